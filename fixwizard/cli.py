@@ -1,0 +1,106 @@
+"""The ``fixwizard`` command: headless sub-commands (solve, import-poses, calibrate-tip).
+
+Exit codes: 0 success (unique or ambiguous), 1 bad input, 2 inconsistent taps, 130 cancelled.
+"""
+
+import argparse
+import sys
+from pathlib import Path
+
+from fixwizard import report
+from fixwizard.errors import FixwizardError, InputError
+from fixwizard.points import write_points
+from fixwizard.solver.search import SearchCancelled, SearchProgress
+from fixwizard.units import parse_length_m
+from fixwizard.workflow.import_poses import import_pose_dir, load_tip
+from fixwizard.workflow.solve_run import SolveRequest, run_solve, summary_lines
+
+EXIT_OK, EXIT_BAD_INPUT, EXIT_INCONSISTENT, EXIT_CANCELLED = 0, 1, 2, 130
+
+
+def _parse_cell_budget(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"the cell budget must be a number such as 1e7, not {text!r}") from None
+
+
+def _print_progress(step: SearchProgress) -> None:
+    print(f"  level rotation {step.rotation_level} / position {step.position_level}: {step.survivors} of "
+          f"{step.evaluated} cells survive ({step.elapsed_s:.1f} s)", file=sys.stderr)
+
+
+def _lengths_from(args: argparse.Namespace) -> tuple[float, float]:
+    """Ball diameter and sample bound (m) from the flags, else from the tip calibration."""
+    tip = load_tip(args.calibration) if args.calibration else None
+    ball = parse_length_m(args.ball_diameter) if args.ball_diameter else (tip.ball_diameter_m if tip else None)
+    bound = parse_length_m(args.sample_bound) if args.sample_bound else (tip.sample_bound_m if tip else None)
+    if ball is None or bound is None:
+        raise InputError("give --ball-diameter and --sample-bound (e.g. --ball-diameter 3mm --sample-bound 1mm), "
+                         "or --calibration with a tip calibration that holds them")
+    return ball, bound
+
+
+def solve_command(args: argparse.Namespace) -> int:
+    ball_diameter_m, sample_bound_m = _lengths_from(args)
+    request = SolveRequest(Path(args.mesh), Path(args.points), ball_diameter_m, sample_bound_m, args.mesh_units,
+                           parse_length_m(args.sigma) if args.sigma else None, args.max_cells)
+    output = Path(args.output) if args.output else Path(args.points).with_suffix(".report.yaml")
+    outcome = run_solve(request, progress=None if args.quiet else _print_progress)
+    print("\n".join(summary_lines(outcome)))
+    report.write(output, outcome.report)
+    print(f"report written to {output}")
+    return EXIT_INCONSISTENT if outcome.solution.status == "inconsistent" else EXIT_OK
+
+
+def import_poses_command(args: argparse.Namespace) -> int:
+    paths, base_p_taps = import_pose_dir(args.directory, load_tip(args.tip))
+    write_points(args.output, base_p_taps, source=[path.name for path in paths], tip=str(args.tip))
+    print(f"{len(base_p_taps)} ball centres written to {args.output}")
+    return EXIT_OK
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="fixwizard", description="Fixture pose calibration with guaranteed "
+                                     "bounds from a few robot taps.")
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    solve_parser = commands.add_parser("solve", help="find every fixture pose that explains the taps; write a report")
+    solve_parser.add_argument("mesh", metavar="MESH", help="fixture CAD mesh (STL, PLY or OBJ)")
+    solve_parser.add_argument("points", metavar="POINTS", help="taps: YAML {frame: base, points_m: [...]} or CSV x,y,z")
+    solve_parser.add_argument("--sample-bound", help="bound on each tap's error, e.g. 1mm")
+    solve_parser.add_argument("--ball-diameter", help="diameter of the tip ball, e.g. 3mm (0 for a grown mesh)")
+    solve_parser.add_argument("--calibration", help="tip calibration YAML giving the ball diameter and sample bound")
+    solve_parser.add_argument("--mesh-units", choices=("m", "mm"), default="m", help="units of the mesh file")
+    solve_parser.add_argument("--max-cells", type=_parse_cell_budget, default=1e7, help="cell budget (default 1e7)")
+    solve_parser.add_argument("--sigma", help="standard deviation of tap errors (default: sample bound / 3)")
+    solve_parser.add_argument("-o", "--output", help="report path (default: POINTS with .report.yaml)")
+    solve_parser.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+    solve_parser.set_defaults(func=solve_command)
+
+    import_parser = commands.add_parser("import-poses", help="turn UR flange *.pose files into ball-centre points")
+    import_parser.add_argument("directory", metavar="DIR", help="folder of *.pose files (x y z rx ry rz)")
+    import_parser.add_argument("--tip", required=True, help="tip as a .pose file or a tip calibration YAML")
+    import_parser.add_argument("-o", "--output", required=True, help="POINTS YAML to write")
+    import_parser.set_defaults(func=import_poses_command)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return EXIT_OK
+    try:
+        return args.func(args)
+    except FixwizardError as error:
+        print(f"fixwizard: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except (SearchCancelled, KeyboardInterrupt):
+        print("fixwizard: cancelled; nothing was written", file=sys.stderr)
+        return EXIT_CANCELLED
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,86 @@
+"""Rigid transforms as 4x4 float64 arrays; conversion to and from UR poses at the edges.
+
+Convention: ``a_T_b @ b_p = a_p``. A UR pose is ``[x, y, z, rx, ry, rz]`` in metres and a
+rotation vector in radians.
+"""
+
+import re
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from fixwizard.errors import InputError
+
+
+def make_transform(rotation: np.ndarray | Rotation, translation_m: np.ndarray) -> np.ndarray:
+    """4x4 transform from a rotation (matrix or scipy Rotation) and a translation (m)."""
+    matrix = rotation.as_matrix() if isinstance(rotation, Rotation) else np.asarray(rotation, float)
+    a_T_b = np.eye(4)
+    a_T_b[:3, :3] = matrix
+    a_T_b[:3, 3] = np.asarray(translation_m, float)
+    return a_T_b
+
+
+def invert(a_T_b: np.ndarray) -> np.ndarray:
+    """Inverse of a rigid transform: returns ``b_T_a``."""
+    b_T_a = np.eye(4)
+    b_T_a[:3, :3] = a_T_b[:3, :3].T
+    b_T_a[:3, 3] = -a_T_b[:3, :3].T @ a_T_b[:3, 3]
+    return b_T_a
+
+
+def transform_points(a_T_b: np.ndarray, b_points: np.ndarray) -> np.ndarray:
+    """Apply ``a_T_b`` to an (N, 3) array of points in frame b; returns points in frame a."""
+    return np.asarray(b_points, float) @ a_T_b[:3, :3].T + a_T_b[:3, 3]
+
+
+def from_ur_pose(ur_pose: np.ndarray) -> np.ndarray:
+    """4x4 transform from a UR pose ``[x, y, z, rx, ry, rz]`` (m, rad)."""
+    ur_pose = np.asarray(ur_pose, float)
+    return make_transform(Rotation.from_rotvec(ur_pose[3:6]), ur_pose[:3])
+
+
+def to_ur_pose(a_T_b: np.ndarray) -> np.ndarray:
+    """UR pose ``[x, y, z, rx, ry, rz]`` (m, rad) of a 4x4 transform."""
+    return np.concatenate([a_T_b[:3, 3], Rotation.from_matrix(a_T_b[:3, :3]).as_rotvec()])
+
+
+def format_ur_pose(a_T_b: np.ndarray) -> str:
+    """The UR script literal ``p[x, y, z, rx, ry, rz]`` of a transform (m, rad)."""
+    return "p[" + ", ".join(f"{value:.6f}" for value in to_ur_pose(a_T_b)) + "]"
+
+
+def rotation_angle_rad(a_R_b: np.ndarray) -> float:
+    """Rotation angle (rad, in [0, pi]) of a 3x3 rotation matrix."""
+    return float(Rotation.from_matrix(a_R_b).magnitude())
+
+
+def read_pose_file(path: str | Path) -> np.ndarray:
+    """Read a ``*.pose`` file (six numbers ``x y z rx ry rz``, m and rad) as a 4x4 transform."""
+    path = Path(path)
+    try:
+        values = np.array(path.read_text().split(), dtype=float)
+    except (OSError, ValueError, UnicodeDecodeError) as error:
+        raise InputError(f"cannot read the pose file {path}: {error}. A .pose file holds six numbers "
+                         "x y z rx ry rz (metres, radians).") from error
+    if values.shape != (6,) or not np.all(np.isfinite(values)):
+        raise InputError(f"the pose file {path} must hold exactly six finite numbers x y z rx ry rz "
+                         f"(metres, radians); it holds {values.size}.")
+    return from_ur_pose(values)
+
+
+def _natural_key(path: Path) -> tuple:
+    """Sort key that orders ``pt_2`` before ``pt_10``."""
+    return tuple(int(part) if part.isdigit() else part for part in re.split(r"(\d+)", path.name))
+
+
+def read_pose_dir(directory: str | Path) -> tuple[list[Path], np.ndarray]:
+    """Read every ``*.pose`` file of a folder in natural name order; returns (paths, (N, 4, 4) transforms)."""
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise InputError(f"{directory} is not a folder; give the folder that holds the *.pose files")
+    paths = sorted(directory.glob("*.pose"), key=_natural_key)
+    if not paths:
+        raise InputError(f"no *.pose files in {directory}")
+    return paths, np.stack([read_pose_file(path) for path in paths])

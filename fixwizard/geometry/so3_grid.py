@@ -1,0 +1,144 @@
+"""Hierarchical rotation grid: HealPix (nested) directions times tilt angles, 72 cells at level 0.
+
+A rotation ``R`` is located by its direction ``d = R e_z`` (a HealPix pixel) and a tilt
+``psi``: ``R = S(d) Rz(psi)``. The section ``S`` is fixed per level-0 (base) pixel ``b``:
+``S(d) = W(c_b -> d) S0_b`` with ``W`` the shortest rotation taking the base pixel centre
+``c_b`` to ``d`` and ``S0_b`` the shortest rotation taking ``e_z`` to ``c_b``. Base pixels
+span under 50 degrees, so ``S`` is smooth on each and has no pole singularity; nested
+children stay in their base pixel, so every child cell lies inside its parent and the
+cells of a level partition SO(3).
+
+Cell bound ``gamma`` (largest angle between the cell centre and any rotation in it). With
+``M = S(d_c)^T S(d)`` written as swing times twist about the body z axis, the swing angle is
+``alpha`` (the angle between ``d_c`` and ``d``) and the twist is ``E``, the area of the
+spherical triangle ``(c_b, d_c, d)`` (the holonomy of ``W``). A tilt offset adds to the
+twist, so ``angle(S(d_c) Rz(psi_c), S(d) Rz(psi)) = 2 acos(cos(alpha/2) cos((E + psi - psi_c)/2))
+<= g(d) = 2 acos(cos(alpha/2) cos((|E| + step/2)/2))``. ``alpha`` and ``|E|`` grow
+monotonically along every great-circle ray from ``d_c``, so on a pixel that is star-shaped
+about its centre the maximum of ``g`` lies on the boundary; it is taken over dense boundary
+samples plus a margin of ``LIPSCHITZ_G * 0.6 * spacing`` between samples (``g`` changes at
+most by ``alpha + E`` between two directions, and ``E <= h tan(beta / 2) < 0.5 h`` for a
+step ``h`` at ``beta < 50 deg`` from ``c_b``, so 2 is a safe Lipschitz constant; 0.6 rather
+than 0.5 of the chord covers the edge's curvature between samples). Tests check the bound
+against random rotations at several levels.
+"""
+
+import healpy
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+BASE_TILTS = 6
+BASE_PIXELS = 12
+CELLS_PER_LEVEL0 = BASE_PIXELS * BASE_TILTS
+BOUNDARY_STEPS = 32
+LIPSCHITZ_G = 2.0
+_EZ = np.array([0.0, 0.0, 1.0])
+
+
+def _shortest_rotations(from_dirs: np.ndarray, to_dirs: np.ndarray) -> Rotation:
+    """Shortest rotations taking unit vectors ``from_dirs`` to ``to_dirs`` (both (N, 3), none antipodal)."""
+    cross = np.cross(from_dirs, to_dirs)
+    sine = np.linalg.norm(cross, axis=-1)
+    cosine = np.sum(from_dirs * to_dirs, axis=-1)
+    angle = np.arctan2(sine, cosine)
+    axis = np.divide(cross, sine[:, None], out=np.zeros_like(cross), where=sine[:, None] > 0)
+    return Rotation.from_rotvec(axis * angle[:, None])
+
+
+def _angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle (rad) between unit vectors along the last axis, accurate at small angles."""
+    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))
+
+
+def _triangle_area(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Area (sr) of spherical triangles with unit-vector corners (Van Oosterom-Strackee)."""
+    numerator = np.abs(np.sum(a * np.cross(b, c), axis=-1))
+    denominator = 1.0 + np.sum(a * b, axis=-1) + np.sum(b * c, axis=-1) + np.sum(c * a, axis=-1)
+    return 2.0 * np.arctan2(numerator, denominator)
+
+
+def swing_twist_angle(swing: np.ndarray, twist: np.ndarray) -> np.ndarray:
+    """Rotation angle (rad) of a swing by ``swing`` composed with a twist by ``twist`` about the swung axis."""
+    sin2 = np.sin(swing / 2) ** 2 + np.sin(twist / 2) ** 2 - (np.sin(swing / 2) * np.sin(twist / 2)) ** 2
+    return 2.0 * np.arcsin(np.sqrt(np.clip(sin2, 0.0, 1.0)))
+
+
+class RotationGrid:
+    """The hierarchical SO(3) grid. A cell at ``level`` is ``pixel * n_tilts(level) + tilt``."""
+
+    def __init__(self) -> None:
+        self._base_centers = np.stack(healpy.pix2vec(1, np.arange(BASE_PIXELS), nest=True), axis=1)
+        self._base_sections = _shortest_rotations(np.tile(_EZ, (BASE_PIXELS, 1)), self._base_centers)
+        self._pixel_gamma: dict[int, np.ndarray] = {}
+
+    @staticmethod
+    def n_tilts(level: int) -> int:
+        return BASE_TILTS * 2**level
+
+    @staticmethod
+    def n_cells(level: int) -> int:
+        return CELLS_PER_LEVEL0 * 8**level
+
+    @staticmethod
+    def tilt_step_rad(level: int) -> float:
+        return 2.0 * np.pi / RotationGrid.n_tilts(level)
+
+    def children(self, level: int, cells: np.ndarray) -> np.ndarray:
+        """The 8 children at ``level + 1`` of each cell, (8N,), grouped per parent."""
+        pixels, tilts = np.divmod(cells, self.n_tilts(level))
+        child_pixels = 4 * pixels[:, None, None] + np.arange(4)[None, :, None]
+        child_tilts = 2 * tilts[:, None, None] + np.arange(2)[None, None, :]
+        return (child_pixels * self.n_tilts(level + 1) + child_tilts).reshape(-1)
+
+    def _sections(self, level: int, pixels: np.ndarray, directions: np.ndarray) -> Rotation:
+        """``S(d)`` for directions ``d`` lying in the given pixels."""
+        base = pixels >> (2 * level)
+        swing = _shortest_rotations(self._base_centers[base], directions)
+        return swing * self._base_sections[base]
+
+    def centers(self, level: int, cells: np.ndarray) -> Rotation:
+        """Centre rotations of cells (the rotation part of ``base_T_fix``)."""
+        pixels, tilts = np.divmod(np.asarray(cells, np.int64), self.n_tilts(level))
+        directions = np.stack(healpy.pix2vec(2**level, pixels, nest=True), axis=1)
+        psi = (tilts + 0.5) * self.tilt_step_rad(level)
+        return self._sections(level, pixels, directions) * Rotation.from_rotvec(np.outer(psi, _EZ))
+
+    def sample(self, level: int, cells: np.ndarray, rng: np.random.Generator) -> Rotation:
+        """One random rotation inside each cell (direction from a random pixel 10 levels finer)."""
+        pixels, tilts = np.divmod(np.asarray(cells, np.int64), self.n_tilts(level))
+        depth = 10
+        fine = (pixels << (2 * depth)) + rng.integers(0, 4**depth, size=len(pixels))
+        directions = np.stack(healpy.pix2vec(2 ** (level + depth), fine, nest=True), axis=1)
+        psi = (tilts + rng.random(len(tilts))) * self.tilt_step_rad(level)
+        return self._sections(level, pixels, directions) * Rotation.from_rotvec(np.outer(psi, _EZ))
+
+    def cell_of(self, level: int, rotations: Rotation) -> np.ndarray:
+        """Cells holding the given rotations."""
+        matrices = rotations.as_matrix().reshape(-1, 3, 3)
+        directions = matrices[:, :, 2]
+        pixels = healpy.vec2pix(2**level, directions[:, 0], directions[:, 1], directions[:, 2], nest=True)
+        twist = (self._sections(level, pixels, directions).inv() * Rotation.from_matrix(matrices)).as_matrix()
+        psi = np.mod(np.arctan2(twist[:, 1, 0], twist[:, 0, 0]), 2.0 * np.pi)
+        tilts = np.minimum((psi / self.tilt_step_rad(level)).astype(np.int64), self.n_tilts(level) - 1)
+        return pixels * self.n_tilts(level) + tilts
+
+    def gamma(self, level: int, cells: np.ndarray) -> np.ndarray:
+        """Largest angle (rad) between each cell's centre and any rotation in the cell; cached per pixel."""
+        pixels = np.asarray(cells, np.int64) // self.n_tilts(level)
+        cache = self._pixel_gamma.setdefault(level, np.full(12 * 4**level, np.nan))
+        missing = np.unique(pixels[np.isnan(cache[pixels])])
+        for chunk in np.array_split(missing, max(1, len(missing) // 20000)):
+            if len(chunk):
+                cache[chunk] = self._compute_gamma(level, chunk)
+        return cache[pixels]
+
+    def _compute_gamma(self, level: int, pixels: np.ndarray) -> np.ndarray:
+        nside = 2**level
+        boundary = healpy.boundaries(nside, pixels, step=BOUNDARY_STEPS, nest=True)
+        boundary = np.moveaxis(boundary.reshape(len(pixels), 3, -1), 1, 2)
+        centers = np.stack(healpy.pix2vec(nside, pixels, nest=True), axis=1)[:, None, :]
+        base = self._base_centers[pixels >> (2 * level)][:, None, :]
+        alpha = _angle_between(centers, boundary)
+        twist = _triangle_area(base, centers, boundary) + 0.5 * self.tilt_step_rad(level)
+        spacing = _angle_between(boundary, np.roll(boundary, -1, axis=1)).max(axis=1)
+        return swing_twist_angle(alpha, twist).max(axis=1) + LIPSCHITZ_G * 0.6 * spacing

@@ -1,0 +1,90 @@
+"""Sets of SE(3) cells: rotation cells of the HealPix grid times position cells of the octree.
+
+Many cells share a rotation, so a set stores its distinct rotation cells once
+(``rotation_ids``) and each cell's index into them (``rotation_index``).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from fixwizard.geometry.octree import PositionGrid
+from fixwizard.geometry.so3_grid import RotationGrid
+
+
+@dataclass
+class CellSet:
+    """Cells of ``base_T_fix`` at one rotation level and one position level.
+
+    ``rotation_ids`` (U,): distinct rotation cells; ``rotation_index`` (N,): each cell's row
+    in them; ``position_cells`` (N, 3): octree cells. Children of a cell are stored
+    consecutively, eight per parent, so cell ``k``'s parent is ``k // 8``.
+    """
+
+    rotation_grid: RotationGrid
+    position_grid: PositionGrid
+    rotation_level: int
+    position_level: int
+    rotation_ids: np.ndarray
+    rotation_index: np.ndarray
+    position_cells: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.rotation_index)
+
+    @property
+    def rotation_cells(self) -> np.ndarray:
+        """Rotation cell of each cell (N,)."""
+        return self.rotation_ids[self.rotation_index]
+
+    @property
+    def position_bound_m(self) -> float:
+        """``b_p``: largest distance (m) from a position cell's centre to any point of it."""
+        return self.position_grid.half_diagonal_m(self.position_level)
+
+    def distinct_rotations(self) -> tuple[Rotation, np.ndarray, np.ndarray]:
+        """Centres and ``gamma`` (rad) of the distinct rotation cells, and each cell's index into them."""
+        return (self.rotation_grid.centers(self.rotation_level, self.rotation_ids),
+                self.rotation_grid.gamma(self.rotation_level, self.rotation_ids), self.rotation_index)
+
+    def positions_m(self, indices: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """Centres (m, base frame) of the position cells of the given cells."""
+        return self.position_grid.centers_m(self.position_level, self.position_cells[indices])
+
+    def contains(self, base_T_fix: np.ndarray) -> bool:
+        """Whether a pose of the internal fixture frame lies in one of the cells."""
+        rotation = self.rotation_grid.cell_of(self.rotation_level, Rotation.from_matrix(base_T_fix[:3, :3]))[0]
+        position = self.position_grid.cell_of(self.position_level, base_T_fix[:3, 3])
+        rows = np.flatnonzero(self.rotation_ids == rotation)
+        return bool(len(rows)) and bool(np.any((self.rotation_index == rows[0])
+                                               & np.all(self.position_cells == position, axis=1)))
+
+    def subset(self, mask: np.ndarray) -> "CellSet":
+        """The cells where ``mask`` is true, keeping only the rotation cells still used."""
+        index = self.rotation_index[mask]
+        used = np.zeros(len(self.rotation_ids), bool)
+        used[index] = True
+        remap = np.cumsum(used) - 1
+        return CellSet(self.rotation_grid, self.position_grid, self.rotation_level, self.position_level,
+                       self.rotation_ids[used], remap[index], self.position_cells[mask])
+
+    def split_rotations(self) -> "CellSet":
+        """Every cell's 8 children in rotation (next rotation level), grouped per parent."""
+        children = self.rotation_grid.children(self.rotation_level, self.rotation_ids)
+        index = (8 * self.rotation_index[:, None] + np.arange(8)).reshape(-1)
+        return CellSet(self.rotation_grid, self.position_grid, self.rotation_level + 1, self.position_level,
+                       children, index, np.repeat(self.position_cells, 8, axis=0))
+
+    def split_positions(self) -> "CellSet":
+        """Every cell's 8 children in position (next position level), grouped per parent."""
+        return CellSet(self.rotation_grid, self.position_grid, self.rotation_level, self.position_level + 1,
+                       self.rotation_ids, np.repeat(self.rotation_index, 8),
+                       self.position_grid.children(self.position_cells))
+
+
+def root_cells(position_grid: PositionGrid) -> CellSet:
+    """The 72 rotation cells of level 0 times the root position cube."""
+    grid = RotationGrid()
+    ids = np.arange(grid.n_cells(0), dtype=np.int64)
+    return CellSet(grid, position_grid, 0, 0, ids, np.arange(len(ids)), np.zeros((len(ids), 3), np.int32))

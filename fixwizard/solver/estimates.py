@@ -1,0 +1,134 @@
+"""Estimates from a surviving cell set: guaranteed bounds, likelihood samples, expected pose, intervals.
+
+Frames: cells hold ``base_T_fix`` (internal frame); everything returned is of the CAD frame
+``base_T_cad = base_T_fix @ fix_T_cad``. ``fix_p_origin`` is the CAD origin in the internal frame.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import logsumexp
+from scipy.spatial.transform import Rotation
+
+from fixwizard.fixture import DistanceOracle
+from fixwizard.geometry.meb import minimum_enclosing_ball
+from fixwizard.geometry.se3 import make_transform
+from fixwizard.solver.cells import CellSet
+
+CENTER_ITERATIONS = 200
+
+
+@dataclass(frozen=True)
+class Bounds:
+    """Guaranteed bounds around a centre pose: every pose of the set lies within them.
+
+    ``position_m``: distance of the CAD origin; ``rotation_rad``: rotation angle;
+    ``max_point_displacement_m``: displacement of any fixture point between the centre pose and any pose.
+    """
+
+    base_T_cad_center: np.ndarray
+    position_m: float
+    rotation_rad: float
+    max_point_displacement_m: float
+
+
+@dataclass(frozen=True)
+class Interval:
+    """Radii around the expected pose holding ``level`` of the probability mass."""
+
+    level: float
+    position_m: float
+    rotation_rad: float
+
+
+@dataclass(frozen=True)
+class Samples:
+    """Stratified pose samples (one per sampled cell) with normalised weights (float64, sum 1)."""
+
+    rotations: Rotation
+    positions_m: np.ndarray
+    cell_index: np.ndarray
+    weights: np.ndarray
+
+
+def chord(angle_rad: np.ndarray | float) -> np.ndarray | float:
+    """Largest displacement of a unit-lever point rotated by ``angle``: ``2 sin(angle / 2)``, angle capped at pi."""
+    return 2.0 * np.sin(np.minimum(angle_rad, np.pi) / 2.0)
+
+
+def rotation_center(rotations: Rotation) -> Rotation:
+    """Approximate minimax centre of a small set of rotations (signs aligned to their principal quaternion)."""
+    quaternions = rotations.as_quat().reshape(-1, 4)
+    principal = np.linalg.eigh(quaternions.T @ quaternions)[1][:, -1]
+    aligned = quaternions * np.where(quaternions @ principal < 0, -1.0, 1.0)[:, None]
+    center = principal.copy()
+    for step in range(1, CENTER_ITERATIONS + 1):
+        farthest = aligned[np.argmax(np.sum((aligned - center) ** 2, axis=1))]
+        center += (farthest - center) / (step + 1)
+    return Rotation.from_quat(center / np.linalg.norm(center))
+
+
+def guaranteed_bounds(cells: CellSet, fix_p_origin: np.ndarray, fixture_radius_m: float,
+                      rotation_centre: Rotation) -> Bounds:
+    """Bounds of a non-empty cell set about the given rotation centre and the CAD origins' enclosing ball."""
+    rotations, gammas, rotation_index = cells.distinct_rotations()
+    positions = cells.positions_m()
+    position_bound = cells.position_bound_m
+    cad_origins = rotations.apply(fix_p_origin).reshape(-1, 3)[rotation_index] + positions
+    center_origin = minimum_enclosing_ball(cad_origins).center
+    origin_lever = float(np.linalg.norm(fix_p_origin))
+    position_m = np.max(np.linalg.norm(cad_origins - center_origin, axis=1) + position_bound
+                        + origin_lever * chord(gammas[rotation_index]))
+    angles = (rotation_centre.inv() * rotations).magnitude() + gammas
+    center_fix = center_origin - rotation_centre.apply(fix_p_origin)
+    displacement = (np.linalg.norm(positions - center_fix, axis=1) + position_bound
+                    + fixture_radius_m * chord(angles[rotation_index]))
+    base_T_cad_center = make_transform(rotation_centre, center_origin)
+    return Bounds(base_T_cad_center, float(position_m), float(min(np.max(angles), np.pi)),
+                  float(np.max(displacement)))
+
+
+def sample_cells(cells: CellSet, oracle: DistanceOracle, base_p_taps: np.ndarray, ball_radius_m: float,
+                 sigma_m: float, max_samples: int, rng: np.random.Generator) -> Samples:
+    """One uniform pose in each of (at most ``max_samples`` randomly chosen) cells, weighted by the likelihood.
+
+    Likelihood: independent Gaussians on the signed point-to-surface residual ``d(x_i) - r_ball``.
+    All cells have equal volume, so the weight is the likelihood alone.
+    """
+    count = len(cells)
+    chosen = np.arange(count) if count <= max_samples else np.sort(rng.choice(count, max_samples, replace=False))
+    rotations = cells.rotation_grid.sample(cells.rotation_level, cells.rotation_cells[chosen], rng)
+    side = cells.position_grid.cell_side_m(cells.position_level)
+    positions = cells.positions_m(chosen) + (rng.random((len(chosen), 3)) - 0.5) * side
+    fix_R_base = rotations.inv()
+    log_likelihood = np.zeros(len(chosen))
+    for tap in base_p_taps:
+        residual = oracle.signed_distance_m(fix_R_base.apply(tap - positions)) - ball_radius_m
+        log_likelihood -= 0.5 * (residual / sigma_m) ** 2
+    weights = np.exp(log_likelihood - logsumexp(log_likelihood))
+    return Samples(rotations, positions, chosen, weights / weights.sum())
+
+
+def expected_pose(samples: Samples, mask: np.ndarray, fix_T_cad: np.ndarray) -> np.ndarray:
+    """Probability-weighted mean ``base_T_cad`` of the masked samples (quaternion mean by eigenvector)."""
+    weights = samples.weights[mask] / samples.weights[mask].sum()
+    position = weights @ samples.positions_m[mask]
+    quaternions = samples.rotations[np.flatnonzero(mask)].as_quat()
+    mean_quaternion = np.linalg.eigh((quaternions * weights[:, None]).T @ quaternions)[1][:, -1]
+    return make_transform(Rotation.from_quat(mean_quaternion), position) @ fix_T_cad
+
+
+def _weighted_quantile(values: np.ndarray, weights: np.ndarray, level: float) -> float:
+    order = np.argsort(values)
+    cumulative = np.cumsum(weights[order])
+    return float(values[order][min(np.searchsorted(cumulative, level * cumulative[-1]), len(values) - 1)])
+
+
+def intervals(samples: Samples, base_T_cad: np.ndarray, fix_p_origin: np.ndarray,
+              levels: tuple[float, ...] = (0.95, 0.99)) -> list[Interval]:
+    """Radii about ``base_T_cad`` (CAD origin distance, rotation angle) holding each level of the mass."""
+    cad_origins = samples.rotations.apply(fix_p_origin) + samples.positions_m
+    distances = np.linalg.norm(cad_origins - base_T_cad[:3, 3], axis=1)
+    angles = (Rotation.from_matrix(base_T_cad[:3, :3]).inv() * samples.rotations).magnitude()
+    return [Interval(level, _weighted_quantile(distances, samples.weights, level),
+                     _weighted_quantile(angles, samples.weights, level)) for level in levels]

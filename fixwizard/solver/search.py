@@ -1,0 +1,208 @@
+"""Hierarchical branch-and-bound over SE(3): every pose that explains the taps survives.
+
+A pose ``base_T_fix = (R, t)`` explains tap ``p_i`` (base frame) when the ball centre lies
+at the ball radius from the surface: ``|s(R^T (p_i - t)) - r_ball| <= b_s`` with ``s`` the
+signed distance (unsigned for an open mesh). A cell with centre ``(R_c, t_c)``, position
+bound ``b_p`` and rotation bound ``gamma`` is rejected only if some tap violates
+``|s(x_i) - r_ball| <= b_s + b_p + b_r,i`` for every value ``s(x_i)`` can take at the
+centre's query point ``x_i = R_c^T (p_i - t_c)`` (an interval that holds the float32 error
+``b_eps``), with lever-arm term ``b_r,i = min(|x_i| + b_p, r + r_ball + b_s) * 2 sin(gamma / 2)``.
+The distance is 1-Lipschitz, so no pose inside a rejected cell can explain all taps.
+
+Each surviving cell keeps, per tap, an interval holding ``s`` at its query point. A child's
+query point lies ``|x_child - x_parent|`` from its parent's, so the parent's interval widened
+by that much holds the child's value: most children are accepted or rejected from it, and
+only those whose interval straddles the band's edge need an Open3D query. Taps are tested
+one at a time over the cells still alive, the tap that rejected most at the previous level first.
+"""
+
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from fixwizard.fixture import DistanceOracle
+from fixwizard.geometry.octree import PositionGrid
+from fixwizard.geometry.socp_box import ball_intersection_box
+from fixwizard.solver.cells import CellSet, root_cells
+
+QUERY_CHUNK = 1 << 20  # cells per batch; a multiple of 8 so batches hold whole families
+
+
+class SearchCancelled(Exception):
+    """The caller asked the search to stop."""
+
+
+@dataclass(frozen=True)
+class SearchProblem:
+    """Inputs of the search. Taps ``base_p_taps`` (N, 3) in m; radii and bounds in m."""
+
+    oracle: DistanceOracle
+    fixture_radius_m: float
+    base_p_taps: np.ndarray
+    ball_radius_m: float
+    sample_bound_m: float
+
+    @property
+    def lever_cap_m(self) -> float:
+        """Largest distance from the fixture centre to any tap: ``r + r_ball + b_s``."""
+        return self.fixture_radius_m + self.ball_radius_m + self.sample_bound_m
+
+
+@dataclass(frozen=True)
+class SearchProgress:
+    """One finished level of the search, for progress displays."""
+
+    rotation_level: int
+    position_level: int
+    evaluated: int
+    survivors: int
+    elapsed_s: float
+
+
+def start_position_grid(problem: SearchProblem) -> PositionGrid | None:
+    """Root cube around the SOCP box of possible fixture centres; None if no centre is possible."""
+    box = ball_intersection_box(problem.base_p_taps, problem.lever_cap_m)
+    if box is None:
+        return None
+    low, high = box
+    side = float(np.max(high - low))
+    return PositionGrid(corner_m=0.5 * (low + high) - 0.5 * side, side_m=side)
+
+
+def _round_down_f32(values: np.ndarray) -> np.ndarray:
+    """float32 values no larger than the float64 ones (a cast errs by at most |v| 2^-24)."""
+    return (values - np.abs(values) * 2.0**-23).astype(np.float32)
+
+
+def _round_up_f32(values: np.ndarray) -> np.ndarray:
+    return (values + np.abs(values) * 2.0**-23).astype(np.float32)
+
+
+def exact_distance_interval_m(oracle: DistanceOracle, fix_p_query: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Interval (m) holding the signed distance of each query point (unsigned for open meshes), float32 error included."""
+    distance = oracle.signed_distance_m(fix_p_query)
+    error = oracle.error_bound_m(fix_p_query)
+    return distance - error, distance + error
+
+
+class _Frames:
+    """Centre frames of a CellSet's cells, for query points ``x = R_c^T p - R_c^T t_c``."""
+
+    def __init__(self, cells: CellSet) -> None:
+        rotations, gammas, _ = cells.distinct_rotations()
+        self.fix_R_base = rotations.inv().as_matrix().reshape(-1, 3, 3)
+        self.gammas_rad = gammas
+        self.rotation_index = cells.rotation_index
+        self.cells = cells
+
+    def rotated_positions(self, indices: np.ndarray | slice) -> np.ndarray:
+        """``R_c^T t_c`` (m) for the given cells."""
+        return np.einsum("nij,nj->ni", self.fix_R_base[self.rotation_index[indices]],
+                         self.cells.positions_m(indices))
+
+    def rotated_tap(self, tap: np.ndarray) -> np.ndarray:
+        """``R_u^T p`` (m) for every distinct rotation."""
+        return self.fix_R_base @ tap
+
+
+@dataclass
+class _Survivors:
+    """Cells that passed every tap, with ``R_c^T t_c`` and, per tap, an interval (m, float32)
+    holding the signed distance at the cell centre's query point."""
+
+    frames: _Frames
+    rotated_positions: np.ndarray
+    low_m: np.ndarray
+    high_m: np.ndarray
+
+
+def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: int, parents: _Survivors | None,
+                  tap_order: np.ndarray, rejected: np.ndarray, cancel: threading.Event | None,
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Survivor mask, ``R_c^T t_c`` and distance intervals of the survivors among cells ``first .. first + count``."""
+    chunk = slice(first, first + count)
+    rotated_positions = frames.rotated_positions(chunk)
+    rotation_index = frames.rotation_index[chunk]
+    chords = 2.0 * np.sin(np.minimum(frames.gammas_rad[rotation_index], np.pi) / 2.0)
+    position_bound = frames.cells.position_bound_m
+    alive = np.ones(count, bool)
+    low = np.zeros((count, len(problem.base_p_taps)), np.float32)
+    high = np.zeros_like(low)
+    for tap_index in tap_order:
+        if cancel is not None and cancel.is_set():
+            raise SearchCancelled
+        local = np.flatnonzero(alive)
+        tap = problem.base_p_taps[tap_index]
+        queries = frames.rotated_tap(tap)[rotation_index[local]] - rotated_positions[local]
+        lever = np.minimum(np.linalg.norm(queries, axis=1) + position_bound, problem.lever_cap_m)
+        tolerance = problem.sample_bound_m + position_bound + lever * chords[local]
+        band_low, band_high = problem.ball_radius_m - tolerance, problem.ball_radius_m + tolerance
+        if parents is None:
+            interval_low = np.full(len(local), -np.inf)
+            interval_high = np.full(len(local), np.inf)
+        else:
+            parent = (first + local) // 8
+            parent_queries = (parents.frames.rotated_tap(tap)[parents.frames.rotation_index[parent]]
+                              - parents.rotated_positions[parent])
+            shift = np.linalg.norm(queries - parent_queries, axis=1)
+            interval_low = parents.low_m[parent, tap_index] - shift
+            interval_high = parents.high_m[parent, tap_index] + shift
+        undecided = ((interval_high >= band_low) & (interval_low <= band_high)
+                     & ((interval_low < band_low) | (interval_high > band_high)))
+        if np.any(undecided):
+            interval_low[undecided], interval_high[undecided] = exact_distance_interval_m(problem.oracle,
+                                                                                          queries[undecided])
+        keep = (interval_high >= band_low) & (interval_low <= band_high)
+        alive[local[~keep]] = False
+        rejected[tap_index] += int(np.count_nonzero(~keep))
+        low[local[keep], tap_index] = _round_down_f32(interval_low[keep])
+        high[local[keep], tap_index] = _round_up_f32(interval_high[keep])
+    return alive, rotated_positions[alive], low[alive], high[alive]
+
+
+def _filter(problem: SearchProblem, cells: CellSet, parents: _Survivors | None, tap_order: np.ndarray,
+            cancel: threading.Event | None) -> tuple[CellSet, _Survivors, np.ndarray]:
+    """Survivors of a level, and the number of cells each tap rejected."""
+    frames = _Frames(cells)
+    rejected = np.zeros(len(problem.base_p_taps), np.int64)
+    parts = [_filter_chunk(problem, frames, first, min(QUERY_CHUNK, len(cells) - first), parents, tap_order,
+                           rejected, cancel) for first in range(0, len(cells), QUERY_CHUNK)]
+    alive, rotated_positions, low, high = (np.concatenate(part) for part in zip(*parts))
+    survivors = cells.subset(alive)
+    return survivors, _Survivors(_Frames(survivors), rotated_positions, low, high), rejected
+
+
+def _rotation_splits_first(cells: CellSet, problem: SearchProblem) -> bool:
+    """Split rotations when their largest displacement at the fixture radius exceeds the position bound."""
+    gamma = float(np.max(cells.distinct_rotations()[1]))
+    rotation_bound = problem.fixture_radius_m * 2.0 * np.sin(min(gamma, np.pi) / 2.0)
+    return rotation_bound >= cells.position_bound_m
+
+
+def search(problem: SearchProblem, max_cells: float = 1e7,
+           progress: Callable[[SearchProgress], None] | None = None,
+           cancel: threading.Event | None = None) -> CellSet | None:
+    """Surviving cells at the finest levels the cell budget allows; an empty CellSet if no pose fits.
+
+    Returns None when the taps are too far apart for any pose (no possible fixture centre).
+    """
+    started = time.perf_counter()
+    position_grid = start_position_grid(problem)
+    if position_grid is None:
+        return None
+    cells = root_cells(position_grid)
+    tap_order = np.arange(len(problem.base_p_taps))
+    parents = None
+    while True:
+        evaluated = len(cells)
+        cells, parents, rejected = _filter(problem, cells, parents, tap_order, cancel)
+        tap_order = np.argsort(-rejected, kind="stable")
+        if progress is not None:
+            progress(SearchProgress(cells.rotation_level, cells.position_level, evaluated, len(cells),
+                                    time.perf_counter() - started))
+        if len(cells) == 0 or 8 * len(cells) > max_cells:
+            return cells
+        cells = cells.split_rotations() if _rotation_splits_first(cells, problem) else cells.split_positions()

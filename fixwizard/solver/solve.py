@@ -1,0 +1,178 @@
+"""The solver's entry point: validate inputs, search, and summarise the guaranteed set.
+
+``solve`` is plain Python: a fixture, taps in the base frame (m), the ball diameter and
+the sample error bound in metres; it returns a ``Solution`` with the pose of the CAD frame.
+"""
+
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from fixwizard.errors import InputError
+from fixwizard.fixture import Fixture
+from fixwizard.geometry.se3 import invert
+from fixwizard.solver.diagnose import SuspectTap, find_suspect_tap
+from fixwizard.solver.estimates import (Bounds, Interval, expected_pose, guaranteed_bounds, intervals,
+                                        rotation_center, sample_cells)
+from fixwizard.solver.modes import rotation_modes
+from fixwizard.solver.cells import CellSet
+from fixwizard.solver.search import SearchProblem, SearchProgress, search
+
+DEFAULT_MAX_CELLS = 1e7
+MIN_MAX_CELLS = 72 * 8
+DEFAULT_MAX_SAMPLES = 40_000
+MIN_TAPS = 3
+
+
+@dataclass(frozen=True)
+class SolveWarning:
+    """A warning for the operator: a stable ``code`` and a plain-words ``message``."""
+
+    code: str
+    message: str
+
+
+@dataclass(frozen=True)
+class Mode:
+    """One connected group of possible poses: its probability mass, expected CAD pose and bounds."""
+
+    probability: float
+    base_T_cad: np.ndarray
+    bounds: Bounds
+    cell_count: int
+
+
+@dataclass(frozen=True)
+class SearchStats:
+    cells: int
+    rotation_level: int
+    position_level: int
+    elapsed_s: float
+    max_cells: float
+
+
+@dataclass
+class Solution:
+    """Result of ``solve``. For ``inconsistent`` the pose, bounds and intervals are None/empty."""
+
+    status: str
+    base_T_cad: np.ndarray | None
+    bounds: Bounds | None
+    intervals: list[Interval]
+    modes: list[Mode]
+    warnings: list[SolveWarning]
+    suspect_tap: SuspectTap | None
+    stats: SearchStats
+    cells: CellSet | None
+    fix_T_cad: np.ndarray = field(repr=False)
+
+    def contains(self, base_T_cad: np.ndarray) -> bool:
+        """Whether a CAD-frame pose lies in the guaranteed set."""
+        return self.cells is not None and self.cells.contains(base_T_cad @ invert(self.fix_T_cad))
+
+
+def _validate(base_p_taps: np.ndarray, ball_diameter_m: float, sample_bound_m: float, sigma_m: float,
+              max_cells: float) -> None:
+    if base_p_taps.ndim != 2 or base_p_taps.shape[1] != 3:
+        raise InputError("taps must be a list of [x, y, z] points in metres")
+    if len(base_p_taps) < MIN_TAPS:
+        raise InputError(f"{len(base_p_taps)} taps are not enough: at least {MIN_TAPS} are needed to fix a pose, "
+                         "and 10-20 taps spread over several faces give tight bounds")
+    bad = np.flatnonzero(~np.all(np.isfinite(base_p_taps), axis=1))
+    if len(bad):
+        raise InputError(f"tap {bad[0] + 1} has a coordinate that is not a finite number; fix or remove it")
+    if not np.isfinite(sample_bound_m) or sample_bound_m <= 0:
+        raise InputError(f"the sample bound must be a positive length, not {sample_bound_m} m; take it from the "
+                         "tip calibration (typically 0.5-2 mm)")
+    if not np.isfinite(ball_diameter_m) or ball_diameter_m < 0:
+        raise InputError(f"the ball diameter must be zero or positive, not {ball_diameter_m} m")
+    if not np.isfinite(sigma_m) or sigma_m <= 0:
+        raise InputError(f"sigma must be a positive length, not {sigma_m} m")
+    if not max_cells >= MIN_MAX_CELLS:
+        raise InputError(f"the cell budget must be at least {MIN_MAX_CELLS}, not {max_cells}")
+
+
+def _mode_separation(modes: list[Mode]) -> tuple[float, float]:
+    """Largest CAD-origin distance (m) and rotation angle (rad) between two modes' poses."""
+    distance = angle = 0.0
+    for i, first in enumerate(modes):
+        for second in modes[i + 1:]:
+            distance = max(distance, float(np.linalg.norm(first.base_T_cad[:3, 3] - second.base_T_cad[:3, 3])))
+            relative = first.base_T_cad[:3, :3].T @ second.base_T_cad[:3, :3]
+            angle = max(angle, float(Rotation.from_matrix(relative).magnitude()))
+    return distance, angle
+
+
+def _inconsistent_warnings(suspect: SuspectTap | None) -> list[SolveWarning]:
+    if suspect is not None:
+        return [SolveWarning("inconsistent", "No pose of the fixture explains all taps."),
+                SolveWarning("suspect_tap",
+                             f"Tap {suspect.index + 1} is the likely culprit: without it the other taps fit, and it "
+                             f"lies at least {suspect.distance_m * 1e3:.1f} mm off the surface under every pose "
+                             "they allow. It probably missed the fixture; drop it and solve again.")]
+    return [SolveWarning("inconsistent",
+                         "No pose of the fixture explains the taps, and no single tap is to blame. Usual causes: "
+                         "the wrong mesh, wrong mesh units, a wrong tool-tip calibration, or a sample bound that "
+                         "is too small for this robot.")]
+
+
+def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sample_bound_m: float,
+          sigma_m: float | None = None, max_cells: float = DEFAULT_MAX_CELLS,
+          progress: Callable[[SearchProgress], None] | None = None, cancel: threading.Event | None = None,
+          max_samples: int = DEFAULT_MAX_SAMPLES, seed: int = 0) -> Solution:
+    """All poses of ``fixture`` that explain the taps, with estimates; raises InputError for bad input.
+
+    ``base_p_taps`` (N, 3): measured ball centres in the robot base frame (m). ``sigma_m``
+    defaults to ``sample_bound_m / 3``. Raises ``SearchCancelled`` if ``cancel`` is set.
+    """
+    base_p_taps = np.asarray(base_p_taps, dtype=float)
+    sigma_m = sample_bound_m / 3.0 if sigma_m is None else sigma_m
+    _validate(base_p_taps, ball_diameter_m, sample_bound_m, sigma_m, max_cells)
+    started = time.perf_counter()
+    problem = SearchProblem(fixture.oracle, fixture.radius_m, base_p_taps, ball_diameter_m / 2.0, sample_bound_m)
+    cells = search(problem, max_cells, progress, cancel)
+    warnings = [SolveWarning(code, message) for code, message in fixture.warnings]
+    fix_T_cad = fixture.fix_T_cad
+    if cells is None or len(cells) == 0:
+        suspect = find_suspect_tap(problem, max_cells)
+        stats = SearchStats(0, cells.rotation_level if cells else 0, cells.position_level if cells else 0,
+                            time.perf_counter() - started, max_cells)
+        return Solution("inconsistent", None, None, [], [], warnings + _inconsistent_warnings(suspect), suspect,
+                        stats, None, fix_T_cad)
+
+    fix_p_origin = -fixture.cad_p_center
+    labels = rotation_modes(*cells.distinct_rotations())
+    samples = sample_cells(cells, fixture.oracle, base_p_taps, ball_diameter_m / 2.0, sigma_m, max_samples,
+                           np.random.default_rng(seed))
+    sample_labels = labels[samples.cell_index]
+    modes = []
+    for label in np.unique(labels):
+        in_mode = labels == label
+        mode_cells = cells.subset(in_mode)
+        mode_samples = sample_labels == label
+        probability = float(samples.weights[mode_samples].sum())
+        base_T_cad = expected_pose(samples, mode_samples, fix_T_cad) if probability > 0 else None
+        centre = rotation_center(mode_cells.distinct_rotations()[0])
+        mode_bounds = guaranteed_bounds(mode_cells, fix_p_origin, fixture.radius_m, centre)
+        modes.append(Mode(probability, base_T_cad if base_T_cad is not None else mode_bounds.base_T_cad_center,
+                          mode_bounds, len(mode_cells)))
+    modes.sort(key=lambda mode: -mode.probability)
+    top = modes[0]
+    bounds = guaranteed_bounds(cells, fix_p_origin, fixture.radius_m,
+                               Rotation.from_matrix(top.bounds.base_T_cad_center[:3, :3]))
+    status = "unique" if len(modes) == 1 else "ambiguous"
+    if status == "ambiguous":
+        distance, angle = _mode_separation(modes)
+        warnings.append(SolveWarning(
+            "ambiguous",
+            f"{len(modes)} distinct poses explain the taps (a symmetric fixture or taps on too few features); they "
+            f"lie up to {distance * 1e3:.1f} mm and {np.degrees(angle):.1f} deg apart. The pose shown is the most "
+            f"probable ({top.probability:.0%}); tap features that tell the poses apart."))
+    stats = SearchStats(len(cells), cells.rotation_level, cells.position_level, time.perf_counter() - started,
+                        max_cells)
+    return Solution(status, top.base_T_cad, bounds, intervals(samples, top.base_T_cad, fix_p_origin), modes,
+                    warnings, None, stats, cells, fix_T_cad)

@@ -1,0 +1,20 @@
+"""Parsing of lengths typed by people ("1mm", "0.003 m", "3") into metres."""
+
+import math
+import re
+
+from fixwizard.errors import InputError
+
+_LENGTH = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(mm|m)?\s*$")
+_METRES_PER_UNIT = {"m": 1.0, "mm": 1e-3}
+
+
+def parse_length_m(text: str, default_unit: str = "m") -> float:
+    """Parse a length such as ``"1mm"`` or ``"0.001"`` (``default_unit`` if no suffix); returns metres."""
+    match = _LENGTH.match(str(text))
+    if match is None:
+        raise InputError(f"cannot read the length {text!r}: write a number with m or mm, e.g. 1mm or 0.001m")
+    value = float(match.group(1)) * _METRES_PER_UNIT[match.group(2) or default_unit]
+    if not math.isfinite(value):
+        raise InputError(f"the length {text!r} is not a finite number")
+    return value

@@ -1,0 +1,1 @@
+"""The steps of the job as plain Python, shared by the CLI and the wizard."""

@@ -1,0 +1,69 @@
+"""One headless solve: load the inputs, run the solver, write the report, and summarise it for people."""
+
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from fixwizard import report
+from fixwizard.fixture import Fixture, load_fixture
+from fixwizard.points import load_points
+from fixwizard.solver.search import SearchProgress
+from fixwizard.solver.solve import DEFAULT_MAX_CELLS, Solution, solve
+
+
+@dataclass(frozen=True)
+class SolveRequest:
+    """Everything a solve needs; lengths in metres."""
+
+    mesh_path: Path
+    points_path: Path
+    ball_diameter_m: float
+    sample_bound_m: float
+    mesh_units: str = "m"
+    sigma_m: float | None = None
+    max_cells: float = DEFAULT_MAX_CELLS
+
+
+@dataclass(frozen=True)
+class SolveOutcome:
+    fixture: Fixture
+    base_p_taps: np.ndarray
+    solution: Solution
+    report: dict
+
+
+def run_solve(request: SolveRequest, progress: Callable[[SearchProgress], None] | None = None,
+              cancel: threading.Event | None = None) -> SolveOutcome:
+    """Load mesh and taps, solve, and build the report dict (not yet written)."""
+    fixture = load_fixture(request.mesh_path, request.mesh_units)
+    base_p_taps = load_points(request.points_path)
+    sigma_m = request.sigma_m if request.sigma_m is not None else request.sample_bound_m / 3.0
+    solution = solve(fixture, base_p_taps, request.ball_diameter_m, request.sample_bound_m, sigma_m,
+                     request.max_cells, progress, cancel)
+    data = report.report_dict(solution, fixture, base_p_taps, request.ball_diameter_m, request.sample_bound_m,
+                              sigma_m)
+    return SolveOutcome(fixture, base_p_taps, solution, data)
+
+
+def summary_lines(outcome: SolveOutcome) -> list[str]:
+    """A short human summary in mm and degrees."""
+    solution = outcome.solution
+    lines = [f"status: {solution.status} ({len(outcome.base_p_taps)} taps, {solution.stats.cells} cells survive, "
+             f"{solution.stats.elapsed_s:.1f} s)"]
+    if solution.base_T_cad is not None:
+        pose = report.pose_dict(solution.base_T_cad)
+        x, y, z = (1e3 * value for value in pose["position_m"])
+        bounds = solution.bounds
+        lines += [f"pose of the CAD frame: x {x:.2f} mm, y {y:.2f} mm, z {z:.2f} mm, "
+                  f"rotation {np.degrees(np.linalg.norm(pose['rotvec_rad'])):.2f} deg",
+                  f"UR pose: {pose['ur']}",
+                  f"guaranteed: CAD origin within {bounds.position_m * 1e3:.2f} mm, rotation within "
+                  f"{np.degrees(bounds.rotation_rad):.2f} deg, any fixture point within "
+                  f"{bounds.max_point_displacement_m * 1e3:.2f} mm"]
+        lines += [f"{interval.level:.0%} interval: {interval.position_m * 1e3:.2f} mm, "
+                  f"{np.degrees(interval.rotation_rad):.2f} deg" for interval in solution.intervals]
+    lines += [f"warning: {warning.message}" for warning in solution.warnings]
+    return lines

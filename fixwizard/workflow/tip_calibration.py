@@ -1,0 +1,95 @@
+"""Tool-tip calibration from folders of recorded flange poses: the ``calibrate-tip`` command.
+
+Prints the figures a person needs to accept or reject the calibration and writes the
+``fixwizard.tip/1`` file.
+"""
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from fixwizard.calibration.calibrate import calibrate_tip
+from fixwizard.calibration.residuals import ResidualStats
+from fixwizard.calibration.store import TipCalibration, save_calibration
+from fixwizard.calibration.taps import PoseSeries
+from fixwizard.errors import FixwizardError
+from fixwizard.geometry.se3 import read_pose_dir
+from fixwizard.units import parse_length_m
+
+
+def read_pose_series(directory: str | Path) -> PoseSeries:
+    """The ``*.pose`` files of a folder (natural name order) with their file names."""
+    paths, base_T_tcp = read_pose_dir(directory)
+    return PoseSeries(base_T_tcp, tuple(path.name for path in paths))
+
+
+def calibrate_tip_from_dirs(pivot_dir: str | Path, table_dir: str | Path, tilted_dir: str | Path,
+                            ball_diameter_m: float, table_coarse_dir: str | Path | None = None, name: str = "tip",
+                            robot: str | None = None) -> TipCalibration:
+    """Calibrate from folders of ``*.pose`` files: pivot poses, table taps at one orientation, tilted table
+    taps and optionally the three coarse table taps A, B, C (see ``calibrate_tip``)."""
+    return calibrate_tip(read_pose_series(pivot_dir), read_pose_series(table_dir), read_pose_series(tilted_dir),
+                         ball_diameter_m, read_pose_series(table_coarse_dir) if table_coarse_dir else None, name,
+                         robot)
+
+
+def summary_lines(calibration: TipCalibration) -> list[str]:
+    """The figures to accept or reject a calibration, in mm."""
+    steps = calibration.steps
+    tip_mm = calibration.tcp_p_tip_m * 1e3
+    pivot_mm = calibration.pivot_tcp_p_tip_m * 1e3
+    excluded = [f"  excluded {step} {tap.describe()}" for step, series in steps.items() for tap in series.excluded]
+    return [
+        f"pivot ({len(steps['pivot'].base_T_tcp)} poses): tip {_mm(pivot_mm)} mm, "
+        f"{_residuals(calibration.pivot_residuals)}",
+        f"table plane ({len(steps['table'].base_T_tcp)} taps): {_residuals(calibration.table_residuals)}",
+        f"fine tip ({len(steps['tilted'].base_T_tcp)} tilted taps): {_mm(tip_mm)} mm, "
+        f"{_residuals(calibration.tip_residuals)}",
+        f"  condition number {calibration.tip_condition_number:.1f}; standard error from the scatter "
+        f"{_mm(calibration.tip_standard_error_m * 1e3)} mm; {np.linalg.norm(tip_mm - pivot_mm):.2f} mm from the "
+        "pivot tip",
+        *(excluded or ["  no tap excluded"]),
+        f"proposed sample bound {calibration.sample_bound_reason} Solving with --sample-bound overrides it.",
+    ]
+
+
+def _mm(values_mm: np.ndarray) -> str:
+    return "[" + ", ".join(f"{value:.3f}" for value in values_mm) + "]"
+
+
+def _residuals(stats: ResidualStats) -> str:
+    return f"residual RMS {stats.rms_m * 1e3:.3f} mm, max {stats.max_m * 1e3:.3f} mm"
+
+
+def calibrate_tip_command(args: argparse.Namespace) -> int:
+    """Run ``calibrate-tip``: 0 when the calibration was written, 1 (message on stderr) for bad input."""
+    output = Path(args.output)
+    try:
+        calibration = calibrate_tip_from_dirs(args.pivot, args.table, args.tilted, parse_length_m(args.ball_diameter),
+                                              args.table_coarse, output.stem, args.robot)
+        save_calibration(calibration, output)
+    except FixwizardError as error:
+        print(f"fixwizard calibrate-tip: {error}", file=sys.stderr)
+        return 1
+    print("\n".join(summary_lines(calibration)))
+    print(f"tip calibration written to {output}")
+    return 0
+
+
+def register_calibrate_tip_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Add the ``calibrate-tip`` sub-command to the ``fixwizard`` command's sub-parsers."""
+    parser = subparsers.add_parser(
+        "calibrate-tip", help="calibrate the ball tip from recorded flange poses; write calibrations/NAME.yaml",
+        description="Calibrate the tool tip (ball centre in the flange frame) from folders of UR flange *.pose "
+                    "files (x y z rx ry rz, m and rad), and propose the sample error bound.")
+    parser.add_argument("--pivot", required=True, metavar="DIR", help="poses turning the tool about one point (3+)")
+    parser.add_argument("--table", required=True, metavar="DIR", help="table taps with one fixed tool orientation")
+    parser.add_argument("--tilted", required=True, metavar="DIR", help="table taps at tilts of 10 to 30 degrees")
+    parser.add_argument("--table-coarse", metavar="DIR", help="three table taps A, B (corner), C for the table frame")
+    parser.add_argument("--ball-diameter", required=True, help="diameter of the tip ball, e.g. 3mm")
+    parser.add_argument("-o", "--output", required=True, help="calibration file to write, e.g. calibrations/NAME.yaml")
+    parser.add_argument("--robot", help="robot identity to record, e.g. its serial number")
+    parser.set_defaults(func=calibrate_tip_command)
+    return parser

@@ -1,0 +1,30 @@
+"""Shared test helpers: where the paper's real data lives, and how to skip without it."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fixwizard.geometry.se3 import read_pose_dir, read_pose_file
+from fixwizard.workflow.import_poses import ball_centres_m
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = REPO.parent / "shared" / "data" / "matlab-logo"
+RUNS = ("student_1", "student_2", "student_3", "expert")
+# Published bounds of the paper's reference implementation on these runs (1e7 cells, 1.0 mm):
+# position (mm), rotation (deg).
+REFERENCE_BOUNDS = {"student_1": (3.30, 2.65), "student_2": (2.71, 1.61), "student_3": (3.01, 4.05),
+                    "expert": (1.59, 1.16)}
+
+
+@pytest.fixture(scope="session")
+def real_data() -> Path:
+    if not DATA.is_dir():
+        pytest.skip(f"the paper's real data is not at {DATA} (it lives in ../shared beside the repository)")
+    return DATA
+
+
+def real_taps(data: Path, run: str) -> np.ndarray:
+    """Ball centres (N, 3, m, base frame) of one user-study run with the published tip."""
+    tip = read_pose_file(data / "calib" / "tcp_t_tip.pose")[:3, 3]
+    return ball_centres_m(read_pose_dir(data / "samples" / run)[1], tip)

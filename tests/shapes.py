@@ -1,0 +1,53 @@
+"""Test fixtures generated with trimesh: asymmetric shapes and symmetric ones with known symmetry orders."""
+
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from fixwizard.fixture import Fixture, fixture_from_mesh
+
+
+def l_prism() -> trimesh.Trimesh:
+    """An L-shaped plate with unequal arms and a notch, 10 mm thick: no rotational symmetry."""
+    outline = np.array([[0, 0], [0.12, 0], [0.12, 0.03], [0.05, 0.03], [0.05, 0.06], [0.035, 0.06],
+                        [0.035, 0.08], [0, 0.08]])
+    faces = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 5], [0, 5, 7], [5, 6, 7]])
+    mesh = trimesh.creation.extrude_triangulation(outline, faces, height=0.01)
+    if mesh.volume < 0:
+        mesh.invert()
+    return mesh
+
+
+def random_polytope(seed: int) -> trimesh.Trimesh:
+    """Convex hull of random points in a 10 x 6 x 4 cm box: almost surely asymmetric."""
+    points = np.random.default_rng(seed).random((14, 3)) * [0.1, 0.06, 0.04]
+    return trimesh.convex.convex_hull(points)
+
+
+def cube() -> trimesh.Trimesh:
+    """A 6 cm cube: 24 rotational symmetries."""
+    return trimesh.creation.box((0.06, 0.06, 0.06))
+
+
+def brick() -> trimesh.Trimesh:
+    """A 10 x 6 x 3 cm box: 4 rotational symmetries."""
+    return trimesh.creation.box((0.10, 0.06, 0.03))
+
+
+def cylinder() -> trimesh.Trimesh:
+    return trimesh.creation.cylinder(radius=0.03, height=0.08, sections=48)
+
+
+def cone() -> trimesh.Trimesh:
+    return trimesh.creation.cone(radius=0.04, height=0.07, sections=48)
+
+
+SHAPES = {"l_prism": l_prism, "polytope": lambda: random_polytope(7), "cube": cube, "brick": brick,
+          "cylinder": cylinder, "cone": cone}
+
+
+def as_fixture(name: str, mesh: trimesh.Trimesh | None = None) -> Fixture:
+    """A generated shape as a Fixture (metres), with a stand-in path for messages."""
+    mesh = mesh if mesh is not None else SHAPES[name]()
+    return fixture_from_mesh(mesh, Path(f"{name}.stl"), "m", "generated")

@@ -1,0 +1,106 @@
+"""Loading fixture meshes: units, bad files, open meshes, and the float32 distance error bound."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from fixwizard.errors import MeshError
+from fixwizard.fixture import load_fixture
+from fixwizard.synthetic import exact_distances_m, touching_ball_centres
+from shapes import SHAPES, as_fixture
+
+
+def test_a_millimetre_mesh_loaded_as_metres_is_refused_with_the_fix(tmp_path):
+    path = tmp_path / "bracket.stl"
+    trimesh.creation.box((180.0, 120.0, 40.0)).export(path)
+    with pytest.raises(MeshError, match="--mesh-units mm"):
+        load_fixture(path, "m")
+    assert load_fixture(path, "mm").mesh.extents == pytest.approx([0.18, 0.12, 0.04])
+
+
+def test_a_metre_mesh_loaded_as_millimetres_is_refused_with_the_fix(tmp_path):
+    path = tmp_path / "bracket.stl"
+    trimesh.creation.box((0.18, 0.12, 0.04)).export(path)
+    with pytest.raises(MeshError, match="--mesh-units m"):
+        load_fixture(path, "mm")
+
+
+@pytest.mark.parametrize("content, match", [(b"", "empty"), (b"hello, I am not a mesh\n" * 10, "mesh"),
+                                            (b"solid x\nendsolid x\n", "no triangles")])
+def test_files_that_are_not_meshes_get_a_clear_message(tmp_path, content, match):
+    path = tmp_path / "fixture.stl"
+    path.write_bytes(content)
+    with pytest.raises(MeshError, match=match):
+        load_fixture(path)
+
+
+def test_a_missing_file_and_a_foreign_format_are_named(tmp_path):
+    with pytest.raises(MeshError, match="does not exist"):
+        load_fixture(tmp_path / "nothing.stl")
+    step = tmp_path / "fixture.step"
+    step.write_text("ISO-10303-21;")
+    with pytest.raises(MeshError, match="STL, PLY or OBJ"):
+        load_fixture(step)
+
+
+def test_a_point_cloud_has_no_faces(tmp_path):
+    path = tmp_path / "cloud.ply"
+    trimesh.PointCloud(np.random.default_rng(0).random((50, 3)) * 0.1).export(path)
+    with pytest.raises(MeshError, match="no triangles"):
+        load_fixture(path)
+
+
+def test_an_open_mesh_loads_with_a_warning_and_unsigned_distances(tmp_path):
+    box = trimesh.creation.box((0.1, 0.1, 0.1))
+    open_box = trimesh.Trimesh(box.vertices, box.faces[2:])
+    path = tmp_path / "open.stl"
+    open_box.export(path)
+    fixture = load_fixture(path)
+    assert [code for code, _ in fixture.warnings] == ["mesh_not_watertight"]
+    assert not fixture.oracle.signed
+
+
+def test_internal_frame_is_the_minimum_enclosing_ball_centre(tmp_path):
+    path = tmp_path / "box.ply"
+    trimesh.creation.box((0.1, 0.06, 0.02)).apply_translation([0.3, 0, 0]).export(path)
+    fixture = load_fixture(path)
+    assert fixture.cad_p_center == pytest.approx([0.3, 0, 0], abs=1e-7)  # PLY stores float32
+    assert fixture.radius_m == pytest.approx(np.linalg.norm([0.05, 0.03, 0.01]), abs=1e-7)
+
+
+@pytest.mark.parametrize("name", sorted(SHAPES))
+def test_float32_distance_error_stays_well_inside_its_bound(name):
+    fixture = as_fixture(name)
+    rng = np.random.default_rng(1)
+    near = touching_ball_centres(fixture.mesh, 300, 0.0015, rng) + rng.normal(size=(300, 3)) * 0.002
+    far = fixture.mesh.bounds[0] + rng.random((300, 3)) * (fixture.mesh.extents * 1.5)
+    points = np.vstack([near, far]) - fixture.cad_p_center
+    exact = exact_distances_m(trimesh.Trimesh(fixture.fix_vertices_m, fixture.mesh.faces, process=False), points)
+    error = np.abs(fixture.oracle.unsigned_distance_m(points) - exact)
+    assert np.all(error <= fixture.oracle.error_bound_m(points) / 4)
+
+
+def test_signed_distance_is_negative_inside_a_closed_mesh():
+    fixture = as_fixture("cube")
+    points = np.array([[0.0, 0, 0], [0.0, 0, 0.05]])
+    assert fixture.oracle.signed_distance_m(points) == pytest.approx([-0.03, 0.02], abs=1e-6)
+
+
+def test_sign_is_right_where_ray_parity_fails():
+    """Open3D's ray-parity occupancy calls this point, 3.7 mm below the L-plate, inside; it is outside."""
+    fixture = as_fixture("l_prism")
+    point = np.array([[-0.02890762, 0.02193329, -0.00873163]])
+    assert fixture.oracle.signed_distance_m(point)[0] == pytest.approx(0.00373163, abs=1e-6)
+
+
+@pytest.mark.parametrize("name", sorted(SHAPES))
+def test_sign_agrees_with_the_exact_winding_number(name):
+    import igl
+
+    fixture = as_fixture(name)
+    rng = np.random.default_rng(2)
+    points = fixture.mesh.bounds[0] - 0.01 + rng.random((5000, 3)) * (fixture.mesh.extents + 0.02)
+    points -= fixture.cad_p_center
+    vertices = fixture.fix_vertices_m
+    winding = igl.winding_number(vertices, np.asarray(fixture.mesh.faces, np.int64), points)
+    assert np.array_equal(fixture.oracle.distance_and_inside(points)[1], winding > 0.5)

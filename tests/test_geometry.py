@@ -1,0 +1,109 @@
+"""Geometry pieces against brute force: enclosing balls, the SOCP box, rotation and position cells."""
+
+import itertools
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from fixwizard.geometry.meb import minimum_enclosing_ball
+from fixwizard.geometry.octree import PositionGrid
+from fixwizard.geometry.so3_grid import RotationGrid
+from fixwizard.geometry.socp_box import ball_intersection_box
+
+
+def brute_force_ball_radius(points: np.ndarray) -> float:
+    """Smallest ball through 1..d+1 of the points that holds them all."""
+    dim = points.shape[1]
+    best = np.inf
+    for size in range(1, dim + 2):
+        for support in itertools.combinations(points, size):
+            origin = support[0]
+            edges = np.array([p - origin for p in support[1:]]).reshape(-1, dim)
+            gram = edges @ edges.T
+            coefficients = np.linalg.lstsq(2 * gram, np.diag(gram), rcond=None)[0] if size > 1 else np.zeros(0)
+            center = origin + coefficients @ edges
+            radius = np.linalg.norm(origin - center)
+            if np.all(np.linalg.norm(points - center, axis=1) <= radius * (1 + 1e-9) + 1e-12):
+                best = min(best, radius)
+    return best
+
+
+@pytest.mark.parametrize("dim", [2, 3, 4])
+@pytest.mark.parametrize("seed", range(8))
+def test_minimum_enclosing_ball_matches_brute_force(dim, seed):
+    points = np.random.default_rng(seed).normal(size=(9, dim))
+    ball = minimum_enclosing_ball(points)
+    assert ball.radius == pytest.approx(brute_force_ball_radius(points), rel=1e-9)
+    assert np.all(np.linalg.norm(points - ball.center, axis=1) <= ball.radius)
+
+
+def test_minimum_enclosing_ball_of_two_points_is_centred_between_them():
+    ball = minimum_enclosing_ball(np.array([[0.0, 0, 0], [1.0, 0, 0], [0.5, 0.1, 0]]))
+    assert ball.center == pytest.approx([0.5, 0, 0])
+    assert ball.radius == pytest.approx(0.5)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_socp_box_holds_every_point_of_the_ball_intersection(seed):
+    rng = np.random.default_rng(seed)
+    radius = 0.15
+    centres = np.array([0.4, 0.1, 0.2]) + rng.normal(size=(rng.integers(3, 15), 3)) * 0.03
+    low, high = ball_intersection_box(centres, radius)
+    candidates = centres[0] + rng.uniform(-radius, radius, size=(400_000, 3))
+    inside = np.all(np.linalg.norm(candidates[:, None, :] - centres[None], axis=2) <= radius, axis=1)
+    points = candidates[inside]
+    assert len(points) > 100
+    assert np.all(points >= low) and np.all(points <= high)
+    # tight: the extreme sampled points come close to every face of the box
+    assert np.all(points.min(axis=0) - low < 0.01) and np.all(high - points.max(axis=0) < 0.01)
+
+
+def test_socp_box_is_none_when_the_balls_do_not_meet():
+    assert ball_intersection_box(np.array([[0.0, 0, 0], [1.0, 0, 0], [0.5, 0.5, 0]]), 0.3) is None
+
+
+@pytest.mark.parametrize("level", range(7))
+def test_rotation_cell_bound_gamma_holds_for_random_rotations(level):
+    grid = RotationGrid()
+    rotations = Rotation.random(100_000, random_state=level)
+    cells = grid.cell_of(level, rotations)
+    angles = (grid.centers(level, cells).inv() * rotations).magnitude()
+    assert np.all(angles <= grid.gamma(level, cells))
+
+
+@pytest.mark.parametrize("level", range(5))
+def test_rotation_children_partition_their_parent(level):
+    grid = RotationGrid()
+    rotations = Rotation.random(20_000, random_state=100 + level)
+    parents = grid.cell_of(level, rotations)
+    children = grid.cell_of(level + 1, rotations)
+    family = grid.children(level, parents).reshape(-1, 8)
+    assert np.all(np.any(family == children[:, None], axis=1))
+    assert len(np.unique(grid.children(level, np.arange(grid.n_cells(level))))) == grid.n_cells(level + 1)
+
+
+def test_rotation_samples_lie_in_their_cells():
+    grid = RotationGrid()
+    cells = np.random.default_rng(3).integers(0, grid.n_cells(4), 5000)
+    samples = grid.sample(4, cells, np.random.default_rng(4))
+    assert np.all(grid.cell_of(4, samples) == cells)
+
+
+def test_rotation_cell_centres_lie_in_their_cells():
+    grid = RotationGrid()
+    cells = np.arange(grid.n_cells(2))
+    assert np.all(grid.cell_of(2, grid.centers(2, cells)) == cells)
+
+
+def test_position_cell_bound_holds_for_points_in_the_cell():
+    grid = PositionGrid(corner_m=np.array([0.1, -0.2, 0.3]), side_m=0.08)
+    rng = np.random.default_rng(0)
+    for level in range(6):
+        points = grid.corner_m + rng.random((10_000, 3)) * grid.side_m
+        cells = np.array([grid.cell_of(level, point) for point in points[:500]])
+        distance = np.linalg.norm(points[:500] - grid.centers_m(level, cells), axis=1)
+        assert np.all(distance <= grid.half_diagonal_m(level))
+        children = grid.children(cells).reshape(-1, 8, 3)
+        finer = np.array([grid.cell_of(level + 1, point) for point in points[:500]])
+        assert np.all(np.any(np.all(children == finer[:, None, :], axis=2), axis=1))

@@ -1,0 +1,81 @@
+"""The guarantee: for random shapes, poses, taps and noise up to the bound, the true pose is never lost.
+
+Small cell budgets keep this fast; the guarantee must hold at any budget.
+"""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from fixwizard.geometry.se3 import make_transform, transform_points
+from fixwizard.solver.solve import solve
+from fixwizard.synthetic import bounded_noise, touching_ball_centres
+from shapes import SHAPES, as_fixture
+
+TRIALS_PER_SHAPE = 36
+FIXTURES = {name: as_fixture(name) for name in SHAPES}
+
+
+def random_case(name: str, seed: int):
+    rng = np.random.default_rng(seed)
+    fixture = FIXTURES[name]
+    base_T_cad = make_transform(Rotation.random(random_state=seed), rng.uniform([-0.6, -0.6, 0.0], [0.6, 0.6, 0.4]))
+    ball_diameter = float(rng.choice([0.0, 0.003, 0.006]))
+    sample_bound = float(rng.uniform(0.0003, 0.002))
+    count = int(rng.integers(6, 16))
+    cad_p_centres = touching_ball_centres(fixture.mesh, count, ball_diameter / 2, rng)
+    taps = transform_points(base_T_cad, cad_p_centres) + bounded_noise(count, sample_bound, rng)
+    max_cells = float(rng.choice([2e4, 6e4, 2e5]))
+    return fixture, base_T_cad, taps, ball_diameter, sample_bound, max_cells
+
+
+def largest_vertex_displacement_m(fixture, first: np.ndarray, second: np.ndarray) -> float:
+    return float(np.max(np.linalg.norm(transform_points(first, fixture.mesh.vertices)
+                                       - transform_points(second, fixture.mesh.vertices), axis=1)))
+
+
+@pytest.mark.parametrize("seed", range(TRIALS_PER_SHAPE))
+@pytest.mark.parametrize("name", sorted(SHAPES))
+def test_true_pose_is_inside_the_guaranteed_set_and_bounds(name, seed):
+    fixture, base_T_cad, taps, ball_diameter, sample_bound, max_cells = random_case(name, seed)
+    solution = solve(fixture, taps, ball_diameter, sample_bound, max_cells=max_cells, max_samples=1000, seed=seed)
+    assert solution.status != "inconsistent"
+    assert solution.contains(base_T_cad)
+    centre = solution.bounds.base_T_cad_center
+    assert np.linalg.norm(base_T_cad[:3, 3] - centre[:3, 3]) <= solution.bounds.position_m
+    angle = Rotation.from_matrix(centre[:3, :3].T @ base_T_cad[:3, :3]).magnitude()
+    assert angle <= solution.bounds.rotation_rad
+    assert largest_vertex_displacement_m(fixture, base_T_cad, centre) <= solution.bounds.max_point_displacement_m
+
+
+def taps_on_every_face(name: str, seed: int, count: int):
+    rng = np.random.default_rng(seed)
+    fixture = FIXTURES[name]
+    base_T_cad = make_transform(Rotation.random(random_state=seed), [0.4, 0.1, 0.2])
+    normals = fixture.mesh.face_normals
+    centres = np.vstack([touching_ball_centres(fixture.mesh, count // 6, 0.0015, rng,
+                                               face_mask=(normals @ axis > 0.99).astype(float))
+                         for axis in np.vstack([np.eye(3), -np.eye(3)])])
+    return fixture, base_T_cad, transform_points(base_T_cad, centres) + bounded_noise(len(centres), 0.0005, rng)
+
+
+@pytest.mark.parametrize("name, symmetries", [("cube", 24), ("brick", 4)])
+def test_discrete_symmetry_gives_one_mode_per_symmetric_pose(name, symmetries):
+    fixture, base_T_cad, taps = taps_on_every_face(name, seed=3, count=18)
+    solution = solve(fixture, taps, 0.003, 0.0005, max_cells=3e5, max_samples=5000)
+    assert solution.status == "ambiguous"
+    assert len(solution.modes) == symmetries
+    assert sum(mode.probability for mode in solution.modes) == pytest.approx(1.0)
+    assert any(code == "ambiguous" for code in (warning.code for warning in solution.warnings))
+    assert solution.contains(base_T_cad)
+
+
+def test_an_asymmetric_fixture_tapped_all_over_is_unique():
+    fixture = FIXTURES["l_prism"]
+    rng = np.random.default_rng(5)
+    base_T_cad = make_transform(Rotation.random(random_state=5), [0.4, 0.1, 0.2])
+    taps = transform_points(base_T_cad, touching_ball_centres(fixture.mesh, 15, 0.0015, rng))
+    solution = solve(fixture, taps + bounded_noise(15, 0.0005, rng), 0.003, 0.0005, max_cells=3e5)
+    assert solution.status == "unique"
+    assert solution.bounds.position_m < 0.005
+    assert np.linalg.norm(solution.base_T_cad[:3, 3] - base_T_cad[:3, 3]) < 0.002
