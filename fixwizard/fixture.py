@@ -78,7 +78,8 @@ class DistanceOracle:
     """
 
     # A closest point within this barycentric margin of an edge or vertex takes that feature's
-    # pseudonormal; that is safe for points whose true closest feature is the face itself.
+    # pseudonormal (that is safe for points whose true closest feature is the face itself);
+    # elsewhere the face normal is the pseudonormal. Open3D's float32 barycentrics err far less.
     FEATURE_MARGIN = 1e-3
 
     def __init__(self, mesh_m: trimesh.Trimesh, signed: bool) -> None:
@@ -98,6 +99,11 @@ class DistanceOracle:
             weights = mesh_m.face_angles[:, :, None] * self._face_normals[:, None, :]
             np.add.at(vertex_normals, self._faces.ravel(), weights.reshape(-1, 3))
             self._corner_normals = vertex_normals[self._faces]
+
+    @property
+    def bounds_m(self) -> tuple[np.ndarray, np.ndarray]:
+        """Corners (m) of the mesh's axis-aligned bounding box in its frame."""
+        return self._vertices.min(axis=0), self._vertices.max(axis=0)
 
     def _query(self, points_m: np.ndarray) -> o3d.core.Tensor:
         return o3d.core.Tensor(np.asarray(points_m, np.float32).reshape(-1, 3))
@@ -134,9 +140,14 @@ class DistanceOracle:
         query = self._query(points_m)
         result = self._scene.compute_closest_points(query)
         closest = result["points"].numpy().astype(np.float64)
-        faces = result["primitive_ids"].numpy().astype(np.int64)
-        distance = np.linalg.norm(points_m - closest, axis=1)
-        inside = self._pseudonormal_inside(points_m, closest, faces)
+        offsets = points_m - closest
+        distance = np.sqrt(np.einsum("ij,ij->i", offsets, offsets))
+        inside = np.einsum("ij,ij->i", offsets, result["primitive_normals"].numpy()) < 0.0
+        uv = result["primitive_uvs"].numpy()
+        near_feature = np.flatnonzero((uv.min(axis=1) <= self.FEATURE_MARGIN)
+                                      | (uv.sum(axis=1) >= 1.0 - self.FEATURE_MARGIN))
+        faces = result["primitive_ids"].numpy()[near_feature].astype(np.int64)
+        inside[near_feature] = self._pseudonormal_inside(points_m[near_feature], closest[near_feature], faces)
         disagree = inside != (self._scene.compute_occupancy(query).numpy() > 0.5)
         if np.any(disagree):
             winding = igl.winding_number(self._vertices, self._faces, points_m[disagree])

@@ -90,6 +90,12 @@ class RotationGrid:
         child_tilts = 2 * tilts[:, None, None] + np.arange(2)[None, None, :]
         return (child_pixels * self.n_tilts(level + 1) + child_tilts).reshape(-1)
 
+    def ancestors(self, level: int, cells: np.ndarray, coarse_level: int) -> np.ndarray:
+        """The cells at ``coarse_level <= level`` that hold the given cells."""
+        pixels, tilts = np.divmod(np.asarray(cells, np.int64), self.n_tilts(level))
+        steps = level - coarse_level
+        return (pixels >> (2 * steps)) * self.n_tilts(coarse_level) + (tilts >> steps)
+
     def _sections(self, level: int, pixels: np.ndarray, directions: np.ndarray) -> Rotation:
         """``S(d)`` for directions ``d`` lying in the given pixels."""
         base = pixels >> (2 * level)

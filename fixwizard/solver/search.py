@@ -12,7 +12,8 @@ The distance is 1-Lipschitz, so no pose inside a rejected cell can explain all t
 Each surviving cell keeps, per tap, an interval holding ``s`` at its query point. A child's
 query point lies ``|x_child - x_parent|`` from its parent's, so the parent's interval widened
 by that much holds the child's value: most children are accepted or rejected from it, and
-only those whose interval straddles the band's edge need an Open3D query. Taps are tested
+then a precomputed distance lattice (``distance_grid``) narrows the interval, and only
+those whose interval still straddles the band's edge need an Open3D query. Taps are tested
 one at a time over the cells still alive, the tap that rejected most at the previous level first.
 """
 
@@ -27,6 +28,7 @@ from fixwizard.fixture import DistanceOracle
 from fixwizard.geometry.octree import PositionGrid
 from fixwizard.geometry.socp_box import ball_intersection_box
 from fixwizard.solver.cells import CellSet, root_cells
+from fixwizard.solver.distance_grid import DistanceGrid, distance_grid_for
 
 QUERY_CHUNK = 1 << 20  # cells per batch; a multiple of 8 so batches hold whole families
 
@@ -120,8 +122,8 @@ class _Survivors:
 
 
 def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: int, parents: _Survivors | None,
-                  tap_order: np.ndarray, rejected: np.ndarray, cancel: threading.Event | None,
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                  grid: DistanceGrid, tap_order: np.ndarray, rejected: np.ndarray,
+                  cancel: threading.Event | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Survivor mask, ``R_c^T t_c`` and distance intervals of the survivors among cells ``first .. first + count``."""
     chunk = slice(first, first + count)
     rotated_positions = frames.rotated_positions(chunk)
@@ -153,6 +155,12 @@ def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: in
         undecided = ((interval_high >= band_low) & (interval_low <= band_high)
                      & ((interval_low < band_low) | (interval_high > band_high)))
         if np.any(undecided):
+            grid_low, grid_high = grid.interval_m(queries[undecided])
+            interval_low[undecided] = np.maximum(interval_low[undecided], grid_low)
+            interval_high[undecided] = np.minimum(interval_high[undecided], grid_high)
+            undecided &= ((interval_high >= band_low) & (interval_low <= band_high)
+                          & ((interval_low < band_low) | (interval_high > band_high)))
+        if np.any(undecided):
             interval_low[undecided], interval_high[undecided] = exact_distance_interval_m(problem.oracle,
                                                                                           queries[undecided])
         keep = (interval_high >= band_low) & (interval_low <= band_high)
@@ -163,13 +171,13 @@ def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: in
     return alive, rotated_positions[alive], low[alive], high[alive]
 
 
-def _filter(problem: SearchProblem, cells: CellSet, parents: _Survivors | None, tap_order: np.ndarray,
-            cancel: threading.Event | None) -> tuple[CellSet, _Survivors, np.ndarray]:
+def _filter(problem: SearchProblem, cells: CellSet, parents: _Survivors | None, grid: DistanceGrid,
+            tap_order: np.ndarray, cancel: threading.Event | None) -> tuple[CellSet, _Survivors, np.ndarray]:
     """Survivors of a level, and the number of cells each tap rejected."""
     frames = _Frames(cells)
     rejected = np.zeros(len(problem.base_p_taps), np.int64)
-    parts = [_filter_chunk(problem, frames, first, min(QUERY_CHUNK, len(cells) - first), parents, tap_order,
-                           rejected, cancel) for first in range(0, len(cells), QUERY_CHUNK)]
+    parts = [_filter_chunk(problem, frames, first, min(QUERY_CHUNK, len(cells) - first), parents, grid,
+                           tap_order, rejected, cancel) for first in range(0, len(cells), QUERY_CHUNK)]
     alive, rotated_positions, low, high = (np.concatenate(part) for part in zip(*parts))
     survivors = cells.subset(alive)
     return survivors, _Survivors(_Frames(survivors), rotated_positions, low, high), rejected
@@ -194,11 +202,12 @@ def search(problem: SearchProblem, max_cells: float = 1e7,
     if position_grid is None:
         return None
     cells = root_cells(position_grid)
+    grid = distance_grid_for(problem.oracle)
     tap_order = np.arange(len(problem.base_p_taps))
     parents = None
     while True:
         evaluated = len(cells)
-        cells, parents, rejected = _filter(problem, cells, parents, tap_order, cancel)
+        cells, parents, rejected = _filter(problem, cells, parents, grid, tap_order, cancel)
         tap_order = np.argsort(-rejected, kind="stable")
         if progress is not None:
             progress(SearchProgress(cells.rotation_level, cells.position_level, evaluated, len(cells),

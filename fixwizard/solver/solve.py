@@ -145,7 +145,7 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
                         stats, None, fix_T_cad)
 
     fix_p_origin = -fixture.cad_p_center
-    labels = rotation_modes(*cells.distinct_rotations())
+    labels = rotation_modes(cells)
     samples = sample_cells(cells, fixture.oracle, base_p_taps, ball_diameter_m / 2.0, sigma_m, max_samples,
                            np.random.default_rng(seed))
     sample_labels = labels[samples.cell_index]
