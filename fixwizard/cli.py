@@ -14,6 +14,7 @@ from fixwizard.solver.search import SearchCancelled, SearchProgress
 from fixwizard.units import parse_length_m
 from fixwizard.workflow.import_poses import import_pose_dir, load_tip
 from fixwizard.workflow.solve_run import SolveRequest, run_solve, summary_lines
+from fixwizard.workflow.tip_calibration import register_calibrate_tip_parser
 
 EXIT_OK, EXIT_BAD_INPUT, EXIT_INCONSISTENT, EXIT_CANCELLED = 0, 1, 2, 130
 
@@ -83,6 +84,8 @@ def build_parser() -> argparse.ArgumentParser:
     import_parser.add_argument("--tip", required=True, help="tip as a .pose file or a tip calibration YAML")
     import_parser.add_argument("-o", "--output", required=True, help="POINTS YAML to write")
     import_parser.set_defaults(func=import_poses_command)
+
+    register_calibrate_tip_parser(commands)
     return parser
 
 

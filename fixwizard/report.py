@@ -18,6 +18,7 @@ from fixwizard.fixture import Fixture
 from fixwizard.geometry.se3 import format_ur_pose, make_transform
 from fixwizard.solver.estimates import Bounds
 from fixwizard.solver.solve import Solution
+from fixwizard.yamlfile import load_document
 
 SCHEMA = "fixwizard.report/1"
 STATUSES = ("unique", "ambiguous", "inconsistent")
@@ -103,12 +104,7 @@ def _pose_from(section: dict, path: Path, where: str) -> np.ndarray:
 def load(path: str | Path) -> Report:
     """Read and check a report written by ``write``; raises InputError for a damaged or foreign file."""
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as error:
-        raise InputError(f"cannot read the report {path}: {error}") from error
-    if not isinstance(data, dict) or data.get("schema") != SCHEMA:
-        raise InputError(f"{path} is not a fixwizard report (expected 'schema: {SCHEMA}')")
+    data = load_document(path, SCHEMA, "fixwizard report")
     if data.get("status") not in STATUSES:
         raise InputError(f"{path}: status must be one of {', '.join(STATUSES)}")
     if data["status"] == "inconsistent":

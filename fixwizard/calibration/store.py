@@ -13,6 +13,7 @@ import numpy as np
 import yaml
 
 from fixwizard.atomic import write_text_atomic
+from fixwizard.yamlfile import load_document
 from fixwizard.calibration.errors import CalibrationFileError
 from fixwizard.calibration.residuals import ExcludedTap, ResidualStats
 from fixwizard.calibration.taps import PoseSeries, readonly_array
@@ -67,14 +68,8 @@ def save_calibration(calibration: TipCalibration, path: str | Path) -> Path:
 def load_calibration(path: str | Path) -> TipCalibration:
     """Read and check a ``fixwizard.tip/1`` file; CalibrationFileError says what is wrong with a bad one."""
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as error:
-        raise CalibrationFileError(f"cannot read the tip calibration {path}: {error}") from error
-    found = data.get("schema") if isinstance(data, dict) else None
-    if found != SCHEMA:
-        raise CalibrationFileError(f"{path} is not a tip calibration: expected 'schema: {SCHEMA}', found "
-                                   f"{found!r}. Give a file written by `fixwizard calibrate-tip`.")
+    data = load_document(path, SCHEMA, "tip calibration", CalibrationFileError,
+                         " Give a file written by `fixwizard calibrate-tip`.")
     try:
         return _calibration(data)
     except _Damaged as problem:

@@ -65,8 +65,7 @@ def minimum_enclosing_ball(points: np.ndarray, seed: int = 0) -> Ball:
     points = np.asarray(points, float)
     if points.ndim != 2 or len(points) == 0:
         raise ValueError("minimum_enclosing_ball needs a non-empty (N, d) array")
-    unique = np.unique(points, axis=0)
-    candidates = _extreme_points(unique)
+    candidates = np.unique(_extreme_points(points), axis=0)
     order = np.random.default_rng(seed).permutation(len(candidates))
     ball = _move_to_front_ball([candidates[i] for i in order], len(candidates), [], points.shape[1])
     radius = float(np.sqrt(np.max(np.sum((points - ball.center) ** 2, axis=1))))

@@ -1,44 +1,47 @@
-"""Which tap makes a set of taps inconsistent: leave each out and see whether the rest fit."""
+"""Which tap makes a set of taps inconsistent: leave each out and see whether the rest fit.
+
+Each leave-one-out search runs at the full cell budget: while the suspect tap is still in,
+the search empties early and costs little; only the removal that restores consistency runs
+to the end.
+"""
 
 from dataclasses import dataclass, replace
 
 import numpy as np
 
+from fixwizard.solver.cells import CellSet
 from fixwizard.solver.search import SearchProblem, search
-
-DIAGNOSIS_MAX_CELLS = 5e4
 
 
 @dataclass(frozen=True)
 class SuspectTap:
-    """Tap ``index`` (0-based) is off the surface by at least ``distance_m`` under every pose the others allow."""
+    """Tap ``index`` (0-based) lies about ``distance_m`` off the ball-offset surface under the poses
+    the other taps allow (the smallest residual over their cells' centres)."""
 
     index: int
     distance_m: float
 
 
-def _smallest_violation_m(problem: SearchProblem, index: int, cells) -> float:
-    """Smallest ``|d(x) - r_ball|`` of tap ``index`` over the cell centres (m)."""
-    tap = problem.base_p_taps[index]
+def _smallest_residual_m(problem: SearchProblem, index: int, cells: CellSet) -> float:
+    """Smallest ``|s(x) - r_ball|`` (m) of tap ``index`` over the cells' centre poses."""
     rotations, _, rotation_index = cells.distinct_rotations()
+    tap = problem.base_p_taps[index]
     queries = np.einsum("nij,nj->ni", rotations.inv().as_matrix()[rotation_index], tap - cells.positions_m())
-    residual = problem.oracle.signed_distance_m(queries) - problem.ball_radius_m
-    return float(np.min(np.abs(residual)))
+    return float(np.min(np.abs(problem.oracle.signed_distance_m(queries) - problem.ball_radius_m)))
 
 
 def find_suspect_tap(problem: SearchProblem, max_cells: float) -> SuspectTap | None:
-    """The tap whose removal leaves the others consistent and which lies farthest from the surface; None if none."""
-    budget = min(max_cells, DIAGNOSIS_MAX_CELLS)
+    """The tap whose removal leaves the others consistent (the farthest off if several); None if none."""
     taps = problem.base_p_taps
+    if len(taps) <= 3:
+        return None
     best: SuspectTap | None = None
     for index in range(len(taps)):
         others = replace(problem, base_p_taps=np.delete(taps, index, axis=0))
-        if len(others.base_p_taps) < 3:
-            return None
-        cells = search(others, budget)
+        cells = search(others, max_cells)
         if cells is None or len(cells) == 0:
             continue
-        violation = _smallest_violation_m(problem, index, cells)
-        if best is None or violation > best.distance_m:
-            best = SuspectTap(index, violation)
+        residual = _smallest_residual_m(problem, index, cells)
+        if best is None or residual > best.distance_m:
+            best = SuspectTap(index, residual)
     return best

@@ -74,6 +74,14 @@ def start_position_grid(problem: SearchProblem) -> PositionGrid | None:
     return PositionGrid(corner_m=0.5 * (low + high) - 0.5 * side, side_m=side)
 
 
+def discretisation_bound_m(problem: SearchProblem, fix_p_query: np.ndarray, chords: np.ndarray,
+                           position_bound_m: float) -> np.ndarray:
+    """``b_p + b_r,i`` (m): how far a query point can move within its cell; ``chords = 2 sin(gamma / 2)``."""
+    lever = np.minimum(np.sqrt(np.einsum("ij,ij->i", fix_p_query, fix_p_query)) + position_bound_m,
+                       problem.lever_cap_m)
+    return position_bound_m + lever * chords
+
+
 def _round_down_f32(values: np.ndarray) -> np.ndarray:
     """float32 values no larger than the float64 ones (a cast errs by at most |v| 2^-24)."""
     return (values - np.abs(values) * 2.0**-23).astype(np.float32)
@@ -139,8 +147,7 @@ def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: in
         local = np.flatnonzero(alive)
         tap = problem.base_p_taps[tap_index]
         queries = frames.rotated_tap(tap)[rotation_index[local]] - rotated_positions[local]
-        lever = np.minimum(np.linalg.norm(queries, axis=1) + position_bound, problem.lever_cap_m)
-        tolerance = problem.sample_bound_m + position_bound + lever * chords[local]
+        tolerance = problem.sample_bound_m + discretisation_bound_m(problem, queries, chords[local], position_bound)
         band_low, band_high = problem.ball_radius_m - tolerance, problem.ball_radius_m + tolerance
         if parents is None:
             interval_low = np.full(len(local), -np.inf)

@@ -112,8 +112,8 @@ def _inconsistent_warnings(suspect: SuspectTap | None) -> list[SolveWarning]:
         return [SolveWarning("inconsistent", "No pose of the fixture explains all taps."),
                 SolveWarning("suspect_tap",
                              f"Tap {suspect.index + 1} is the likely culprit: without it the other taps fit, and it "
-                             f"lies at least {suspect.distance_m * 1e3:.1f} mm off the surface under every pose "
-                             "they allow. It probably missed the fixture; drop it and solve again.")]
+                             f"lies about {suspect.distance_m * 1e3:.1f} mm off the surface under the poses they "
+                             "allow. It probably missed the fixture; drop it and solve again.")]
     return [SolveWarning("inconsistent",
                          "No pose of the fixture explains the taps, and no single tap is to blame. Usual causes: "
                          "the wrong mesh, wrong mesh units, a wrong tool-tip calibration, or a sample bound that "
@@ -162,8 +162,8 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
                           mode_bounds, len(mode_cells)))
     modes.sort(key=lambda mode: -mode.probability)
     top = modes[0]
-    bounds = guaranteed_bounds(cells, fix_p_origin, fixture.radius_m,
-                               Rotation.from_matrix(top.bounds.base_T_cad_center[:3, :3]))
+    bounds = top.bounds if len(modes) == 1 else guaranteed_bounds(
+        cells, fix_p_origin, fixture.radius_m, Rotation.from_matrix(top.bounds.base_T_cad_center[:3, :3]))
     status = "unique" if len(modes) == 1 else "ambiguous"
     if status == "ambiguous":
         distance, angle = _mode_separation(modes)

@@ -5,6 +5,8 @@ from pathlib import Path
 
 import numpy as np
 
+from fixwizard.calibration.store import load_calibration
+from fixwizard.calibration.taps import ball_centres_m
 from fixwizard.errors import InputError
 from fixwizard.geometry.se3 import read_pose_dir, read_pose_file
 
@@ -24,17 +26,10 @@ def load_tip(path: str | Path) -> Tip:
     if path.suffix.lower() == ".pose":
         return Tip(read_pose_file(path)[:3, 3])
     if path.suffix.lower() in (".yaml", ".yml"):
-        from fixwizard.calibration.store import load_calibration
-
         calibration = load_calibration(path)
         return Tip(np.asarray(calibration.tcp_p_tip_m, float), calibration.ball_diameter_m,
                    calibration.sample_bound_m)
     raise InputError(f"{path} is neither a .pose file nor a tip calibration (.yaml); give one of those")
-
-
-def ball_centres_m(base_T_tcp: np.ndarray, tcp_p_tip_m: np.ndarray) -> np.ndarray:
-    """Ball centres (N, 3) in the base frame (m) for flange poses (N, 4, 4) and a tip (3,) in the flange frame."""
-    return np.einsum("nij,j->ni", base_T_tcp[:, :3, :3], tcp_p_tip_m) + base_T_tcp[:, :3, 3]
 
 
 def import_pose_dir(directory: str | Path, tip: Tip) -> tuple[list[Path], np.ndarray]:

@@ -1,0 +1,139 @@
+"""The headless command line, as an operator would use it: good runs, and every kind of bad input."""
+
+import numpy as np
+import pytest
+import trimesh
+import yaml
+from scipy.spatial.transform import Rotation
+
+from fixwizard import report
+from fixwizard.cli import main
+from fixwizard.geometry.se3 import make_transform, transform_points
+from fixwizard.points import write_points
+from fixwizard.synthetic import bounded_noise, touching_ball_centres
+from shapes import l_prism
+
+REPO_FIXTURES = __import__("pathlib").Path(__file__).resolve().parents[1] / "fixtures"
+
+
+@pytest.fixture(scope="module")
+def bracket(tmp_path_factory):
+    """An L-plate exported in millimetres, 12 taps at a known pose, and that pose."""
+    folder = tmp_path_factory.mktemp("bracket")
+    mesh_m = l_prism()
+    mesh_mm = mesh_m.copy()
+    mesh_mm.apply_scale(1000.0)
+    mesh_mm.export(folder / "plate.stl")
+    rng = np.random.default_rng(11)
+    base_T_cad = make_transform(Rotation.from_euler("z", 40, degrees=True), [0.5, 0.1, 0.0])
+    taps = transform_points(base_T_cad, touching_ball_centres(mesh_m, 12, 0.0015, rng)) + bounded_noise(12, 0.0005, rng)
+    write_points(folder / "taps.yaml", taps)
+    return folder, taps, base_T_cad
+
+
+def solve_args(folder, points="taps.yaml", *extra):
+    return ["solve", str(folder / "plate.stl"), str(folder / points), "--mesh-units", "mm", "--sample-bound", "0.5mm",
+            "--ball-diameter", "3mm", "--max-cells", "1e5", "-q", "-o", str(folder / "report.yaml"), *extra]
+
+
+def test_solve_prints_a_summary_and_writes_a_loadable_report(bracket, capsys):
+    folder, taps, base_T_cad = bracket
+    assert main(solve_args(folder)) == 0
+    out = capsys.readouterr().out
+    assert "status: unique" in out and "guaranteed:" in out and "p[" in out
+    loaded = report.load(folder / "report.yaml")
+    assert loaded.status == "unique"
+    assert np.linalg.norm(loaded.center_base_T_cad[:3, 3] - base_T_cad[:3, 3]) <= loaded.position_bound_m
+    assert np.array(loaded.data["inputs"]["points_m"]) == pytest.approx(taps)
+
+
+def test_a_csv_points_file_works_like_yaml(bracket, capsys):
+    folder, taps, _ = bracket
+    np.savetxt(folder / "taps.csv", taps, delimiter=",", header="x,y,z", comments="")
+    assert main(solve_args(folder, "taps.csv")) == 0
+
+
+def test_wrong_units_name_the_fix(bracket, capsys):
+    folder, _, _ = bracket
+    args = solve_args(folder)
+    args[args.index("mm")] = "m"
+    assert main(args) == 1
+    assert "--mesh-units mm" in capsys.readouterr().err
+
+
+def test_a_non_mesh_file_is_refused(bracket, tmp_path, capsys):
+    folder, _, _ = bracket
+    (tmp_path / "plate.stl").write_text("this is a shopping list, not a mesh\n" * 20)
+    write_points(tmp_path / "taps.yaml", np.zeros((5, 3)))
+    assert main(solve_args(tmp_path)) == 1
+    err = capsys.readouterr().err
+    assert "mesh" in err and "Traceback" not in err
+
+
+def test_two_taps_are_not_enough(bracket, capsys):
+    folder, taps, _ = bracket
+    write_points(folder / "two.yaml", taps[:2])
+    assert main(solve_args(folder, "two.yaml")) == 1
+    assert "at least 3" in capsys.readouterr().err
+
+
+def test_nan_in_the_points_file_is_refused_with_the_tap_number(bracket, capsys):
+    folder, _, _ = bracket
+    (folder / "nan.csv").write_text("0.1,0.2,0.3\n0.1,nan,0.3\n0.2,0.2,0.2\n")
+    assert main(solve_args(folder, "nan.csv")) == 1
+    assert "tap 2" in capsys.readouterr().err
+
+
+def test_a_tap_5cm_off_the_fixture_is_inconsistent_and_named(bracket, capsys):
+    folder, taps, _ = bracket
+    off = taps.copy()
+    off[6] += np.array([0.0, 0.0, 0.05])
+    write_points(folder / "off.yaml", off)
+    args = solve_args(folder, "off.yaml")
+    args[args.index("1e5")] = "1e6"
+    assert main(args) == 2
+    out = capsys.readouterr().out
+    assert "status: inconsistent" in out and "Tap 7" in out
+    loaded = report.load(folder / "report.yaml")
+    assert loaded.status == "inconsistent" and loaded.base_T_cad is None
+    assert loaded.data["suspect_tap"]["tap"] == 7
+    assert loaded.data["pose"] is None and loaded.data["bounds"] is None and loaded.data["intervals"] is None
+
+
+def test_a_bad_length_is_refused(bracket, capsys):
+    folder, _, _ = bracket
+    args = solve_args(folder)
+    args[args.index("0.5mm")] = "half a millimetre"
+    assert main(args) == 1
+    assert "cannot read the length" in capsys.readouterr().err
+
+
+def test_import_poses_turns_flange_poses_into_ball_centres(tmp_path, capsys):
+    poses = tmp_path / "poses"
+    poses.mkdir()
+    for index, pose in enumerate([[0.4, 0.0, 0.2, 0.0, 3.14159, 0.0], [0.5, 0.1, 0.2, 0.0, 3.14159, 0.0]]):
+        (poses / f"base_t_tcp_{index}.pose").write_text("\n".join(str(value) for value in pose))
+    (tmp_path / "tip.pose").write_text("0\n0\n0.05\n0\n0\n0\n")
+    assert main(["import-poses", str(poses), "--tip", str(tmp_path / "tip.pose"), "-o", str(tmp_path / "p.yaml")]) == 0
+    points = yaml.safe_load((tmp_path / "p.yaml").read_text())
+    assert points["frame"] == "base"
+    assert np.array(points["points_m"]) == pytest.approx(np.array([[0.4, 0.0, 0.15], [0.5, 0.1, 0.15]]), abs=1e-5)
+
+
+def test_import_poses_reads_a_tip_calibration(tmp_path, real_data):
+    output = tmp_path / "points.yaml"
+    calibration = REPO_FIXTURES.parent / "calibrations" / "example_matlab_logo.yaml"
+    assert main(["import-poses", str(real_data / "samples" / "expert"), "--tip", str(calibration), "-o",
+                 str(output)]) == 0
+    assert len(yaml.safe_load(output.read_text())["points_m"]) == 20
+
+
+def test_the_bundled_demo_solves(tmp_path, capsys):
+    args = ["solve", str(REPO_FIXTURES / "demo_bracket.stl"), str(REPO_FIXTURES / "demo_bracket_taps.yaml"),
+            "--mesh-units", "mm", "--sample-bound", "1mm", "--ball-diameter", "3mm", "--max-cells", "2e5", "-q",
+            "-o", str(tmp_path / "demo.yaml")]
+    assert main(args) == 0
+    hidden = yaml.safe_load((REPO_FIXTURES / "demo_bracket_taps.yaml").read_text())["hidden_pose_ur"]
+    loaded = report.load(tmp_path / "demo.yaml")
+    values = [float(value) for value in hidden.strip("p[]").split(",")]
+    assert np.linalg.norm(loaded.center_base_T_cad[:3, 3] - values[:3]) <= loaded.position_bound_m
