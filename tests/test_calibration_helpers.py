@@ -23,11 +23,13 @@ def real_calib_dir() -> Path:
     return REAL_DATA / "calib"
 
 
-def tap(hover_base_T_tcp: np.ndarray, noise_m: float = 0.0, seed: int = 0) -> np.ndarray:
-    """Flange poses after moving each hover pose along tool z until the ball centre reaches the table plane
-    of ``BASE_T_TABLE`` (z = 0), plus uniform noise in [-noise_m, noise_m] along the table normal."""
+def tap(hover_base_T_tcp: np.ndarray, noise_m: float = 0.0, seed: int = 0,
+        tcp_p_tip_m: np.ndarray = TCP_P_TIP_M) -> np.ndarray:
+    """Flange poses after moving each hover pose along tool z until the ball centre (at ``tcp_p_tip_m``)
+    reaches the table plane of ``BASE_T_TABLE`` (z = 0), plus uniform noise in [-noise_m, noise_m] along
+    the table normal."""
     base_n_table = BASE_T_TABLE[:3, 2]
-    heights_m = (ball_centres_m(hover_base_T_tcp, TCP_P_TIP_M) - BASE_T_TABLE[:3, 3]) @ base_n_table
+    heights_m = (ball_centres_m(hover_base_T_tcp, tcp_p_tip_m) - BASE_T_TABLE[:3, 3]) @ base_n_table
     travel_m = heights_m / -(hover_base_T_tcp[:, :3, 2] @ base_n_table)
     noise = np.random.default_rng(seed).uniform(-noise_m, noise_m, len(hover_base_T_tcp))
     tapped = hover_base_T_tcp.copy()

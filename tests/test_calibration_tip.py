@@ -83,11 +83,30 @@ def test_real_tilted_series_fits_the_table_to_a_third_of_a_millimetre():
 
 def test_real_taps_off_the_table_are_excluded_and_named_not_averaged_in():
     series, base_n_table = real_tilted_series()
-    fit = fit_fine_tip(series.base_T_tcp, base_n_table, series.files)
-    excluded = {tap.file for tap in fit.excluded}
+    keep = np.r_[0:11, 100:200]
+    fit = fit_fine_tip(series.base_T_tcp[keep], base_n_table, tuple(series.files[index] for index in keep))
     # files 0-10 lie 16 to 61 mm off the table
-    assert {f"base_t_tcp_pt_{index}.pose" for index in range(11)} <= excluded
-    assert all(tap.index < 100 for tap in fit.excluded)
+    assert {tap.file for tap in fit.excluded} == {f"base_t_tcp_pt_{index}.pose" for index in range(11)}
+    assert fit.stats.max_m <= 0.35e-3
+
+
+def test_real_series_with_the_flange_turned_90_degrees_is_refused_not_mixed_in():
+    series, base_n_table = real_tilted_series()
     # files 11-99 are a second series with the flange turned 90 degrees about the tool axis: they agree with
-    # each other to 0.1 mm RMS, but not with files 100-199, so fitting both shows up in the residuals
-    assert fit.stats.rms_m > 3 * 0.10e-3
+    # each other to 0.1 mm RMS and fitted with files 100-199 stay within 1.7 mm, yet alone give a tip 2.6 mm
+    # away, which no rigidly mounted tool can do
+    with pytest.raises(CalibrationError) as refused:
+        fit_fine_tip(series.base_T_tcp, base_n_table, series.files)
+    message = str(refused.value)
+    assert "depends on how the flange is turned about the tool axis" in message
+    assert "the 86 taps base_t_tcp_pt_11.pose to base_t_tcp_pt_96.pose (flange heading" in message
+    assert "the 100 taps base_t_tcp_pt_100.pose to base_t_tcp_pt_199.pose (heading" in message
+    assert "2.64 mm apart" in message and "calibrate from one series only" in message
+    assert message.endswith("Already left out for their residuals: the 14 taps base_t_tcp_pt_0.pose to "
+                            "base_t_tcp_pt_10.pose, base_t_tcp_pt_97.pose to base_t_tcp_pt_99.pose.")
+
+
+def test_real_second_series_alone_fits_as_well_as_the_first():
+    series, base_n_table = real_tilted_series()
+    fit = fit_fine_tip(series.base_T_tcp[11:100], base_n_table, series.files[11:100])
+    assert fit.excluded == () and fit.stats.rms_m < 0.15e-3

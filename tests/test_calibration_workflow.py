@@ -16,10 +16,10 @@ def parse(argv: list[str]) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def linked_series(calib: Path, folder: Path, first: int, last: int) -> Path:
-    """A folder of links to the tip_pts files first..last."""
+def linked_series(calib: Path, folder: Path, *ranges: range) -> Path:
+    """A folder of links to the tip_pts files of the given index ranges."""
     folder.mkdir()
-    for index in range(first, last + 1):
+    for index in (index for indices in ranges for index in indices):
         name = f"base_t_tcp_pt_{index}.pose"
         (folder / name).symlink_to(calib / "tip_pts" / name)
     return folder
@@ -41,7 +41,7 @@ def test_the_parser_offers_the_documented_options():
 
 
 def test_real_data_gives_a_loadable_calibration_and_prints_the_figures(tmp_path, capsys):
-    tilted = linked_series(real_calib_dir(), tmp_path / "tilted", 100, 199)
+    tilted = linked_series(real_calib_dir(), tmp_path / "tilted", range(100, 200))
     assert calibrate_tip_command(real_args(tmp_path, tilted, "--robot", "UR5 of the logo cell")) == 0
     printed = capsys.readouterr().out
     for figure in ("pivot (3 poses): tip [0.185, 0.116, 49.052] mm, residual RMS 0.859 mm, max 1.078 mm",
@@ -56,11 +56,20 @@ def test_real_data_gives_a_loadable_calibration_and_prints_the_figures(tmp_path,
 
 
 def test_taps_off_the_table_are_named_in_the_printout(tmp_path, capsys):
-    calib = real_calib_dir()
-    assert calibrate_tip_command(real_args(tmp_path, calib / "tip_pts")) == 0
+    tilted = linked_series(real_calib_dir(), tmp_path / "tilted", range(11), range(100, 200))
+    assert calibrate_tip_command(real_args(tmp_path, tilted)) == 0
     printed = capsys.readouterr().out
-    assert "excluded tilted tap 0 (base_t_tcp_pt_0.pose): +60.55 mm" in printed
+    assert "excluded tilted tap 0 (base_t_tcp_pt_0.pose): +" in printed
     assert "excluded tilted tap 10 (base_t_tcp_pt_10.pose)" in printed
+
+
+def test_all_200_real_files_are_refused_naming_the_two_series(tmp_path, capsys):
+    args = real_args(tmp_path, real_calib_dir() / "tip_pts")
+    assert calibrate_tip_command(args) == 1
+    error = capsys.readouterr().err
+    assert "base_t_tcp_pt_11.pose to base_t_tcp_pt_96.pose" in error
+    assert "base_t_tcp_pt_100.pose to base_t_tcp_pt_199.pose" in error and "calibrate from one series only" in error
+    assert not Path(args.output).exists()
 
 
 @pytest.mark.parametrize("problem, message", [
