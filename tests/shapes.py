@@ -35,6 +35,11 @@ def brick() -> trimesh.Trimesh:
     return trimesh.creation.box((0.10, 0.06, 0.03))
 
 
+def triangular_prism() -> trimesh.Trimesh:
+    """An equilateral triangular prism, 2 cm thick: 6 rotational symmetries."""
+    return trimesh.creation.cylinder(radius=0.05, height=0.02, sections=3)
+
+
 def cylinder() -> trimesh.Trimesh:
     return trimesh.creation.cylinder(radius=0.03, height=0.08, sections=48)
 
@@ -44,7 +49,7 @@ def cone() -> trimesh.Trimesh:
 
 
 SHAPES = {"l_prism": l_prism, "polytope": lambda: random_polytope(7), "cube": cube, "brick": brick,
-          "cylinder": cylinder, "cone": cone}
+          "triangular_prism": triangular_prism, "cylinder": cylinder, "cone": cone}
 
 
 def as_fixture(name: str, mesh: trimesh.Trimesh | None = None) -> Fixture:

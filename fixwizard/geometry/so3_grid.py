@@ -131,7 +131,9 @@ class RotationGrid:
     def gamma(self, level: int, cells: np.ndarray) -> np.ndarray:
         """Largest angle (rad) between each cell's centre and any rotation in the cell; cached per pixel."""
         pixels = np.asarray(cells, np.int64) // self.n_tilts(level)
-        cache = self._pixel_gamma.setdefault(level, np.full(12 * 4**level, np.nan))
+        if level not in self._pixel_gamma:
+            self._pixel_gamma[level] = np.full(12 * 4**level, np.nan)
+        cache = self._pixel_gamma[level]
         missing = np.unique(pixels[np.isnan(cache[pixels])])
         for chunk in np.array_split(missing, max(1, len(missing) // 20000)):
             if len(chunk):

@@ -68,24 +68,43 @@ def rotation_center(rotations: Rotation) -> Rotation:
     return Rotation.from_quat(center / np.linalg.norm(center))
 
 
-def guaranteed_bounds(cells: CellSet, fix_p_origin: np.ndarray, fixture_radius_m: float,
-                      rotation_centre: Rotation) -> Bounds:
-    """Bounds of a non-empty cell set about the given rotation centre and the CAD origins' enclosing ball."""
+@dataclass(frozen=True)
+class BoundCentre:
+    """The pose bounds are measured from: ``rotation`` and the CAD origin ``cad_origin_m`` (base frame, m)."""
+
+    rotation: Rotation
+    cad_origin_m: np.ndarray
+
+
+def bound_centre(cells: CellSet, fix_p_origin: np.ndarray, rotation_centre: Rotation) -> BoundCentre:
+    """Centre from a rotation and the minimum enclosing ball of the cells' CAD origins."""
+    rotations, _, rotation_index = cells.distinct_rotations()
+    cad_origins = rotations.apply(fix_p_origin).reshape(-1, 3)[rotation_index] + cells.positions_m()
+    return BoundCentre(rotation_centre, minimum_enclosing_ball(cad_origins).center)
+
+
+def cell_bound_figures(cells: CellSet, centre: BoundCentre, fix_p_origin: np.ndarray,
+                       fixture_radius_m: float) -> np.ndarray:
+    """(3, N): for each cell, the largest CAD-origin distance (m), rotation angle (rad) and fixture-point
+    displacement (m) between the centre and any pose in the cell."""
     rotations, gammas, rotation_index = cells.distinct_rotations()
     positions = cells.positions_m()
     position_bound = cells.position_bound_m
     cad_origins = rotations.apply(fix_p_origin).reshape(-1, 3)[rotation_index] + positions
-    center_origin = minimum_enclosing_ball(cad_origins).center
     origin_lever = float(np.linalg.norm(fix_p_origin))
-    position_m = np.max(np.linalg.norm(cad_origins - center_origin, axis=1) + position_bound
-                        + origin_lever * chord(gammas[rotation_index]))
-    angles = (rotation_centre.inv() * rotations).magnitude() + gammas
-    center_fix = center_origin - rotation_centre.apply(fix_p_origin)
+    position = (np.linalg.norm(cad_origins - centre.cad_origin_m, axis=1) + position_bound
+                + origin_lever * chord(gammas[rotation_index]))
+    angles = np.minimum((centre.rotation.inv() * rotations).magnitude() + gammas, np.pi)
+    center_fix = centre.cad_origin_m - centre.rotation.apply(fix_p_origin)
     displacement = (np.linalg.norm(positions - center_fix, axis=1) + position_bound
                     + fixture_radius_m * chord(angles[rotation_index]))
-    base_T_cad_center = make_transform(rotation_centre, center_origin)
-    return Bounds(base_T_cad_center, float(position_m), float(min(np.max(angles), np.pi)),
-                  float(np.max(displacement)))
+    return np.vstack([position, angles[rotation_index], displacement])
+
+
+def bounds_from_figures(centre: BoundCentre, largest: np.ndarray) -> Bounds:
+    """Bounds from the largest (CAD-origin distance, rotation angle, point displacement) over a set."""
+    return Bounds(make_transform(centre.rotation, centre.cad_origin_m), float(largest[0]), float(largest[1]),
+                  float(largest[2]))
 
 
 def sample_cells(cells: CellSet, oracle: DistanceOracle, base_p_taps: np.ndarray, ball_radius_m: float,

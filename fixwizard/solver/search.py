@@ -19,6 +19,7 @@ one at a time over the cells still alive, the tap that rejected most at the prev
 
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -30,7 +31,8 @@ from fixwizard.geometry.socp_box import ball_intersection_box
 from fixwizard.solver.cells import CellSet, root_cells
 from fixwizard.solver.distance_grid import DistanceGrid, distance_grid_for
 
-QUERY_CHUNK = 1 << 20  # cells per batch; a multiple of 8 so batches hold whole families
+QUERY_CHUNK = 1 << 17  # cells per batch; a multiple of 8 so batches hold whole families
+WORKERS = 2  # batches run in threads: numpy and Open3D release the GIL for their array work
 
 
 class SearchCancelled(Exception):
@@ -101,12 +103,20 @@ def exact_distance_interval_m(oracle: DistanceOracle, fix_p_query: np.ndarray) -
 class _Frames:
     """Centre frames of a CellSet's cells, for query points ``x = R_c^T p - R_c^T t_c``."""
 
-    def __init__(self, cells: CellSet) -> None:
-        rotations, gammas, _ = cells.distinct_rotations()
-        self.fix_R_base = rotations.inv().as_matrix().reshape(-1, 3, 3)
-        self.gammas_rad = gammas
+    def __init__(self, cells: CellSet, fix_R_base: np.ndarray | None = None, gammas_rad: np.ndarray | None = None):
+        if fix_R_base is None:
+            rotations, gammas_rad, _ = cells.distinct_rotations()
+            fix_R_base = rotations.inv().as_matrix().reshape(-1, 3, 3)
+        self.fix_R_base = fix_R_base
+        self.gammas_rad = gammas_rad
         self.rotation_index = cells.rotation_index
         self.cells = cells
+
+    def subset(self, alive: np.ndarray) -> "_Frames":
+        """The frames of the cells where ``alive`` is true (same compaction as ``CellSet.subset``)."""
+        used = np.zeros(len(self.fix_R_base), bool)
+        used[self.rotation_index[alive]] = True
+        return _Frames(self.cells.subset(alive), self.fix_R_base[used], self.gammas_rad[used])
 
     def rotated_positions(self, indices: np.ndarray | slice) -> np.ndarray:
         """``R_c^T t_c`` (m) for the given cells."""
@@ -120,8 +130,8 @@ class _Frames:
 
 @dataclass
 class _Survivors:
-    """Cells that passed every tap, with ``R_c^T t_c`` and, per tap, an interval (m, float32)
-    holding the signed distance at the cell centre's query point."""
+    """Cells that passed every tap, with ``R_c^T t_c`` and, per tap, an interval (m, float32, shape
+    (taps, cells)) holding the signed distance at the cell centre's query point."""
 
     frames: _Frames
     rotated_positions: np.ndarray
@@ -139,7 +149,7 @@ def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: in
     chords = 2.0 * np.sin(np.minimum(frames.gammas_rad[rotation_index], np.pi) / 2.0)
     position_bound = frames.cells.position_bound_m
     alive = np.ones(count, bool)
-    low = np.zeros((count, len(problem.base_p_taps)), np.float32)
+    low = np.zeros((len(problem.base_p_taps), count), np.float32)
     high = np.zeros_like(low)
     for tap_index in tap_order:
         if cancel is not None and cancel.is_set():
@@ -157,8 +167,8 @@ def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: in
             parent_queries = (parents.frames.rotated_tap(tap)[parents.frames.rotation_index[parent]]
                               - parents.rotated_positions[parent])
             shift = np.linalg.norm(queries - parent_queries, axis=1)
-            interval_low = parents.low_m[parent, tap_index] - shift
-            interval_high = parents.high_m[parent, tap_index] + shift
+            interval_low = parents.low_m[tap_index, parent] - shift
+            interval_high = parents.high_m[tap_index, parent] + shift
         undecided = ((interval_high >= band_low) & (interval_low <= band_high)
                      & ((interval_low < band_low) | (interval_high > band_high)))
         if np.any(undecided):
@@ -173,28 +183,38 @@ def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: in
         keep = (interval_high >= band_low) & (interval_low <= band_high)
         alive[local[~keep]] = False
         rejected[tap_index] += int(np.count_nonzero(~keep))
-        low[local[keep], tap_index] = _round_down_f32(interval_low[keep])
-        high[local[keep], tap_index] = _round_up_f32(interval_high[keep])
-    return alive, rotated_positions[alive], low[alive], high[alive]
+        low[tap_index, local[keep]] = _round_down_f32(interval_low[keep])
+        high[tap_index, local[keep]] = _round_up_f32(interval_high[keep])
+    return alive, rotated_positions[alive], low[:, alive], high[:, alive]
 
 
 def _filter(problem: SearchProblem, cells: CellSet, parents: _Survivors | None, grid: DistanceGrid,
             tap_order: np.ndarray, cancel: threading.Event | None) -> tuple[CellSet, _Survivors, np.ndarray]:
     """Survivors of a level, and the number of cells each tap rejected."""
     frames = _Frames(cells)
-    rejected = np.zeros(len(problem.base_p_taps), np.int64)
-    parts = [_filter_chunk(problem, frames, first, min(QUERY_CHUNK, len(cells) - first), parents, grid,
-                           tap_order, rejected, cancel) for first in range(0, len(cells), QUERY_CHUNK)]
-    alive, rotated_positions, low, high = (np.concatenate(part) for part in zip(*parts))
-    survivors = cells.subset(alive)
-    return survivors, _Survivors(_Frames(survivors), rotated_positions, low, high), rejected
+    starts = range(0, len(cells), QUERY_CHUNK)
+    rejected = np.zeros((len(starts), len(problem.base_p_taps)), np.int64)
+    with ThreadPoolExecutor(max_workers=WORKERS) as pool:
+        parts = list(pool.map(lambda job: _filter_chunk(problem, frames, job[1], min(QUERY_CHUNK, len(cells) - job[1]),
+                                                        parents, grid, tap_order, rejected[job[0]], cancel),
+                              enumerate(starts)))
+    alive, rotated_positions = (np.concatenate(part) for part in list(zip(*parts))[:2])
+    low, high = (np.concatenate(part, axis=1) for part in list(zip(*parts))[2:])
+    survivor_frames = frames.subset(alive)
+    return survivor_frames.cells, _Survivors(survivor_frames, rotated_positions, low, high), rejected.sum(axis=0)
 
 
-def _rotation_splits_first(cells: CellSet, problem: SearchProblem) -> bool:
+def rotation_splits_first(cells: CellSet, problem: SearchProblem) -> bool:
     """Split rotations when their largest displacement at the fixture radius exceeds the position bound."""
-    gamma = float(np.max(cells.distinct_rotations()[1]))
+    gamma = float(np.max(cells.rotation_grid.gamma(cells.rotation_level, cells.rotation_ids)))
     rotation_bound = problem.fixture_radius_m * 2.0 * np.sin(min(gamma, np.pi) / 2.0)
     return rotation_bound >= cells.position_bound_m
+
+
+def filter_cells(problem: SearchProblem, cells: CellSet, cancel: threading.Event | None = None) -> CellSet:
+    """The cells of any set that no tap rejects (evaluated without parent intervals)."""
+    return _filter(problem, cells, None, distance_grid_for(problem.oracle), np.arange(len(problem.base_p_taps)),
+                   cancel)[0]
 
 
 def search(problem: SearchProblem, max_cells: float = 1e7,
@@ -221,4 +241,4 @@ def search(problem: SearchProblem, max_cells: float = 1e7,
                                     time.perf_counter() - started))
         if len(cells) == 0 or 8 * len(cells) > max_cells:
             return cells
-        cells = cells.split_rotations() if _rotation_splits_first(cells, problem) else cells.split_positions()
+        cells = cells.split_rotations() if rotation_splits_first(cells, problem) else cells.split_positions()

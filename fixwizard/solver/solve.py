@@ -16,8 +16,9 @@ from fixwizard.errors import InputError
 from fixwizard.fixture import Fixture
 from fixwizard.geometry.se3 import invert
 from fixwizard.solver.diagnose import SuspectTap, find_suspect_tap
-from fixwizard.solver.estimates import (Bounds, Interval, expected_pose, guaranteed_bounds, intervals,
-                                        rotation_center, sample_cells)
+from fixwizard.solver.estimates import (Bounds, Interval, bound_centre, bounds_from_figures, cell_bound_figures,
+                                        expected_pose, intervals, rotation_center, sample_cells)
+from fixwizard.solver.refine import refined_largest_figures
 from fixwizard.solver.modes import rotation_modes
 from fixwizard.solver.cells import CellSet
 from fixwizard.solver.search import SearchProblem, SearchProgress, search
@@ -150,20 +151,26 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
                            np.random.default_rng(seed))
     sample_labels = labels[samples.cell_index]
     modes = []
-    for label in np.unique(labels):
+    mode_labels = np.unique(labels)
+    refine_budget = max_cells - len(cells)
+    for label in mode_labels:
         in_mode = labels == label
         mode_cells = cells.subset(in_mode)
         mode_samples = sample_labels == label
         probability = float(samples.weights[mode_samples].sum())
         base_T_cad = expected_pose(samples, mode_samples, fix_T_cad) if probability > 0 else None
-        centre = rotation_center(mode_cells.distinct_rotations()[0])
-        mode_bounds = guaranteed_bounds(mode_cells, fix_p_origin, fixture.radius_m, centre)
+        centre = bound_centre(mode_cells, fix_p_origin, rotation_center(mode_cells.distinct_rotations()[0]))
+        mode_bounds = bounds_from_figures(centre, refined_largest_figures(
+            problem, mode_cells, centre, fix_p_origin, refine_budget / len(mode_labels)))
         modes.append(Mode(probability, base_T_cad if base_T_cad is not None else mode_bounds.base_T_cad_center,
                           mode_bounds, len(mode_cells)))
     modes.sort(key=lambda mode: -mode.probability)
     top = modes[0]
-    bounds = top.bounds if len(modes) == 1 else guaranteed_bounds(
-        cells, fix_p_origin, fixture.radius_m, Rotation.from_matrix(top.bounds.base_T_cad_center[:3, :3]))
+    if len(modes) == 1:
+        bounds = top.bounds
+    else:
+        centre = bound_centre(cells, fix_p_origin, Rotation.from_matrix(top.bounds.base_T_cad_center[:3, :3]))
+        bounds = bounds_from_figures(centre, cell_bound_figures(cells, centre, fix_p_origin, fixture.radius_m).max(1))
     status = "unique" if len(modes) == 1 else "ambiguous"
     if status == "ambiguous":
         distance, angle = _mode_separation(modes)
