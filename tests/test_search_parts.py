@@ -33,3 +33,39 @@ def test_cell_set_split_and_subset_keep_each_pose_in_exactly_one_cell():
         rotation = cells.rotation_grid.cell_of(cells.rotation_level, Rotation.from_matrix(pose[:3, :3]))[0]
         assert not cells.subset(cells.rotation_cells != rotation).contains(pose)
     assert len(np.unique(np.column_stack([cells.rotation_cells, cells.position_cells]), axis=0)) == len(cells)
+
+
+def small_problem():
+    from fixwizard.solver.search import SearchProblem
+    from fixwizard.synthetic import touching_ball_centres
+
+    fixture = as_fixture("l_prism")
+    taps = touching_ball_centres(fixture.mesh, 8, 0.0015, np.random.default_rng(0))
+    return fixture, SearchProblem(fixture.oracle, fixture.radius_m, taps, 0.0015, 0.0005)
+
+
+def test_search_reports_progress_per_level_and_stops_when_cancelled():
+    import threading
+
+    from fixwizard.solver.search import SearchCancelled, search
+
+    _, problem = small_problem()
+    steps = []
+    search(problem, 5e4, progress=steps.append)
+    assert steps[0].rotation_level == 0 and steps[0].evaluated == 72
+    assert [step.elapsed_s for step in steps] == sorted(step.elapsed_s for step in steps)
+    cancel = threading.Event()
+    with pytest.raises(SearchCancelled):
+        search(problem, 5e4, progress=lambda step: cancel.set(), cancel=cancel)
+
+
+@pytest.mark.parametrize("bound, diameter, match", [(0.0, 0.003, "sample bound"), (-0.001, 0.003, "sample bound"),
+                                                    (float("nan"), 0.003, "sample bound"),
+                                                    (0.001, -0.003, "ball diameter")])
+def test_solve_refuses_impossible_bounds(bound, diameter, match):
+    from fixwizard.errors import InputError
+    from fixwizard.solver.solve import solve
+
+    fixture, problem = small_problem()
+    with pytest.raises(InputError, match=match):
+        solve(fixture, problem.base_p_taps, diameter, bound)
