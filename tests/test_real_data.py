@@ -27,10 +27,11 @@ def test_each_run_is_unique_with_bounds_near_the_published_ones(solutions, run):
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "the paper reports agreement within 0.87 mm / 0.74 deg; here student_3 lies 1.9 mm from student_1 and 1.8 mm "
-    "from student_2 (rotations agree within 1.5 deg). Its taps fit no pose within the 1.0 mm bound better than "
-    "1.16 mm (RMS 0.47 mm against the model's 0.33 mm), with the Minkowski mesh too and with sigma = 1 mm, which "
-    "points at the published tip (a blend of two series 2.7 mm apart, see the calibration tests), not the solver."))
+    "the paper reports agreement within 0.87 mm / 0.74 deg; here student_3's expected pose lies 1.9 mm from "
+    "student_1's and 1.8 mm from student_2's (rotations within 1.5 deg). The same holds with the Minkowski mesh "
+    "and unsigned distance, with sigma = 1 mm, and with the 100-199 series tip. Every run fits some pose within "
+    "0.53-0.79 mm (minimax), so the runs are consistent; their likelihood-weighted means differ. Open question, "
+    "see the issue notes."))
 def test_the_four_expected_poses_agree(solutions):
     poses = [solutions[run].base_T_cad for run in RUNS]
     for index, first in enumerate(poses):
