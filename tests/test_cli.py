@@ -1,8 +1,9 @@
 """The headless command line, as an operator would use it: good runs, and every kind of bad input."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
-import trimesh
 import yaml
 from scipy.spatial.transform import Rotation
 
@@ -13,7 +14,7 @@ from fixwizard.points import write_points
 from fixwizard.synthetic import bounded_noise, touching_ball_centres
 from shapes import l_prism
 
-REPO_FIXTURES = __import__("pathlib").Path(__file__).resolve().parents[1] / "fixtures"
+REPO_FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
 
 
 @pytest.fixture(scope="module")
@@ -137,3 +138,15 @@ def test_the_bundled_demo_solves(tmp_path, capsys):
     loaded = report.load(tmp_path / "demo.yaml")
     values = [float(value) for value in hidden.strip("p[]").split(",")]
     assert np.linalg.norm(loaded.center_base_T_cad[:3, 3] - values[:3]) <= loaded.position_bound_m
+
+
+def test_solve_takes_ball_diameter_and_sample_bound_from_a_tip_calibration(tmp_path, real_data, capsys):
+    calibration = REPO_FIXTURES.parent / "calibrations" / "example_matlab_logo.yaml"
+    points = tmp_path / "expert.yaml"
+    assert main(["import-poses", str(real_data / "samples" / "expert"), "--tip", str(calibration), "-o",
+                 str(points)]) == 0
+    assert main(["solve", str(real_data / "meshes" / "matlab_logo.ply"), str(points), "--calibration",
+                 str(calibration), "--max-cells", "1e5", "-q", "-o", str(tmp_path / "report.yaml")]) == 0
+    inputs = report.load(tmp_path / "report.yaml").data["inputs"]
+    assert inputs["ball_diameter_m"] == pytest.approx(0.003)
+    assert inputs["sample_bound_m"] == pytest.approx(0.0008)

@@ -5,6 +5,7 @@ the search empties early and costs little; only the removal that restores consis
 to the end.
 """
 
+import threading
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -30,7 +31,8 @@ def _smallest_residual_m(problem: SearchProblem, index: int, cells: CellSet) -> 
     return float(np.min(np.abs(problem.oracle.signed_distance_m(queries) - problem.ball_radius_m)))
 
 
-def find_suspect_tap(problem: SearchProblem, max_cells: float) -> SuspectTap | None:
+def find_suspect_tap(problem: SearchProblem, max_cells: float,
+                     cancel: threading.Event | None = None) -> SuspectTap | None:
     """The tap whose removal leaves the others consistent (the farthest off if several); None if none."""
     taps = problem.base_p_taps
     if len(taps) <= 3:
@@ -38,7 +40,7 @@ def find_suspect_tap(problem: SearchProblem, max_cells: float) -> SuspectTap | N
     best: SuspectTap | None = None
     for index in range(len(taps)):
         others = replace(problem, base_p_taps=np.delete(taps, index, axis=0))
-        cells = search(others, max_cells)
+        cells = search(others, max_cells, cancel=cancel)
         if cells is None or len(cells) == 0:
             continue
         residual = _smallest_residual_m(problem, index, cells)

@@ -16,8 +16,8 @@ from fixwizard.errors import InputError
 from fixwizard.fixture import Fixture
 from fixwizard.geometry.se3 import invert
 from fixwizard.solver.diagnose import SuspectTap, find_suspect_tap
-from fixwizard.solver.estimates import (Bounds, Interval, bound_centre, bounds_from_figures, cell_bound_figures,
-                                        expected_pose, intervals, rotation_center, sample_cells)
+from fixwizard.solver.estimates import (Bounds, Interval, Samples, bound_centre, bounds_from_figures,
+                                        cell_bound_figures, expected_pose, intervals, rotation_center, sample_cells)
 from fixwizard.solver.refine import refined_largest_figures
 from fixwizard.solver.modes import rotation_modes
 from fixwizard.solver.cells import CellSet
@@ -121,6 +121,25 @@ def _inconsistent_warnings(suspect: SuspectTap | None) -> list[SolveWarning]:
                          "is too small for this robot.")]
 
 
+def _modes(problem: SearchProblem, cells: CellSet, samples: Samples, fix_p_origin: np.ndarray,
+           fix_T_cad: np.ndarray, refine_budget: float) -> list[Mode]:
+    """The modes of a non-empty set, most probable first, each with refined bounds."""
+    labels = rotation_modes(cells)
+    sample_labels = labels[samples.cell_index]
+    mode_labels = np.unique(labels)
+    modes = []
+    for label in mode_labels:
+        mode_cells = cells.subset(labels == label)
+        mode_samples = sample_labels == label
+        probability = float(samples.weights[mode_samples].sum())
+        centre = bound_centre(mode_cells, fix_p_origin, rotation_center(mode_cells.distinct_rotations()[0]))
+        bounds = bounds_from_figures(centre, refined_largest_figures(problem, mode_cells, centre, fix_p_origin,
+                                                                     refine_budget / len(mode_labels)))
+        base_T_cad = expected_pose(samples, mode_samples, fix_T_cad) if probability > 0 else bounds.base_T_cad_center
+        modes.append(Mode(probability, base_T_cad, bounds, len(mode_cells)))
+    return sorted(modes, key=lambda mode: -mode.probability)
+
+
 def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sample_bound_m: float,
           sigma_m: float | None = None, max_cells: float = DEFAULT_MAX_CELLS,
           progress: Callable[[SearchProgress], None] | None = None, cancel: threading.Event | None = None,
@@ -139,32 +158,16 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
     warnings = [SolveWarning(code, message) for code, message in fixture.warnings]
     fix_T_cad = fixture.fix_T_cad
     if cells is None or len(cells) == 0:
-        suspect = find_suspect_tap(problem, max_cells)
+        suspect = find_suspect_tap(problem, max_cells, cancel)
         stats = SearchStats(0, cells.rotation_level if cells else 0, cells.position_level if cells else 0,
                             time.perf_counter() - started, max_cells)
         return Solution("inconsistent", None, None, [], [], warnings + _inconsistent_warnings(suspect), suspect,
                         stats, None, fix_T_cad)
 
     fix_p_origin = -fixture.cad_p_center
-    labels = rotation_modes(cells)
     samples = sample_cells(cells, fixture.oracle, base_p_taps, ball_diameter_m / 2.0, sigma_m, max_samples,
                            np.random.default_rng(seed))
-    sample_labels = labels[samples.cell_index]
-    modes = []
-    mode_labels = np.unique(labels)
-    refine_budget = max_cells - len(cells)
-    for label in mode_labels:
-        in_mode = labels == label
-        mode_cells = cells.subset(in_mode)
-        mode_samples = sample_labels == label
-        probability = float(samples.weights[mode_samples].sum())
-        base_T_cad = expected_pose(samples, mode_samples, fix_T_cad) if probability > 0 else None
-        centre = bound_centre(mode_cells, fix_p_origin, rotation_center(mode_cells.distinct_rotations()[0]))
-        mode_bounds = bounds_from_figures(centre, refined_largest_figures(
-            problem, mode_cells, centre, fix_p_origin, refine_budget / len(mode_labels)))
-        modes.append(Mode(probability, base_T_cad if base_T_cad is not None else mode_bounds.base_T_cad_center,
-                          mode_bounds, len(mode_cells)))
-    modes.sort(key=lambda mode: -mode.probability)
+    modes = _modes(problem, cells, samples, fix_p_origin, fix_T_cad, max_cells - len(cells))
     top = modes[0]
     if len(modes) == 1:
         bounds = top.bounds
