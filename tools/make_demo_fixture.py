@@ -1,4 +1,5 @@
-"""Regenerate the bundled demo: fixtures/demo_bracket.stl (mm) and 12 simulated taps at a hidden pose.
+"""Regenerate the bundled demo: fixtures/demo_bracket.stl (mm) and simulated taps at a hidden pose,
+two on every face the robot can reach from above and four on the top face.
 
 Run from the repository root: ``.venv/bin/python tools/make_demo_fixture.py``. The hidden
 pose is written beside the taps so the demo's result can be checked by eye.
@@ -21,6 +22,8 @@ FAN = np.array([[0, i, i + 1] for i in range(1, len(OUTLINE_MM) - 1)])
 DEPTH_MM = 60.0
 BALL_DIAMETER_M = 0.003
 NOISE_BOUND_M = 0.0008
+TAPS_PER_FACE = 2
+TAPS_ON_LARGEST_FACE = 4  # the top face: three or more spread taps fix the tilt
 
 
 def bracket_mm() -> trimesh.Trimesh:
@@ -40,16 +43,17 @@ def main() -> None:
     mesh_m.apply_scale(1e-3)
     reachable = (mesh_m.face_normals @ base_T_cad[:3, :3].T)[:, 2] > -0.5
     centres = []
-    for facet in sorted(mesh_m.facets, key=lambda faces: -mesh_m.area_faces[faces].sum()):
+    for rank, facet in enumerate(sorted(mesh_m.facets, key=lambda faces: -mesh_m.area_faces[faces].sum())):
         mask = np.zeros(len(mesh_m.faces))
         mask[facet] = reachable[facet]
-        if mask.any() and len(centres) < 12:
-            centres.append(touching_ball_centres(mesh_m, 1, BALL_DIAMETER_M / 2, rng, face_mask=mask)[0])
-    centres = np.vstack([centres, touching_ball_centres(mesh_m, 12 - len(centres), BALL_DIAMETER_M / 2, rng,
-                                                        face_mask=reachable.astype(float))])
+        if mask.any():
+            count = TAPS_ON_LARGEST_FACE if rank == 0 else TAPS_PER_FACE
+            centres.append(touching_ball_centres(mesh_m, count, BALL_DIAMETER_M / 2, rng, face_mask=mask))
+    centres = np.vstack(centres)
     taps = transform_points(base_T_cad, centres) + bounded_noise(len(centres), NOISE_BOUND_M, rng)
     write_points(FIXTURES / "demo_bracket_taps.yaml", taps,
-                 note="simulated taps on fixtures/demo_bracket.stl (mm) with a 3 mm ball, noise <= 0.8 mm",
+                 note="simulated taps on fixtures/demo_bracket.stl (mm), two per reachable face, four on top, 3 mm ball, "
+                      "noise <= 0.8 mm",
                  hidden_pose_ur=format_ur_pose(base_T_cad))
     print(yaml.safe_dump({"hidden_pose_ur": format_ur_pose(base_T_cad)}))
 

@@ -1,8 +1,8 @@
 """Tighter bounds for the same cell budget: refine only the cells that decide the bounds.
 
 The bounds are maxima over cells, so only the outermost cells matter. Those within
-``OUTER_FRACTION`` of a maximum are split once more and their children filtered against
-every tap; the bounds are then the maxima over the untouched cells and the surviving
+``OUTER_FRACTION`` of a maximum (the outermost ones only, if the budget cannot take them
+all) are split once more and their children filtered against every tap; the bounds are then the maxima over the untouched cells and the surviving
 children. Every pose of the consistent set lies in one of those, so the bounds stay
 guaranteed. Repeated for a few rounds within the unused part of the cell budget.
 """
@@ -24,8 +24,11 @@ def refined_largest_figures(problem: SearchProblem, cells: CellSet, centre: Boun
     settled = np.zeros(3)
     for _ in range(ROUNDS):
         largest = np.maximum(settled, figures.max(axis=1))
-        outer = np.any(figures > OUTER_FRACTION * largest[:, None], axis=0)
-        if not np.any(outer) or 8 * np.count_nonzero(outer) > budget:
+        score = np.max(figures / np.maximum(largest[:, None], 1e-300), axis=0)
+        outer = score > OUTER_FRACTION
+        if 8 * np.count_nonzero(outer) > budget:
+            outer = score >= np.sort(score)[-int(budget // 8)] if budget >= 8 else np.zeros(len(score), bool)
+        if not np.any(outer):
             break
         if np.any(~outer):
             settled = np.maximum(settled, figures[:, ~outer].max(axis=1))
