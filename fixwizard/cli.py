@@ -61,10 +61,18 @@ def import_poses_command(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with bad usage exiting 1 (bad input), since exit code 2 means inconsistent taps."""
+
+    def error(self, message: str) -> None:
+        self.print_usage(sys.stderr)
+        self.exit(EXIT_BAD_INPUT, f"fixwizard: {message}\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="fixwizard", description="Fixture pose calibration with guaranteed "
-                                     "bounds from a few robot taps.")
-    commands = parser.add_subparsers(dest="command", metavar="COMMAND")
+    parser = _Parser(prog="fixwizard", description="Fixture pose calibration with guaranteed bounds from a few "
+                     "robot taps.")
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
     solve_parser = commands.add_parser("solve", help="find every fixture pose that explains the taps; write a report")
     solve_parser.add_argument("mesh", metavar="MESH", help="fixture CAD mesh (STL, PLY or OBJ)")
@@ -99,6 +107,10 @@ def main(argv: list[str] | None = None) -> int:
         return args.func(args)
     except FixwizardError as error:
         print(f"fixwizard: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except OSError as error:
+        print(f"fixwizard: cannot write {error.filename or 'the output'}: {error.strerror or error}; choose a "
+              "folder you can write to", file=sys.stderr)
         return EXIT_BAD_INPUT
     except (SearchCancelled, KeyboardInterrupt):
         print("fixwizard: cancelled; nothing was written", file=sys.stderr)

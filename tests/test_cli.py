@@ -150,3 +150,31 @@ def test_solve_takes_ball_diameter_and_sample_bound_from_a_tip_calibration(tmp_p
     inputs = report.load(tmp_path / "report.yaml").data["inputs"]
     assert inputs["ball_diameter_m"] == pytest.approx(0.003)
     assert inputs["sample_bound_m"] == pytest.approx(0.0008)
+
+
+def test_a_length_without_unit_that_means_metres_is_caught(bracket, capsys):
+    folder, _, _ = bracket
+    args = solve_args(folder)
+    args[args.index("0.5mm")] = "1"
+    assert main(args) == 1
+    assert "--sample-bound 1mm" in capsys.readouterr().err
+
+
+def test_bad_usage_exits_1_not_2(bracket, capsys):
+    folder, _, _ = bracket
+    args = solve_args(folder)
+    args[args.index("1e5")] = "lots"
+    with pytest.raises(SystemExit) as exit_info:
+        main(args)
+    assert exit_info.value.code == 1
+
+
+def test_an_unwritable_report_path_is_a_message_not_a_traceback(bracket, capsys):
+    folder, _, _ = bracket
+    blocker = folder / "not_a_folder"
+    blocker.write_text("a file where a folder should be")
+    args = solve_args(folder)
+    args[args.index(str(folder / "report.yaml"))] = str(blocker / "report.yaml")
+    assert main(args) == 1
+    err = capsys.readouterr().err
+    assert "cannot write" in err and "Traceback" not in err

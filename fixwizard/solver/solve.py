@@ -27,6 +27,8 @@ DEFAULT_MAX_CELLS = 1e7
 MIN_MAX_CELLS = 72 * 8
 DEFAULT_MAX_SAMPLES = 40_000
 MIN_TAPS = 3
+MAX_SAMPLE_BOUND_M = 0.02  # larger bounds are a unit mistake (1 for 1 mm), not a robot
+MAX_BALL_DIAMETER_M = 0.05
 
 
 @dataclass(frozen=True)
@@ -89,8 +91,14 @@ def _validate(base_p_taps: np.ndarray, ball_diameter_m: float, sample_bound_m: f
     if not np.isfinite(sample_bound_m) or sample_bound_m <= 0:
         raise InputError(f"the sample bound must be a positive length, not {sample_bound_m} m; take it from the "
                          "tip calibration (typically 0.5-2 mm)")
+    if sample_bound_m > MAX_SAMPLE_BOUND_M:
+        raise InputError(f"a sample bound of {sample_bound_m * 1e3:g} mm is implausible for a robot tap; give it "
+                         "with its unit, e.g. --sample-bound 1mm")
     if not np.isfinite(ball_diameter_m) or ball_diameter_m < 0:
         raise InputError(f"the ball diameter must be zero or positive, not {ball_diameter_m} m")
+    if ball_diameter_m > MAX_BALL_DIAMETER_M:
+        raise InputError(f"a {ball_diameter_m * 1e3:g} mm tip ball is implausible; give the diameter with its unit, "
+                         "e.g. --ball-diameter 3mm")
     if not np.isfinite(sigma_m) or sigma_m <= 0:
         raise InputError(f"sigma must be a positive length, not {sigma_m} m")
     if not max_cells >= MIN_MAX_CELLS:
