@@ -76,8 +76,9 @@ def test_float32_distance_error_stays_well_inside_its_bound(name):
     far = fixture.mesh.bounds[0] + rng.random((300, 3)) * (fixture.mesh.extents * 1.5)
     points = np.vstack([near, far]) - fixture.cad_p_center
     exact = exact_distances_m(trimesh.Trimesh(fixture.fix_vertices_m, fixture.mesh.faces, process=False), points)
-    error = np.abs(fixture.oracle.unsigned_distance_m(points) - exact)
-    assert np.all(error <= fixture.oracle.error_bound_m(points) / 4)
+    bound = fixture.oracle.error_bound_m(points)
+    assert np.all(np.abs(fixture.oracle.unsigned_distance_m(points) - exact) <= bound / 4)
+    assert np.all(np.abs(fixture.oracle.distance_and_inside(points)[0] - exact) <= bound / 4)
 
 
 def test_signed_distance_is_negative_inside_a_closed_mesh():
