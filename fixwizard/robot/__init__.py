@@ -1,0 +1,16 @@
+"""Robot cells: the ``Robot`` protocol, its results and errors, and a simulated cell."""
+
+from fixwizard.robot.base import (
+                                  ConnectionLost,
+                                  EmergencyStop,
+                                  NoContact,
+                                  NotInRemoteControl,
+                                  ProtectiveStop,
+                                  Robot,
+                                  RobotError,
+                                  RobotStatus,
+                                  TapResult,
+)
+
+__all__ = ["ConnectionLost", "EmergencyStop", "NoContact", "NotInRemoteControl", "ProtectiveStop", "Robot",
+           "RobotError", "RobotStatus", "TapResult"]

@@ -1,0 +1,129 @@
+"""The robot interface every cell implements (simulated or real), its results and its typed errors.
+
+Poses are 4x4 float64 transforms ``base_T_tcp`` of the flange (tcp without tool offset) in the
+robot base frame, metres. Errors say what happened and what the operator should do next.
+"""
+
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from fixwizard.errors import FixwizardError
+
+# Safety limits of a tap and a linear move; a cell refuses requests beyond them.
+MAX_TAP_TRAVEL_M = 0.05
+MAX_TAP_SPEED_M_S = 0.05
+MAX_TAP_FORCE_N = 50.0
+MAX_LINEAR_SPEED_M_S = 0.25
+
+
+class RobotError(FixwizardError):
+    """The robot cannot do what was asked; the message says what to do next."""
+
+
+class ProtectiveStop(RobotError):
+    """The controller made a protective stop; motion is blocked until it is unlocked."""
+
+    def __init__(self, context: str = "") -> None:
+        super().__init__(f"the robot made a protective stop{context}: unlock the protective stop on the teach "
+                         "pendant, then retry")
+
+
+class EmergencyStop(RobotError):
+    """The emergency stop is pressed."""
+
+    def __init__(self) -> None:
+        super().__init__("the emergency stop is pressed: make the cell safe, release the emergency stop, power on "
+                         "and release the brakes on the teach pendant, then retry")
+
+
+class ConnectionLost(RobotError):
+    """The link to the controller is down (never made, closed or dropped)."""
+
+    def __init__(self, context: str = "") -> None:
+        super().__init__(f"the connection to the robot is lost{context}: check that the robot is powered on and "
+                         "the network cable is plugged in, then reconnect")
+
+
+class NoContact(RobotError):
+    """A tap travelled its full distance without touching anything."""
+
+    def __init__(self, max_travel_m: float) -> None:
+        super().__init__(f"the tap found no surface within {max_travel_m * 1e3:.0f} mm: move the tool closer to "
+                         "the fixture and retry")
+
+
+class NotInRemoteControl(RobotError):
+    """The controller is in local mode and refuses commands from outside."""
+
+    def __init__(self) -> None:
+        super().__init__("the robot is in local control: switch it to remote control on the teach pendant, "
+                         "then retry")
+
+
+@dataclass(frozen=True)
+class RobotStatus:
+    """Controller state as the operator should see it; ``mode`` is a short human-readable text."""
+
+    connected: bool
+    protective_stop: bool
+    emergency_stop: bool
+    program_running: bool
+    mode: str
+
+
+@dataclass(frozen=True, eq=False)
+class TapResult:
+    """One tap: flange pose at contact (base frame, m), travel to contact (m), peak contact force (N),
+    time waited for the contact to settle (s)."""
+
+    base_T_tcp_contact: np.ndarray
+    travel_m: float
+    peak_force_n: float
+    settle_s: float
+
+
+@runtime_checkable
+class Robot(Protocol):
+    """A robot cell fixwizard can drive. Every call may raise a ``RobotError``."""
+
+    def connect(self) -> None:
+        """Open (or reopen) the link to the controller."""
+
+    def close(self) -> None:
+        """Close the link; further calls need ``connect`` first."""
+
+    def base_T_tcp(self) -> np.ndarray:
+        """Current flange pose as the controller reports it (4x4, base frame, m)."""
+
+    def freedrive(self, on: bool) -> None:
+        """Let the operator move the arm by hand (True) or hold it (False)."""
+
+    def tap(self, max_travel_m: float = 0.02, speed_m_s: float = 0.01, force_limit_n: float = 10.0) -> TapResult:
+        """Approach along the tool z axis until ``force_limit_n`` (N), at most ``max_travel_m`` (m) at
+        ``speed_m_s`` (m/s); settle, record the contact flange pose, retract to the start."""
+
+    def move_linear(self, base_T_tcp: np.ndarray, speed_m_s: float = 0.05) -> None:
+        """Move the flange in a straight line to ``base_T_tcp`` (4x4, base frame, m) at ``speed_m_s`` (m/s)."""
+
+    def status(self) -> RobotStatus:
+        """Current controller state; never raises for a lost connection (it shows ``connected=False``)."""
+
+    def stop(self) -> None:
+        """Stop any motion now."""
+
+
+def check_tap_request(max_travel_m: float, speed_m_s: float, force_limit_n: float) -> None:
+    """Raise ``RobotError`` unless the tap's travel (m), speed (m/s) and force (N) are within the safety limits."""
+    for name, value, limit, unit, scale in (("travel", max_travel_m, MAX_TAP_TRAVEL_M, "mm", 1e3),
+                                            ("speed", speed_m_s, MAX_TAP_SPEED_M_S, "mm/s", 1e3),
+                                            ("force limit", force_limit_n, MAX_TAP_FORCE_N, "N", 1.0)):
+        check_limit(f"tap {name}", value, limit, unit, scale)
+
+
+def check_limit(name: str, value: float, limit: float, unit: str, scale: float) -> None:
+    """Raise ``RobotError`` unless ``0 < value <= limit``; ``scale`` converts SI to the shown ``unit``."""
+    if not 0.0 < value <= limit:
+        raise RobotError(f"the {name} of {value * scale:g} {unit} is outside the safe range (0, {limit * scale:g}] "
+                         f"{unit}: choose a value in that range")

@@ -1,0 +1,175 @@
+"""The simulated cell: taps touch the true surfaces within the forward-kinematics bound, faults raise typed
+errors with a way out, and the taps it records calibrate the fixture."""
+
+import threading
+
+import numpy as np
+import pytest
+from shapes import as_fixture
+
+from fixwizard.calibration.taps import ball_centres_m
+from fixwizard.geometry.se3 import invert, make_transform, transform_points
+from fixwizard.robot import ConnectionLost, NoContact, ProtectiveStop, Robot, RobotError
+from fixwizard.robot.sim import SimulatedCell
+from fixwizard.solver.solve import solve
+
+FK_BOUND_M = 0.0003
+CONTACT_TOLERANCE_M = 1e-6
+
+
+@pytest.fixture(scope="module")
+def fixture():
+    return as_fixture("l_prism")
+
+
+@pytest.fixture
+def cell(fixture) -> SimulatedCell:
+    cell = SimulatedCell.with_fixture(fixture, seed=3, fk_error_bound_m=FK_BOUND_M)
+    cell.connect()
+    return cell
+
+
+def tap_centres(cell: SimulatedCell, target: str, count: int, seed: int) -> np.ndarray:
+    """Ball centres (count, 3, base frame, m) of ``count`` taps on ``target``, computed with the true tip."""
+    rng = np.random.default_rng(seed)
+    poses = []
+    for _ in range(count):
+        cell.place_tip_near(target, rng)
+        poses.append(cell.tap().base_T_tcp_contact)
+    return ball_centres_m(np.array(poses), cell.truth.tcp_p_tip_m)
+
+
+def offset_residual_m(cell: SimulatedCell, fixture, base_p_centres: np.ndarray) -> np.ndarray:
+    """Signed distance of the ball centres to the fixture minus the ball radius (m)."""
+    fix_p = transform_points(fixture.fix_T_cad @ invert(cell.truth.base_T_cad), base_p_centres)
+    return fixture.oracle.signed_distance_m(fix_p) - cell.truth.ball_diameter_m / 2.0
+
+
+def test_the_cell_is_a_robot(cell):
+    assert isinstance(cell, Robot)
+
+
+def test_random_fixture_pose_rests_on_the_table(cell, fixture):
+    base_p_vertices = transform_points(cell.truth.base_T_cad, fixture.mesh.vertices)
+    assert base_p_vertices[:, 2].min() == pytest.approx(0.0, abs=1e-12)
+    assert 0.3 < np.linalg.norm(cell.truth.base_T_cad[:2, 3]) < 0.7
+
+
+def test_fixture_taps_land_on_the_ball_offset_surface(cell, fixture):
+    residual = offset_residual_m(cell, fixture, tap_centres(cell, "fixture", 10, seed=1))
+    assert np.all(np.abs(residual) <= FK_BOUND_M + CONTACT_TOLERANCE_M)
+
+
+def test_table_taps_give_ball_centres_at_ball_radius_height(cell):
+    heights = tap_centres(cell, "table", 8, seed=2)[:, 2]
+    assert np.all(np.abs(heights - cell.truth.ball_diameter_m / 2.0) <= FK_BOUND_M + CONTACT_TOLERANCE_M)
+
+
+def test_tap_at_a_given_point_touches_there(cell):
+    cell.place_tip_near("table", np.random.default_rng(4), point=np.array([0.2, -0.3, 0.0]))
+    centre = ball_centres_m(cell.tap().base_T_tcp_contact[None], cell.truth.tcp_p_tip_m)[0]
+    # the tool tilts up to 30 deg, so the ball lands within hover / cos(30 deg) of the point
+    assert np.linalg.norm(centre[:2] - [0.2, -0.3]) < 0.006 + FK_BOUND_M
+
+
+@pytest.mark.parametrize("shape", ["l_prism", "polytope"])
+def test_twelve_fixture_taps_calibrate_the_fixture(shape):
+    fixture = as_fixture(shape)
+    cell = SimulatedCell.with_fixture(fixture, seed=3, fk_error_bound_m=FK_BOUND_M)
+    cell.connect()
+    centres = tap_centres(cell, "fixture", 12, seed=5)
+    solution = solve(fixture, centres, cell.truth.ball_diameter_m, sample_bound_m=FK_BOUND_M + 2e-5,
+                     max_cells=2e5, max_samples=2000)
+    assert solution.status != "inconsistent"
+    assert solution.contains(cell.truth.base_T_cad)
+
+
+def test_tap_pointing_away_finds_no_contact(cell):
+    cell.move_linear(make_transform(np.eye(3), [0.3, 0.0, 0.3]))  # tool z points up, into free space
+    with pytest.raises(NoContact, match="no surface within 20 mm: move the tool closer"):
+        cell.tap()
+
+
+def test_tap_never_reaches_beyond_its_travel(cell):
+    cell.place_tip_near("table", np.random.default_rng(6))
+    travel = cell.tap().travel_m
+    assert 0.005 <= travel <= 0.010  # the hover height
+    with pytest.raises(NoContact, match="no surface within"):
+        cell.tap(max_travel_m=travel - 0.001)
+    assert cell.tap(max_travel_m=travel + 1e-4).travel_m == pytest.approx(travel, abs=1e-9)
+
+
+@pytest.mark.parametrize("travel, speed, force, shown", [(0.1, 0.01, 10.0, "tap travel of 100 mm"),
+                                                         (0.02, 0.5, 10.0, "tap speed of 500 mm/s"),
+                                                         (0.02, 0.0, 10.0, "tap speed of 0 mm/s"),
+                                                         (0.02, 0.01, 500.0, "tap force limit of 500 N")])
+def test_tap_outside_the_safe_limits_is_refused(cell, travel, speed, force, shown):
+    with pytest.raises(RobotError, match=f"{shown} is outside the safe range"):
+        cell.tap(max_travel_m=travel, speed_m_s=speed, force_limit_n=force)
+
+
+@pytest.mark.parametrize("fault, error, advice, blocked, recover", [
+    ("protective_stop_during_tap", ProtectiveStop, "unlock the protective stop on the teach pendant, then retry",
+     lambda status: status.protective_stop, SimulatedCell.unlock),
+    ("connection_loss", ConnectionLost, "check that the robot is powered on .* then reconnect",
+     lambda status: not status.connected, SimulatedCell.connect)])
+def test_fault_during_a_tap_blocks_the_cell_until_recovered(cell, fault, error, advice, blocked, recover):
+    cell.place_tip_near("table", np.random.default_rng(7))
+    cell.inject_fault(fault)
+    with pytest.raises(error, match=advice):
+        cell.tap()
+    assert blocked(cell.status())
+    with pytest.raises(error):
+        cell.tap()
+    recover(cell)
+    assert not blocked(cell.status())
+    assert cell.tap().travel_m > 0
+
+
+def test_no_surface_fault_raises_no_contact_once(cell):
+    cell.place_tip_near("fixture", np.random.default_rng(9))
+    cell.inject_fault("no_surface")
+    with pytest.raises(NoContact, match="move the tool closer to the fixture and retry"):
+        cell.tap()
+    assert cell.tap().travel_m > 0
+
+
+def test_freedrive_blocks_robot_motion(cell):
+    cell.freedrive(True)
+    assert cell.status().mode == "freedrive"
+    with pytest.raises(RobotError, match="turn freedrive off"):
+        cell.tap()
+    cell.freedrive(False)
+
+
+def test_reported_pose_errs_within_the_bound(cell):
+    cell.place_tip_near("table", np.random.default_rng(10))
+    poses = np.array([cell.base_T_tcp() for _ in range(200)])
+    spread = np.linalg.norm(poses[:, :3, 3] - poses[:, :3, 3].mean(axis=0), axis=1)
+    assert np.all(spread <= 2 * FK_BOUND_M)
+    assert np.ptp(poses[:, :3, 3], axis=0).max() > 0  # a real error, not a constant offset
+
+
+def test_status_and_pose_are_safe_from_another_thread(cell):
+    errors: list[BaseException] = []
+    done = threading.Event()
+
+    def poll() -> None:
+        try:
+            while not done.is_set():
+                assert cell.status().connected
+                assert cell.base_T_tcp().shape == (4, 4)
+        except BaseException as error:  # noqa: BLE001 - reported to the main thread
+            errors.append(error)
+
+    pollers = [threading.Thread(target=poll) for _ in range(2)]
+    for poller in pollers:
+        poller.start()
+    try:
+        centres = tap_centres(cell, "table", 10, seed=11)
+    finally:
+        done.set()
+        for poller in pollers:
+            poller.join()
+    assert not errors
+    assert np.all(np.abs(centres[:, 2] - cell.truth.ball_diameter_m / 2.0) <= FK_BOUND_M + CONTACT_TOLERANCE_M)
