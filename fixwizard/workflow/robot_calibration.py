@@ -1,0 +1,177 @@
+"""The robot-driven tool-tip calibration: pivot, table points A, B, C, table taps and tilted taps on any Robot.
+
+The operator captures the pivot poses (ball held on one fixed point, tool turned) and the three table
+points A, B (the corner), C, counter-clockwise seen from the tool; the robot then taps the table by
+itself, first at one orientation over a grid, then at the planned tilts. The automatic steps never move
+sideways below the approach height: from wherever the flange is, they first move straight up along the
+table normal to it, then to each hover pose (ball centre ``approach_height_m`` above the plane of the
+ball centres at contact); ``tap()`` does the rest and returns there. Between two taps they report
+progress and honour a cancel request. Every recorded pose stays available (``poses``) after a cancel or
+a robot error, and running a step again continues where it stopped.
+
+Not thread safe: drive one instance from one worker thread at a time.
+"""
+
+import threading
+from collections.abc import Callable
+from typing import Literal, TypeVar
+
+import numpy as np
+
+from fixwizard.calibration.calibrate import calibrate_tip
+from fixwizard.calibration.errors import CalibrationError
+from fixwizard.calibration.pivot import PivotFit, fit_pivot
+from fixwizard.calibration.plans import (
+    DEFAULT_AZIMUTHS,
+    DEFAULT_TILTS_DEG,
+    grid_hover_poses,
+    tilted_hover_poses,
+)
+from fixwizard.calibration.store import TipCalibration
+from fixwizard.calibration.table import coarse_table_frame, fit_table_plane
+from fixwizard.calibration.taps import PoseSeries, ball_centres_m
+from fixwizard.errors import FixwizardError
+from fixwizard.robot.base import MAX_TAP_TRAVEL_M, Robot, RobotError
+
+Step = Literal["pivot", "table_coarse", "table", "tilted"]
+Progress = Callable[[Step, int, int], None]
+T = TypeVar("T")
+
+STEP_TITLES: dict[Step, str] = {"pivot": "pivot", "table_coarse": "table point", "table": "table taps",
+                                "tilted": "tilted taps"}
+TABLE_POINTS = ("A", "B", "C")
+# A tap may travel this much (m) beyond the planned distance to the table, for the coarse tip's error.
+TAP_MARGIN_M = 0.01
+DEFAULT_APPROACH_HEIGHT_M = 0.03
+
+
+class Cancelled(FixwizardError):
+    """The operator cancelled an automatic step between two taps; the taps recorded so far are kept."""
+
+    def __init__(self, step: Step, done: int, total: int) -> None:
+        super().__init__(f"the {STEP_TITLES[step]} were cancelled after {done} of {total} taps; the recorded taps "
+                         "are kept: run the step again to continue")
+
+
+class RobotTipCalibration:
+    """One tip calibration on ``robot``: ball diameter (m), approach height of the automatic taps above the
+    table (m, ball centre above its contact plane), the table grid (rows, columns) and its spacing (m),
+    and the tilts (deg), azimuth count and spacing (m) of the tilted taps.
+
+    The tilted plan puts each tilt in its own column, so an error in the measured table normal would turn
+    into an error of the tip along the tool axis in proportion to the columns' spread: the table grid is
+    wide (a better normal) and the tilted taps are close together.
+    """
+
+    def __init__(self, robot: Robot, ball_diameter_m: float, approach_height_m: float = DEFAULT_APPROACH_HEIGHT_M,
+                 table_grid: tuple[int, int] = (4, 4), table_spacing_m: float = 0.03,
+                 tilts_deg: tuple[float, ...] = DEFAULT_TILTS_DEG, azimuths: int = DEFAULT_AZIMUTHS,
+                 tilted_spacing_m: float = 0.005) -> None:
+        self.robot = robot
+        self.ball_diameter_m = ball_diameter_m
+        self.approach_height_m = approach_height_m
+        self.table_grid = table_grid
+        self.table_spacing_m = table_spacing_m
+        self.tilts_deg = tilts_deg
+        self.azimuths = azimuths
+        self.tilted_spacing_m = tilted_spacing_m
+        self._tap_travel_m = approach_height_m / np.cos(np.radians(max(tilts_deg))) + TAP_MARGIN_M
+        if not 0.0 < approach_height_m or self._tap_travel_m > MAX_TAP_TRAVEL_M:
+            raise CalibrationError(
+                f"an approach height of {approach_height_m * 1e3:g} mm needs taps of {self._tap_travel_m * 1e3:.0f} "
+                f"mm at {max(tilts_deg):g} degrees tilt, beyond the safe {MAX_TAP_TRAVEL_M * 1e3:.0f} mm: choose a "
+                "lower approach height (above 0) or smaller tilts")
+        self._poses: dict[Step, list[np.ndarray]] = {step: [] for step in STEP_TITLES}
+
+    def poses(self, step: Step) -> np.ndarray:
+        """The flange poses ``base_T_tcp`` (N, 4, 4) recorded so far in ``step``."""
+        return np.array(self._poses[step], dtype=float).reshape(-1, 4, 4)
+
+    # --- steps the operator drives ---
+
+    def capture_pivot_pose(self) -> None:
+        """Record the current flange pose; the ball must sit on the same fixed point as for the others."""
+        self._poses["pivot"].append(_call(f"pivot, pose {len(self._poses['pivot']) + 1}", self.robot.base_T_tcp))
+
+    def pivot_fit(self) -> PivotFit:
+        """The coarse tip from the pivot poses so far, with its live residuals; ``CalibrationError`` says
+        what to capture next while there are too few poses or too little tilt."""
+        return fit_pivot(self.poses("pivot"))
+
+    def tap_table_point(self) -> np.ndarray:
+        """Tap the table below the ball (the operator placed it a few mm above the next of A, B, C) and
+        record the contact flange pose (4, 4), which is returned."""
+        done = len(self._poses["table_coarse"])
+        if done == len(TABLE_POINTS):
+            raise CalibrationError("the table points A, B and C are recorded already; go on with the table taps")
+        contact = _call(f"table point {TABLE_POINTS[done]}", self.robot.tap).base_T_tcp_contact
+        self._poses["table_coarse"].append(contact)
+        return contact
+
+    # --- automatic steps ---
+
+    def run_table_taps(self, progress: Progress | None = None, cancel: threading.Event | None = None) -> None:
+        """Tap the table grid at one orientation, starting from the table frame of A, B, C and the pivot tip."""
+        rows, cols = self.table_grid
+        plan = grid_hover_poses(self._coarse_frame(None), self.pivot_fit().tcp_p_tip_m, rows, cols,
+                                self.table_spacing_m, self.approach_height_m)
+        self._run("table", plan, progress, cancel)
+
+    def run_tilted_taps(self, progress: Progress | None = None, cancel: threading.Event | None = None) -> None:
+        """Tap the table at the planned tilts, leaning from the normal the table taps measured."""
+        tip = self.pivot_fit().tcp_p_tip_m
+        base_n_table = fit_table_plane(self.poses("table"), tip).base_n_table
+        plan = tilted_hover_poses(self._coarse_frame(base_n_table), tip, self.tilted_spacing_m, self.approach_height_m,
+                                  self.tilts_deg, self.azimuths)
+        self._run("tilted", plan, progress, cancel)
+
+    def result(self, name: str = "tip", robot: str | None = None) -> TipCalibration:
+        """The calibration from every step (saving it is the caller's choice: ``store.save_calibration``)."""
+        series = {step: PoseSeries(self.poses(step)) for step in STEP_TITLES}
+        return calibrate_tip(series["pivot"], series["table"], series["tilted"], self.ball_diameter_m,
+                             series["table_coarse"], name, robot)
+
+    # --- internals ---
+
+    def _coarse_frame(self, base_n_table: np.ndarray | None) -> np.ndarray:
+        """``base_T_table`` from A, B, C and the pivot tip, z along ``base_n_table`` when given."""
+        if len(self._poses["table_coarse"]) < len(TABLE_POINTS):
+            raise CalibrationError("tap the table points A, B (the corner) and C first, counter-clockwise seen "
+                                   "from the tool")
+        return coarse_table_frame(self.poses("table_coarse"), self.pivot_fit().tcp_p_tip_m, base_n_table)
+
+    def _run(self, step: Step, plan: np.ndarray, progress: Progress | None, cancel: threading.Event | None) -> None:
+        """Tap from every hover pose of ``plan`` not yet recorded, lifting to the approach height first."""
+        recorded, total = self._poses[step], len(plan)
+        first = len(recorded)
+        base_n_up = self._coarse_frame(None)[:3, 2]
+        tip = self.pivot_fit().tcp_p_tip_m
+        base_p_hover = ball_centres_m(plan, tip)
+        for index in range(first, total):
+            if cancel is not None and cancel.is_set():
+                raise Cancelled(step, len(recorded), total)
+            where = f"{STEP_TITLES[step]}, tap {index + 1} of {total}"
+            if index == first:
+                _call(where, self._lift, tip, base_n_up, base_p_hover[index])
+            _call(where, self.robot.move_linear, plan[index])
+            result = _call(where, self.robot.tap, max_travel_m=self._tap_travel_m)
+            recorded.append(result.base_T_tcp_contact)
+            if progress is not None:
+                progress(step, len(recorded), total)
+
+    def _lift(self, tcp_p_tip_m: np.ndarray, base_n_up: np.ndarray, base_p_hover: np.ndarray) -> None:
+        """Move straight along the table normal until the ball centre is at least as high as the hover point."""
+        base_T_tcp = self.robot.base_T_tcp()
+        rise_m = (base_p_hover - ball_centres_m(base_T_tcp[None], tcp_p_tip_m)[0]) @ base_n_up
+        if rise_m > 0.0:
+            base_T_tcp[:3, 3] += rise_m * base_n_up
+            self.robot.move_linear(base_T_tcp)
+
+
+def _call(where: str, action: Callable[..., T], *args, **kwargs) -> T:
+    """Run one robot action; a ``RobotError`` keeps its type and gets ``where`` in front of its message."""
+    try:
+        return action(*args, **kwargs)
+    except RobotError as error:
+        error.args = (f"{where}: {error}",)
+        raise

@@ -1,0 +1,169 @@
+"""The robot-driven tip calibration on the simulated cell: it recovers the hidden tip, the calibrated tip
+locates the fixture, progress and cancel work between taps, robot errors name the step and keep the
+recorded taps, and no commanded move brings the ball below the approach height."""
+
+import threading
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+from shapes import as_fixture
+
+from fixwizard.calibration.errors import CalibrationError
+from fixwizard.calibration.taps import ball_centres_m
+from fixwizard.geometry.se3 import make_transform
+from fixwizard.robot import ProtectiveStop
+from fixwizard.robot.sim import SimulatedCell
+from fixwizard.solver.solve import solve
+from fixwizard.workflow.robot_calibration import Cancelled, RobotTipCalibration
+from fixwizard.workflow.session import SamplingSession
+
+TRUE_TIP_M = np.array([0.0012, -0.0007, 0.049])
+FK_BOUND_M = 0.0003
+APPROACH_M = 0.03
+PLAN = {"table": 16, "tilted": 40}  # 4 x 4 grid; 8 azimuths x 5 tilts
+
+
+class MoveLog:
+    """The cell as the workflow sees it, keeping every ``move_linear`` target."""
+
+    def __init__(self, cell: SimulatedCell) -> None:
+        self.cell = cell
+        self.targets: list[np.ndarray] = []
+
+    def move_linear(self, base_T_tcp: np.ndarray, speed_m_s: float = 0.05) -> None:
+        self.targets.append(np.array(base_T_tcp))
+        self.cell.move_linear(base_T_tcp, speed_m_s)
+
+    def __getattr__(self, name: str):
+        return getattr(self.cell, name)
+
+
+@pytest.fixture(scope="module")
+def fixture():
+    return as_fixture("polytope")
+
+
+def new_cell(fixture) -> SimulatedCell:
+    cell = SimulatedCell.with_fixture(fixture, seed=11, tcp_p_tip_m=TRUE_TIP_M, fk_error_bound_m=FK_BOUND_M)
+    cell.connect()
+    return cell
+
+
+def operator_steps(cell: SimulatedCell, workflow: RobotTipCalibration) -> None:
+    """What the operator does by hand: pivot about a table point, then tap A, B (corner), C counter-clockwise,
+    all on the side of the table away from the fixture."""
+    away = -cell.truth.base_T_cad[:2, 3] / np.linalg.norm(cell.truth.base_T_cad[:2, 3])
+    base_p_pivot = np.array([*(0.3 * away), 0.0015])
+    for axis, tilt_deg in [((1, 0, 0), 0), ((1, 0, 0), 25), ((0, 1, 0), 25), ((-1, 0, 0), 25), ((0, -1, 0), 25)]:
+        base_R_tcp = Rotation.from_rotvec(np.radians(tilt_deg) * np.array(axis, float)) * Rotation.from_euler("x", 180,
+                                                                                                           degrees=True)
+        cell.move_linear(make_transform(base_R_tcp, base_p_pivot - base_R_tcp.apply(TRUE_TIP_M)))
+        workflow.capture_pivot_pose()
+    base_p_b = np.array([*(0.45 * away), 0.0])
+    rng = np.random.default_rng(2)
+    for base_p_point in (base_p_b + [0.12, 0, 0], base_p_b, base_p_b + [0, 0.18, 0]):
+        cell.place_tip_near("table", rng, point=base_p_point)
+        workflow.tap_table_point()
+
+
+@pytest.fixture(scope="module")
+def calibrated(fixture):
+    cell = new_cell(fixture)
+    log = MoveLog(cell)
+    workflow = RobotTipCalibration(log, cell.truth.ball_diameter_m, approach_height_m=APPROACH_M)
+    operator_steps(cell, workflow)
+    reports = []
+    workflow.run_table_taps(lambda *report: reports.append(report))
+    workflow.run_tilted_taps(lambda *report: reports.append(report))
+    return cell, log, workflow, workflow.result("sim-tip", robot="sim"), reports
+
+
+@pytest.fixture
+def ready(fixture):
+    """A fresh cell and workflow with the operator's steps done."""
+    cell = new_cell(fixture)
+    workflow = RobotTipCalibration(cell, cell.truth.ball_diameter_m)
+    operator_steps(cell, workflow)
+    return cell, workflow
+
+
+def test_calibration_recovers_the_hidden_tip_and_proposes_a_bound_covering_the_robot(calibrated):
+    _, _, workflow, calibration, _ = calibrated
+    error_m = calibration.tcp_p_tip_m - TRUE_TIP_M
+    assert np.linalg.norm(error_m) < 0.0005
+    assert np.all(np.abs(error_m) <= 3 * calibration.tip_standard_error_m)
+    assert calibration.sample_bound_m >= FK_BOUND_M
+    assert {step: len(series.base_T_tcp) for step, series in calibration.steps.items()} == {
+        "pivot": 5, "table_coarse": 3, **PLAN}
+    assert workflow.pivot_fit().stats.max_m < 2 * FK_BOUND_M
+
+
+def test_the_calibrated_tip_locates_the_fixture(calibrated, fixture, tmp_path):
+    cell, _, _, calibration, _ = calibrated
+    rng = np.random.default_rng(5)
+    with SamplingSession.create(tmp_path / "s.jsonl", {"name": "polytope"},
+                                {"tcp_p_tip_m": calibration.tcp_p_tip_m.tolist()}) as session:
+        for _ in range(12):
+            cell.place_tip_near("fixture", rng)
+            session.record_tap(cell.tap().base_T_tcp_contact)
+        base_p_taps = session.base_p_taps
+    assert len(base_p_taps) == 12
+    solution = solve(fixture, base_p_taps, calibration.ball_diameter_m, sample_bound_m=calibration.sample_bound_m,
+                     max_cells=2e5, max_samples=2000)
+    assert solution.status != "inconsistent"
+    assert solution.contains(cell.truth.base_T_cad)
+
+
+def test_progress_is_reported_after_every_tap(calibrated):
+    reports = calibrated[-1]
+    assert reports == [(step, done, total) for step, total in PLAN.items() for done in range(1, total + 1)]
+
+
+def test_no_move_brings_the_ball_below_the_approach_height(calibrated):
+    cell, log, _, _, _ = calibrated
+    heights_m = ball_centres_m(np.array(log.targets), TRUE_TIP_M)[:, 2] - cell.truth.ball_diameter_m / 2
+    assert len(log.targets) >= sum(PLAN.values()) + 1  # a lift from table point C before the first hover
+    # the hover poses are planned with the pivot tip, which errs by less than a millimetre
+    assert heights_m.min() >= APPROACH_M - 0.001
+
+
+def test_cancel_stops_between_taps_and_running_again_continues(ready):
+    _, workflow = ready
+    cancel = threading.Event()
+
+    def cancel_after_three(step, done, total):
+        if done == 3:
+            cancel.set()
+
+    with pytest.raises(Cancelled, match="table taps were cancelled after 3 of 16 taps; the recorded taps are kept"):
+        workflow.run_table_taps(cancel_after_three, cancel)
+    assert len(workflow.poses("table")) == 3
+    workflow.run_table_taps()
+    assert len(workflow.poses("table")) == 16
+
+
+def test_protective_stop_names_the_step_and_keeps_the_recorded_taps(ready):
+    cell, workflow = ready
+
+    def stop_after_four(step, done, total):
+        if done == 4:
+            cell.inject_fault("protective_stop_during_tap")
+
+    with pytest.raises(ProtectiveStop, match="^table taps, tap 5 of 16: the robot made a protective stop .* unlock"):
+        workflow.run_table_taps(stop_after_four)
+    assert len(workflow.poses("table")) == 4
+    cell.unlock()
+    workflow.run_table_taps()
+    assert len(workflow.poses("table")) == 16
+
+
+def test_steps_out_of_order_and_unsafe_heights_are_refused(fixture):
+    cell = new_cell(fixture)
+    with pytest.raises(CalibrationError, match="choose a lower approach height"):
+        RobotTipCalibration(cell, 0.003, approach_height_m=0.045)
+    workflow = RobotTipCalibration(cell, 0.003)
+    with pytest.raises(CalibrationError, match="tap the table points A, B .* first"):
+        workflow.run_table_taps()
+    with pytest.raises(CalibrationError, match="at least 3 flange poses"):
+        workflow.pivot_fit()
