@@ -266,6 +266,8 @@ class SamplingSession:
 
     def _apply(self, record: dict, number: int | None) -> Tap | None:
         """Replay one record; ``number`` is its journal line when replaying from the file."""
+        invalid = SessionError(f"line {number} of the session {self.path} is not a valid tap, undo or closed "
+                               "record; keep the file and start a new session")
         try:
             kind = record["kind"]
             if kind == "tap":
@@ -275,13 +277,12 @@ class SamplingSession:
                 return tap
             if kind == "undo":
                 return self._taps.pop(int(record["id"]))
-            if kind == "closed":
-                self.closed = True
-                return None
         except (KeyError, TypeError, ValueError):
-            pass
-        raise SessionError(f"line {number} of the session {self.path} is not a valid tap, undo or closed record; "
-                           "keep the file and start a new session")
+            raise invalid from None
+        if kind != "closed":
+            raise invalid
+        self.closed = True
+        return None
 
 
 def _move_aside(path: Path, handle: int, line_number: int, offset: int, torn: bytes) -> TornLine:
