@@ -55,8 +55,15 @@ def touching_ball_centres(mesh: trimesh.Trimesh, count: int, ball_radius_m: floa
 
     Contact points are uniform over the surface (or over the faces in ``face_mask``).
     """
+    return touching_ball_contacts(mesh, count, ball_radius_m, rng, face_mask)[0]
+
+
+def touching_ball_contacts(mesh: trimesh.Trimesh, count: int, ball_radius_m: float, rng: np.random.Generator,
+                           face_mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Ball centres as ``touching_ball_centres`` and the outward surface normals (unit, mesh frame) there."""
     weights = mesh.area_faces * (face_mask if face_mask is not None else 1.0)
     centres: list[np.ndarray] = []
+    normals: list[np.ndarray] = []
     while len(centres) < count:
         faces = rng.choice(len(mesh.faces), size=4 * count, p=weights / weights.sum())
         corners = mesh.triangles[faces]
@@ -68,7 +75,8 @@ def touching_ball_centres(mesh: trimesh.Trimesh, count: int, ball_radius_m: floa
         distance = exact_distances_m(mesh, candidates)
         good = np.abs(distance - ball_radius_m) <= CONTACT_TOLERANCE_M
         centres.extend(candidates[good])
-    return np.array(centres[:count])
+        normals.extend(mesh.face_normals[faces][good])
+    return np.array(centres[:count]), np.array(normals[:count])
 
 
 def bounded_noise(count: int, bound_m: float, rng: np.random.Generator, at_bound_fraction: float = 0.3) -> np.ndarray:

@@ -35,7 +35,7 @@ def refined_largest_figures(problem: SearchProblem, cells: CellSet, centre: Boun
         parents = cells.subset(outer)
         children = parents.split_rotations() if rotation_splits_first(parents, problem) else parents.split_positions()
         budget -= len(children)
-        cells = filter_cells(problem, children)
+        cells = filter_cells(problem, children).cells
         if len(cells) == 0:
             return settled
         figures = cell_bound_figures(cells, centre, fix_p_origin, problem.fixture_radius_m)

@@ -129,7 +129,7 @@ class _Frames:
 
 
 @dataclass
-class _Survivors:
+class Survivors:
     """Cells that passed every tap, with ``R_c^T t_c`` and, per tap, an interval (m, float32, shape
     (taps, cells)) holding the signed distance at the cell centre's query point."""
 
@@ -138,8 +138,17 @@ class _Survivors:
     low_m: np.ndarray
     high_m: np.ndarray
 
+    @property
+    def cells(self) -> CellSet:
+        return self.frames.cells
 
-def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: int, parents: _Survivors | None,
+    def subset(self, mask: np.ndarray) -> "Survivors":
+        """The survivors where ``mask`` is true, with their intervals."""
+        return Survivors(self.frames.subset(mask), self.rotated_positions[mask], self.low_m[:, mask],
+                         self.high_m[:, mask])
+
+
+def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: int, parents: Survivors | None,
                   grid: DistanceGrid, tap_order: np.ndarray, rejected: np.ndarray,
                   cancel: threading.Event | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Survivor mask, ``R_c^T t_c`` and distance intervals of the survivors among cells ``first .. first + count``."""
@@ -188,8 +197,8 @@ def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: in
     return alive, rotated_positions[alive], low[:, alive], high[:, alive]
 
 
-def _filter(problem: SearchProblem, cells: CellSet, parents: _Survivors | None, grid: DistanceGrid,
-            tap_order: np.ndarray, cancel: threading.Event | None) -> tuple[CellSet, _Survivors, np.ndarray]:
+def _filter(problem: SearchProblem, cells: CellSet, parents: Survivors | None, grid: DistanceGrid,
+            tap_order: np.ndarray, cancel: threading.Event | None) -> tuple[CellSet, Survivors, np.ndarray]:
     """Survivors of a level, and the number of cells each tap rejected."""
     frames = _Frames(cells)
     starts = range(0, len(cells), QUERY_CHUNK)
@@ -201,7 +210,7 @@ def _filter(problem: SearchProblem, cells: CellSet, parents: _Survivors | None, 
     alive, rotated_positions = (np.concatenate(part) for part in list(zip(*parts))[:2])
     low, high = (np.concatenate(part, axis=1) for part in list(zip(*parts))[2:])
     survivor_frames = frames.subset(alive)
-    return survivor_frames.cells, _Survivors(survivor_frames, rotated_positions, low, high), rejected.sum(axis=0)
+    return survivor_frames.cells, Survivors(survivor_frames, rotated_positions, low, high), rejected.sum(axis=0)
 
 
 def rotation_splits_first(cells: CellSet, problem: SearchProblem) -> bool:
@@ -211,10 +220,12 @@ def rotation_splits_first(cells: CellSet, problem: SearchProblem) -> bool:
     return rotation_bound >= cells.position_bound_m
 
 
-def filter_cells(problem: SearchProblem, cells: CellSet, cancel: threading.Event | None = None) -> CellSet:
-    """The cells of any set that no tap rejects (evaluated without parent intervals)."""
-    return _filter(problem, cells, None, distance_grid_for(problem.oracle), np.arange(len(problem.base_p_taps)),
-                   cancel)[0]
+def filter_cells(problem: SearchProblem, cells: CellSet, parents: Survivors | None = None,
+                 cancel: threading.Event | None = None) -> Survivors:
+    """The cells of a set that no tap rejects. ``parents``: the survivors the cells are children of
+    (eight per parent, in order), whose intervals then decide most children without a query."""
+    return _filter(problem, cells, parents, distance_grid_for(problem.oracle), np.arange(len(problem.base_p_taps)),
+                   cancel)[1]
 
 
 def search(problem: SearchProblem, max_cells: float = 1e7,
