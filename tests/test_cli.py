@@ -32,6 +32,11 @@ def bracket(tmp_path_factory):
     return folder, taps, base_T_cad
 
 
+def replaced(args: list[str], old: str, new: str) -> list[str]:
+    """The arguments with one value swapped."""
+    return [new if arg == old else arg for arg in args]
+
+
 def solve_args(folder, points="taps.yaml", *extra):
     return ["solve", str(folder / "plate.stl"), str(folder / points), "--mesh-units", "mm", "--sample-bound", "0.5mm",
             "--ball-diameter", "3mm", "--max-cells", "1e5", "-q", "-o", str(folder / "report.yaml"), *extra]
@@ -56,8 +61,7 @@ def test_a_csv_points_file_works_like_yaml(bracket, capsys):
 
 def test_wrong_units_name_the_fix(bracket, capsys):
     folder, _, _ = bracket
-    args = solve_args(folder)
-    args[args.index("mm")] = "m"
+    args = replaced(solve_args(folder), "mm", "m")
     assert main(args) == 1
     assert "--mesh-units mm" in capsys.readouterr().err
 
@@ -90,8 +94,7 @@ def test_a_tap_5cm_off_the_fixture_is_inconsistent_and_named(bracket, capsys):
     off = taps.copy()
     off[6] += np.array([0.0, 0.0, 0.05])
     write_points(folder / "off.yaml", off)
-    args = solve_args(folder, "off.yaml")
-    args[args.index("1e5")] = "1e6"
+    args = replaced(solve_args(folder, "off.yaml"), "1e5", "1e6")
     assert main(args) == 2
     out = capsys.readouterr().out
     assert "status: inconsistent" in out and "Tap 7" in out
@@ -103,8 +106,7 @@ def test_a_tap_5cm_off_the_fixture_is_inconsistent_and_named(bracket, capsys):
 
 def test_a_bad_length_is_refused(bracket, capsys):
     folder, _, _ = bracket
-    args = solve_args(folder)
-    args[args.index("0.5mm")] = "half a millimetre"
+    args = replaced(solve_args(folder), "0.5mm", "half a millimetre")
     assert main(args) == 1
     assert "cannot read the length" in capsys.readouterr().err
 
@@ -154,16 +156,14 @@ def test_solve_takes_ball_diameter_and_sample_bound_from_a_tip_calibration(tmp_p
 
 def test_a_length_without_unit_that_means_metres_is_caught(bracket, capsys):
     folder, _, _ = bracket
-    args = solve_args(folder)
-    args[args.index("0.5mm")] = "1"
+    args = replaced(solve_args(folder), "0.5mm", "1")
     assert main(args) == 1
     assert "--sample-bound 1mm" in capsys.readouterr().err
 
 
 def test_bad_usage_exits_1_not_2(bracket, capsys):
     folder, _, _ = bracket
-    args = solve_args(folder)
-    args[args.index("1e5")] = "lots"
+    args = replaced(solve_args(folder), "1e5", "lots")
     with pytest.raises(SystemExit) as exit_info:
         main(args)
     assert exit_info.value.code == 1
@@ -173,8 +173,6 @@ def test_an_unwritable_report_path_is_a_message_not_a_traceback(bracket, capsys)
     folder, _, _ = bracket
     blocker = folder / "not_a_folder"
     blocker.write_text("a file where a folder should be")
-    args = solve_args(folder)
-    args[args.index(str(folder / "report.yaml"))] = str(blocker / "report.yaml")
-    assert main(args) == 1
+    assert main(replaced(solve_args(folder), str(folder / "report.yaml"), str(blocker / "report.yaml"))) == 1
     err = capsys.readouterr().err
     assert "cannot write" in err and "Traceback" not in err

@@ -69,3 +69,11 @@ def test_solve_refuses_impossible_bounds(bound, diameter, match):
     fixture, problem = small_problem()
     with pytest.raises(InputError, match=match):
         solve(fixture, problem.base_p_taps, diameter, bound)
+
+
+def test_float32_interval_ends_are_rounded_outward():
+    from fixwizard.solver.search import _round_down_f32, _round_up_f32
+
+    values = np.random.default_rng(3).normal(size=100_000) * np.logspace(-6, 0, 100_000)
+    assert np.all(_round_down_f32(values).astype(np.float64) <= values)
+    assert np.all(_round_up_f32(values).astype(np.float64) >= values)

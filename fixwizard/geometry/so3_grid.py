@@ -35,6 +35,12 @@ LIPSCHITZ_G = 2.0
 _EZ = np.array([0.0, 0.0, 1.0])
 
 
+def chord(angle_rad: np.ndarray | float) -> np.ndarray | float:
+    """Largest displacement of a unit-lever point rotated by ``angle``: ``2 sin(angle / 2)``, angle capped at pi
+    (the cancellation-free form of ``sqrt(2 - 2 cos(angle))``)."""
+    return 2.0 * np.sin(np.minimum(angle_rad, np.pi) / 2.0)
+
+
 def _shortest_rotations(from_dirs: np.ndarray, to_dirs: np.ndarray) -> Rotation:
     """Shortest rotations taking unit vectors ``from_dirs`` to ``to_dirs`` (both (N, 3), none antipodal)."""
     cross = np.cross(from_dirs, to_dirs)

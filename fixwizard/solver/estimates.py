@@ -13,6 +13,7 @@ from scipy.spatial.transform import Rotation
 from fixwizard.fixture import DistanceOracle
 from fixwizard.geometry.meb import minimum_enclosing_ball
 from fixwizard.geometry.se3 import make_transform
+from fixwizard.geometry.so3_grid import chord
 from fixwizard.solver.cells import CellSet
 
 CENTER_ITERATIONS = 200
@@ -49,11 +50,6 @@ class Samples:
     positions_m: np.ndarray
     cell_index: np.ndarray
     weights: np.ndarray
-
-
-def chord(angle_rad: np.ndarray | float) -> np.ndarray | float:
-    """Largest displacement of a unit-lever point rotated by ``angle``: ``2 sin(angle / 2)``, angle capped at pi."""
-    return 2.0 * np.sin(np.minimum(angle_rad, np.pi) / 2.0)
 
 
 def rotation_center(rotations: Rotation) -> Rotation:

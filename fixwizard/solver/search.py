@@ -27,6 +27,7 @@ import numpy as np
 
 from fixwizard.fixture import DistanceOracle
 from fixwizard.geometry.octree import PositionGrid
+from fixwizard.geometry.so3_grid import chord
 from fixwizard.geometry.socp_box import ball_intersection_box
 from fixwizard.solver.cells import CellSet, root_cells
 from fixwizard.solver.distance_grid import DistanceGrid, distance_grid_for
@@ -148,6 +149,11 @@ class Survivors:
                          self.high_m[:, mask])
 
 
+def _straddles(low: np.ndarray, high: np.ndarray, band_low: np.ndarray, band_high: np.ndarray) -> np.ndarray:
+    """Intervals that meet the band without lying inside it: only an exact value decides those."""
+    return (high >= band_low) & (low <= band_high) & ((low < band_low) | (high > band_high))
+
+
 def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: int, parents: Survivors | None,
                   grid: DistanceGrid, tap_order: np.ndarray, rejected: np.ndarray,
                   cancel: threading.Event | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -155,7 +161,7 @@ def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: in
     chunk = slice(first, first + count)
     rotated_positions = frames.rotated_positions(chunk)
     rotation_index = frames.rotation_index[chunk]
-    chords = 2.0 * np.sin(np.minimum(frames.gammas_rad[rotation_index], np.pi) / 2.0)
+    chords = chord(frames.gammas_rad[rotation_index])
     position_bound = frames.cells.position_bound_m
     alive = np.ones(count, bool)
     low = np.zeros((len(problem.base_p_taps), count), np.float32)
@@ -178,14 +184,12 @@ def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: in
             shift = np.linalg.norm(queries - parent_queries, axis=1)
             interval_low = parents.low_m[tap_index, parent] - shift
             interval_high = parents.high_m[tap_index, parent] + shift
-        undecided = ((interval_high >= band_low) & (interval_low <= band_high)
-                     & ((interval_low < band_low) | (interval_high > band_high)))
+        undecided = _straddles(interval_low, interval_high, band_low, band_high)
         if np.any(undecided):
             grid_low, grid_high = grid.interval_m(queries[undecided])
             interval_low[undecided] = np.maximum(interval_low[undecided], grid_low)
             interval_high[undecided] = np.minimum(interval_high[undecided], grid_high)
-            undecided &= ((interval_high >= band_low) & (interval_low <= band_high)
-                          & ((interval_low < band_low) | (interval_high > band_high)))
+            undecided &= _straddles(interval_low, interval_high, band_low, band_high)
         if np.any(undecided):
             interval_low[undecided], interval_high[undecided] = exact_distance_interval_m(problem.oracle,
                                                                                           queries[undecided])
@@ -198,7 +202,7 @@ def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: in
 
 
 def _filter(problem: SearchProblem, cells: CellSet, parents: Survivors | None, grid: DistanceGrid,
-            tap_order: np.ndarray, cancel: threading.Event | None) -> tuple[CellSet, Survivors, np.ndarray]:
+            tap_order: np.ndarray, cancel: threading.Event | None) -> tuple[Survivors, np.ndarray]:
     """Survivors of a level, and the number of cells each tap rejected."""
     frames = _Frames(cells)
     starts = range(0, len(cells), QUERY_CHUNK)
@@ -209,14 +213,13 @@ def _filter(problem: SearchProblem, cells: CellSet, parents: Survivors | None, g
                               enumerate(starts)))
     alive, rotated_positions = (np.concatenate(part) for part in list(zip(*parts))[:2])
     low, high = (np.concatenate(part, axis=1) for part in list(zip(*parts))[2:])
-    survivor_frames = frames.subset(alive)
-    return survivor_frames.cells, Survivors(survivor_frames, rotated_positions, low, high), rejected.sum(axis=0)
+    return Survivors(frames.subset(alive), rotated_positions, low, high), rejected.sum(axis=0)
 
 
 def rotation_splits_first(cells: CellSet, problem: SearchProblem) -> bool:
     """Split rotations when their largest displacement at the fixture radius exceeds the position bound."""
     gamma = float(np.max(cells.rotation_grid.gamma(cells.rotation_level, cells.rotation_ids)))
-    rotation_bound = problem.fixture_radius_m * 2.0 * np.sin(min(gamma, np.pi) / 2.0)
+    rotation_bound = problem.fixture_radius_m * chord(gamma)
     return rotation_bound >= cells.position_bound_m
 
 
@@ -225,7 +228,7 @@ def filter_cells(problem: SearchProblem, cells: CellSet, parents: Survivors | No
     """The cells of a set that no tap rejects. ``parents``: the survivors the cells are children of
     (eight per parent, in order), whose intervals then decide most children without a query."""
     return _filter(problem, cells, parents, distance_grid_for(problem.oracle), np.arange(len(problem.base_p_taps)),
-                   cancel)[1]
+                   cancel)[0]
 
 
 def search(problem: SearchProblem, max_cells: float = 1e7,
@@ -245,7 +248,8 @@ def search(problem: SearchProblem, max_cells: float = 1e7,
     parents = None
     while True:
         evaluated = len(cells)
-        cells, parents, rejected = _filter(problem, cells, parents, grid, tap_order, cancel)
+        parents, rejected = _filter(problem, cells, parents, grid, tap_order, cancel)
+        cells = parents.cells
         tap_order = np.argsort(-rejected, kind="stable")
         if progress is not None:
             progress(SearchProgress(cells.rotation_level, cells.position_level, evaluated, len(cells),
