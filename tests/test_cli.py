@@ -9,12 +9,13 @@ from scipy.spatial.transform import Rotation
 
 from fixwizard import report
 from fixwizard.cli import main
+from fixwizard.demo import DEMO_MESH, DEMO_TAPS
 from fixwizard.geometry.se3 import make_transform, transform_points
 from fixwizard.points import write_points
 from fixwizard.synthetic import bounded_noise, touching_ball_centres
 from shapes import l_prism
 
-REPO_FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
+REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
@@ -125,25 +126,25 @@ def test_import_poses_turns_flange_poses_into_ball_centres(tmp_path, capsys):
 
 def test_import_poses_reads_a_tip_calibration(tmp_path, real_data):
     output = tmp_path / "points.yaml"
-    calibration = REPO_FIXTURES.parent / "calibrations" / "example_matlab_logo.yaml"
+    calibration = REPO / "calibrations" / "example_matlab_logo.yaml"
     assert main(["import-poses", str(real_data / "samples" / "expert"), "--tip", str(calibration), "-o",
                  str(output)]) == 0
     assert len(yaml.safe_load(output.read_text())["points_m"]) == 20
 
 
 def test_the_bundled_demo_solves(tmp_path, capsys):
-    args = ["solve", str(REPO_FIXTURES / "demo_bracket.stl"), str(REPO_FIXTURES / "demo_bracket_taps.yaml"),
+    args = ["solve", str(DEMO_MESH), str(DEMO_TAPS),
             "--mesh-units", "mm", "--sample-bound", "1mm", "--ball-diameter", "3mm", "--max-cells", "2e5", "-q",
             "-o", str(tmp_path / "demo.yaml")]
     assert main(args) == 0
-    hidden = yaml.safe_load((REPO_FIXTURES / "demo_bracket_taps.yaml").read_text())["hidden_pose_ur"]
+    hidden = yaml.safe_load(DEMO_TAPS.read_text())["hidden_pose_ur"]
     loaded = report.load(tmp_path / "demo.yaml")
     values = [float(value) for value in hidden.strip("p[]").split(",")]
     assert np.linalg.norm(loaded.center_base_T_cad[:3, 3] - values[:3]) <= loaded.position_bound_m
 
 
 def test_solve_takes_ball_diameter_and_sample_bound_from_a_tip_calibration(tmp_path, real_data, capsys):
-    calibration = REPO_FIXTURES.parent / "calibrations" / "example_matlab_logo.yaml"
+    calibration = REPO / "calibrations" / "example_matlab_logo.yaml"
     points = tmp_path / "expert.yaml"
     assert main(["import-poses", str(real_data / "samples" / "expert"), "--tip", str(calibration), "-o",
                  str(points)]) == 0

@@ -1,4 +1,4 @@
-"""Regenerate the bundled demo: fixtures/demo_bracket.stl (mm) and simulated taps at a hidden pose,
+"""Regenerate the bundled demo: fixwizard/data/demo_bracket.stl (mm) and simulated taps at a hidden pose,
 two on every face the robot can reach from above and four on the top face.
 
 Run from the repository root: ``.venv/bin/python tools/make_demo_fixture.py``. The hidden
@@ -16,7 +16,7 @@ from fixwizard.geometry.se3 import format_ur_pose, make_transform, transform_poi
 from fixwizard.points import write_points
 from fixwizard.synthetic import bounded_noise, touching_ball_centres
 
-FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
+DATA = Path(__file__).resolve().parents[1] / "fixwizard" / "data"
 OUTLINE_MM = np.array([[0, 0], [160, 0], [160, 20], [40, 20], [40, 30], [25, 30], [25, 90], [0, 90]], float)
 FAN = np.array([[0, i, i + 1] for i in range(1, len(OUTLINE_MM) - 1)])
 DEPTH_MM = 60.0
@@ -36,7 +36,7 @@ def bracket_mm() -> trimesh.Trimesh:
 
 def main() -> None:
     mesh_mm = bracket_mm()
-    mesh_mm.export(FIXTURES / "demo_bracket.stl")
+    mesh_mm.export(DATA / "demo_bracket.stl")
     rng = np.random.default_rng(2024)
     base_T_cad = make_transform(Rotation.from_euler("zyx", [32.0, 0.0, 0.0], degrees=True), [0.45, -0.12, 0.02])
     mesh_m = mesh_mm.copy()
@@ -51,8 +51,8 @@ def main() -> None:
             centres.append(touching_ball_centres(mesh_m, count, BALL_DIAMETER_M / 2, rng, face_mask=mask))
     centres = np.vstack(centres)
     taps = transform_points(base_T_cad, centres) + bounded_noise(len(centres), NOISE_BOUND_M, rng)
-    write_points(FIXTURES / "demo_bracket_taps.yaml", taps,
-                 note="simulated taps on fixtures/demo_bracket.stl (mm), two per reachable face, four on top, 3 mm ball, "
+    write_points(DATA / "demo_bracket_taps.yaml", taps,
+                 note="simulated taps on fixwizard/data/demo_bracket.stl (mm), two per reachable face, four on top, 3 mm ball, "
                       "noise <= 0.8 mm",
                  hidden_pose_ur=format_ur_pose(base_T_cad))
     print(yaml.safe_dump({"hidden_pose_ur": format_ur_pose(base_T_cad)}))
