@@ -6,16 +6,15 @@ import threading
 
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
 from shapes import as_fixture
 
 from fixwizard.calibration.errors import CalibrationError
 from fixwizard.calibration.taps import ball_centres_m
-from fixwizard.geometry.se3 import make_transform
 from fixwizard.robot import ProtectiveStop
 from fixwizard.robot.sim import SimulatedCell
+from fixwizard.robot.sim_hands import SimulatedHands
 from fixwizard.solver.solve import solve
-from fixwizard.workflow.robot_calibration import Cancelled, RobotTipCalibration
+from fixwizard.workflow.robot_calibration import TABLE_POINTS, Cancelled, RobotTipCalibration
 from fixwizard.workflow.session import SamplingSession
 
 TRUE_TIP_M = np.array([0.0012, -0.0007, 0.049])
@@ -51,19 +50,13 @@ def new_cell(fixture) -> SimulatedCell:
 
 
 def operator_steps(cell: SimulatedCell, workflow: RobotTipCalibration) -> None:
-    """What the operator does by hand: pivot about a table point, then tap A, B (corner), C counter-clockwise,
-    all on the side of the table away from the fixture."""
-    away = -cell.truth.base_T_cad[:2, 3] / np.linalg.norm(cell.truth.base_T_cad[:2, 3])
-    base_p_pivot = np.array([*(0.3 * away), 0.0015])
-    for axis, tilt_deg in [((1, 0, 0), 0), ((1, 0, 0), 25), ((0, 1, 0), 25), ((-1, 0, 0), 25), ((0, -1, 0), 25)]:
-        base_R_tcp = Rotation.from_rotvec(np.radians(tilt_deg) * np.array(axis, float)) * Rotation.from_euler("x", 180,
-                                                                                                           degrees=True)
-        cell.move_linear(make_transform(base_R_tcp, base_p_pivot - base_R_tcp.apply(TRUE_TIP_M)))
+    """What the operator does by hand: pivot about a table point, then tap A, B (corner), C counter-clockwise."""
+    hands = SimulatedHands(cell, seed=2)
+    for index in range(hands.pivot_count):
+        hands.pivot(index)
         workflow.capture_pivot_pose()
-    base_p_b = np.array([*(0.45 * away), 0.0])
-    rng = np.random.default_rng(2)
-    for base_p_point in (base_p_b + [0.12, 0, 0], base_p_b, base_p_b + [0, 0.18, 0]):
-        cell.place_tip_near("table", rng, point=base_p_point)
+    for label in TABLE_POINTS:
+        hands.table_point(label)
         workflow.tap_table_point()
 
 
@@ -101,18 +94,19 @@ def test_calibration_recovers_the_hidden_tip_and_proposes_a_bound_covering_the_r
 
 def test_the_calibrated_tip_locates_the_fixture(calibrated, fixture, tmp_path):
     cell, _, _, calibration, _ = calibrated
-    rng = np.random.default_rng(5)
+    hands = SimulatedHands(cell, seed=5)
     with SamplingSession.create(tmp_path / "s.jsonl", {"name": "polytope"},
                                 {"tcp_p_tip_m": calibration.tcp_p_tip_m.tolist()}) as session:
-        for _ in range(12):
-            cell.place_tip_near("fixture", rng)
+        for index in range(12):
+            hands.near_spread_point(index)
             session.record_tap(cell.tap().base_T_tcp_contact)
         base_p_taps = session.base_p_taps
     assert len(base_p_taps) == 12
     solution = solve(fixture, base_p_taps, calibration.ball_diameter_m, sample_bound_m=calibration.sample_bound_m,
-                     max_cells=2e5, max_samples=2000)
-    assert solution.status != "inconsistent"
+                     max_cells=1e6, max_samples=2000)
+    assert solution.status == "unique"
     assert solution.contains(cell.truth.base_T_cad)
+    assert solution.bounds.max_point_displacement_m < 0.01  # no fixture point moves more than 1 cm in the set
 
 
 def test_progress_is_reported_after_every_tap(calibrated):

@@ -9,8 +9,10 @@ from shapes import as_fixture
 
 from fixwizard.calibration.taps import ball_centres_m
 from fixwizard.geometry.se3 import invert, make_transform, transform_points
-from fixwizard.robot import ConnectionLost, NoContact, ProtectiveStop, Robot, RobotError
+from fixwizard.demo import demo_fixture
+from fixwizard.robot import ConnectionLost, MotionStopped, NoContact, ProtectiveStop, Robot, RobotError
 from fixwizard.robot.sim import SimulatedCell
+from fixwizard.robot.sim_hands import SimulatedHands
 from fixwizard.solver.solve import solve
 
 FK_BOUND_M = 0.0003
@@ -72,16 +74,35 @@ def test_tap_at_a_given_point_touches_there(cell):
     assert np.linalg.norm(centre[:2] - [0.2, -0.3]) < 0.006 + FK_BOUND_M
 
 
-@pytest.mark.parametrize("shape", ["l_prism", "polytope"])
-def test_twelve_fixture_taps_calibrate_the_fixture(shape):
-    fixture = as_fixture(shape)
+def test_twelve_spread_taps_calibrate_the_bundled_fixture_to_a_few_millimetres():
+    fixture = demo_fixture()
     cell = SimulatedCell.with_fixture(fixture, seed=3, fk_error_bound_m=FK_BOUND_M)
     cell.connect()
-    centres = tap_centres(cell, "fixture", 12, seed=5)
+    hands = SimulatedHands(cell, seed=5)
+    poses = []
+    for index in range(12):
+        hands.near_spread_point(index)
+        poses.append(cell.tap().base_T_tcp_contact)
+    centres = ball_centres_m(np.array(poses), cell.truth.tcp_p_tip_m)
     solution = solve(fixture, centres, cell.truth.ball_diameter_m, sample_bound_m=FK_BOUND_M + 2e-5,
-                     max_cells=2e5, max_samples=2000)
-    assert solution.status != "inconsistent"
+                     max_cells=1e6, max_samples=2000)
+    assert solution.status == "unique"
     assert solution.contains(cell.truth.base_T_cad)
+    assert solution.bounds.position_m < 0.006
+    assert np.degrees(solution.bounds.rotation_rad) < 3.0
+
+
+def test_paced_motion_is_cut_short_by_stop_and_the_next_tap_works(fixture):
+    cell = SimulatedCell.with_fixture(fixture, seed=3, pace_s=5.0)
+    cell.connect()
+    cell.place_tip_near("table", np.random.default_rng(8))
+    cell.pace_s = 5.0
+    stopper = threading.Timer(0.2, cell.stop)
+    stopper.start()
+    with pytest.raises(MotionStopped, match="the tap was stopped on request; nothing was recorded"):
+        cell.tap()
+    cell.pace_s = 0.0
+    assert cell.tap().travel_m > 0
 
 
 def test_tap_pointing_away_finds_no_contact(cell):

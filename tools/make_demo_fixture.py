@@ -52,8 +52,8 @@ def main() -> None:
     centres = np.vstack(centres)
     taps = transform_points(base_T_cad, centres) + bounded_noise(len(centres), NOISE_BOUND_M, rng)
     write_points(DATA / "demo_bracket_taps.yaml", taps,
-                 note="simulated taps on fixwizard/data/demo_bracket.stl (mm), two per reachable face, four on top, 3 mm ball, "
-                      "noise <= 0.8 mm",
+                 note="simulated taps on fixwizard/data/demo_bracket.stl (mm), two per reachable face, four on top, "
+                      "3 mm ball, noise <= 0.8 mm",
                  hidden_pose_ur=format_ur_pose(base_T_cad))
     print(yaml.safe_dump({"hidden_pose_ur": format_ur_pose(base_T_cad)}))
 

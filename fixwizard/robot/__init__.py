@@ -3,6 +3,7 @@
 from fixwizard.robot.base import (
                                   ConnectionLost,
                                   EmergencyStop,
+                                  MotionStopped,
                                   NoContact,
                                   NotInRemoteControl,
                                   ProtectiveStop,
@@ -12,5 +13,5 @@ from fixwizard.robot.base import (
                                   TapResult,
 )
 
-__all__ = ["ConnectionLost", "EmergencyStop", "NoContact", "NotInRemoteControl", "ProtectiveStop", "Robot",
+__all__ = ["ConnectionLost", "EmergencyStop", "MotionStopped", "NoContact", "NotInRemoteControl", "ProtectiveStop", "Robot",
            "RobotError", "RobotStatus", "TapResult"]

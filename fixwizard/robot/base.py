@@ -54,6 +54,14 @@ class NoContact(RobotError):
                          "the fixture and retry")
 
 
+class MotionStopped(RobotError):
+    """The operator stopped a motion (the STOP key) before it finished; nothing was recorded from it."""
+
+    def __init__(self, motion: str) -> None:
+        super().__init__(f"the {motion} was stopped on request; nothing was recorded from it: check the cell, "
+                         "then retry")
+
+
 class NotInRemoteControl(RobotError):
     """The controller is in local mode and refuses commands from outside."""
 

@@ -18,6 +18,7 @@ from fixwizard.geometry.se3 import invert, make_transform, transform_points
 from fixwizard.robot.base import (
     MAX_LINEAR_SPEED_M_S,
     ConnectionLost,
+    MotionStopped,
     NoContact,
     ProtectiveStop,
     RobotError,
@@ -77,8 +78,9 @@ class SimulatedCell:
     ``inject_fault`` makes the next tap fail, ``unlock`` stands in for the teach pendant.
     """
 
-    def __init__(self, fixture: Fixture, truth: SimTruth, seed: int = 0) -> None:
+    def __init__(self, fixture: Fixture, truth: SimTruth, seed: int = 0, pace_s: float = 0.0) -> None:
         self.fixture = fixture
+        self.pace_s = pace_s
         self.truth = truth
         self._rng = np.random.default_rng(seed)
         self._fix_T_base = fixture.fix_T_cad @ invert(truth.base_T_cad)
@@ -88,19 +90,21 @@ class SimulatedCell:
         self._protective_stop = False
         self._freedrive = False
         self._fault: Fault | None = None
+        self._stop_requested = threading.Event()
 
     @classmethod
     def with_fixture(cls, fixture: Fixture, seed: int = 0, base_T_cad: np.ndarray | None = None,
                      tcp_p_tip_m: np.ndarray | None = None, ball_diameter_m: float = 0.003,
-                     fk_error_bound_m: float = 0.0003) -> "SimulatedCell":
+                     fk_error_bound_m: float = 0.0003, pace_s: float = 0.0) -> "SimulatedCell":
         """A cell with ``fixture`` at ``base_T_cad`` (random resting pose if None) and a tip about 10 cm
-        along the flange z axis (random within 2 mm if None); all randomness from ``seed``."""
+        along the flange z axis (random within 2 mm if None); all randomness from ``seed``. Each tap and
+        move takes ``pace_s`` seconds (0 for tests; a demo uses a fraction of a second so motion is visible)."""
         rng = np.random.default_rng(seed)
         base_T_cad = resting_pose(fixture, rng) if base_T_cad is None else np.array(base_T_cad, float)
         if tcp_p_tip_m is None:
             tcp_p_tip_m = np.array([0.0, 0.0, 0.1]) + rng.uniform(-0.002, 0.002, 3)
         truth = SimTruth(base_T_cad, np.array(tcp_p_tip_m, float), ball_diameter_m, fk_error_bound_m)
-        return cls(fixture, truth, seed=int(rng.integers(2**31)))
+        return cls(fixture, truth, seed=int(rng.integers(2**31)), pace_s=pace_s)
 
     @property
     def _ball_radius_m(self) -> float:
@@ -128,6 +132,7 @@ class SimulatedCell:
 
     def tap(self, max_travel_m: float = 0.02, speed_m_s: float = 0.01, force_limit_n: float = 10.0) -> TapResult:
         check_tap_request(max_travel_m, speed_m_s, force_limit_n)
+        self._move_for_pace("tap")
         with self._lock:
             self._require_ready()
             fault, self._fault = self._fault, None
@@ -148,6 +153,7 @@ class SimulatedCell:
 
     def move_linear(self, base_T_tcp: np.ndarray, speed_m_s: float = 0.05) -> None:
         check_limit("linear speed", speed_m_s, MAX_LINEAR_SPEED_M_S, "mm/s", 1e3)
+        self._move_for_pace("move")
         with self._lock:
             self._require_ready()
             self._base_T_tcp = np.array(base_T_tcp, float)
@@ -159,7 +165,8 @@ class SimulatedCell:
             return RobotStatus(self._connected, self._protective_stop, False, False, mode)
 
     def stop(self) -> None:
-        """Motion in the simulation is instantaneous, so there is never anything to stop."""
+        """Cut short a tap or move that is waiting out its pace; it raises ``MotionStopped``."""
+        self._stop_requested.set()
 
     # --- stand-ins for the operator and the teach pendant ---
 
@@ -196,7 +203,13 @@ class SimulatedCell:
                     return
         raise RobotError(f"could not place the tip above the {target}: give a point on its upper surface")
 
-    # --- internals (call with the lock held) ---
+    # --- internals (call with the lock held, except ``_move_for_pace``) ---
+
+    def _move_for_pace(self, motion: str) -> None:
+        """Let ``pace_s`` pass as the motion's duration; a ``stop()`` meanwhile aborts the motion."""
+        self._stop_requested.clear()
+        if self.pace_s > 0.0 and self._stop_requested.wait(self.pace_s):
+            raise MotionStopped(motion)
 
     def _require_connected(self) -> None:
         if not self._connected:
