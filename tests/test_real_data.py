@@ -6,15 +6,22 @@ from scipy.spatial.transform import Rotation
 
 from conftest import REFERENCE_BOUNDS, RUNS, real_taps
 from fixwizard.fixture import load_fixture
+from fixwizard.geometry.meb import minimum_enclosing_ball
+from fixwizard.geometry.se3 import transform_points
+from fixwizard.solver.estimates import rotation_center
 from fixwizard.solver.solve import solve
 
 TOLERANCE = 1.25  # within 25 % of the published bounds, or tighter
 
 
 @pytest.fixture(scope="module")
-def solutions(real_data):
-    fixture = load_fixture(real_data / "meshes" / "matlab_logo.ply")
-    return {run: solve(fixture, real_taps(real_data, run), 0.003, 0.001, max_cells=1e7) for run in RUNS}
+def logo(real_data):
+    return load_fixture(real_data / "meshes" / "matlab_logo.ply")
+
+
+@pytest.fixture(scope="module")
+def solutions(real_data, logo):
+    return {run: solve(logo, real_taps(real_data, run), 0.003, 0.001, max_cells=1e7) for run in RUNS}
 
 
 @pytest.mark.parametrize("run", RUNS)
@@ -26,15 +33,14 @@ def test_each_run_is_unique_with_bounds_near_the_published_ones(solutions, run):
     assert np.degrees(solution.bounds.rotation_rad) <= rotation_deg * TOLERANCE
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "the paper reports agreement within 0.87 mm / 0.74 deg; here student_3's expected pose lies 1.9 mm from "
-    "student_1's and 1.8 mm from student_2's (rotations within 1.5 deg). The same holds with the Minkowski mesh "
-    "and unsigned distance, with sigma = 1 mm, and with the 100-199 series tip. Every run fits some pose within "
-    "0.53-0.79 mm (minimax), so the runs are consistent; their likelihood-weighted means differ. Open question, "
-    "see the issue notes."))
-def test_the_four_expected_poses_agree(solutions):
-    poses = [solutions[run].base_T_cad for run in RUNS]
-    for index, first in enumerate(poses):
-        for second in poses[index + 1:]:
-            assert np.linalg.norm(first[:3, 3] - second[:3, 3]) < 0.001
-            assert np.degrees(Rotation.from_matrix(first[:3, :3].T @ second[:3, :3]).magnitude()) < 1.0
+def test_the_four_expected_poses_agree_as_the_paper_measures_it(solutions, logo):
+    """The paper's 0.87 mm / 0.74 deg are radii of the smallest balls enclosing the runs' expected positions of
+    the fixture's centre (its mesh is centred on its minimum enclosing ball) and their rotations (in the
+    quaternion chart); the reference implementation's experiments/analyze_real_exp.py computes them so.
+    Pairwise, expected positions differ by up to twice that radius."""
+    base_p_centres = np.array([transform_points(solutions[run].base_T_cad, logo.cad_p_center[None])[0]
+                               for run in RUNS])
+    rotations = Rotation.from_matrix(np.array([solutions[run].base_T_cad[:3, :3] for run in RUNS]))
+    rotation_radius_rad = (rotation_center(rotations).inv() * rotations).magnitude().max()
+    assert minimum_enclosing_ball(base_p_centres).radius < 0.001
+    assert np.degrees(rotation_radius_rad) < 1.0
