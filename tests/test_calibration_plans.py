@@ -47,6 +47,14 @@ def test_grid_taps_keep_the_tool_straight_down_and_tilted_taps_lean_by_the_plann
     assert len(set(np.round(azimuths_deg, 6) % 360)) == 6
 
 
+def test_the_tilt_does_not_follow_the_position_on_the_table():
+    poses = PLANS["tilted"]
+    columns = np.round(in_table(tap(poses))[:, 0] / SPACING_M - 0.5).astype(int)
+    tilts = np.round(tilts_deg(poses), 6)
+    for column in np.unique(columns):
+        assert len(set(tilts[columns == column])) > 1
+
+
 @pytest.mark.parametrize("name", PLANS)
 def test_the_ball_hovers_at_the_approach_height_and_the_approach_along_tool_z_lands_on_the_grid(name):
     poses = PLANS[name]

@@ -32,13 +32,16 @@ def tilted_hover_poses(base_T_table: np.ndarray, tcp_p_tip_m: np.ndarray, spacin
     """Hover poses (azimuths * len(tilts_deg), 4, 4) for the fine tip: the tool axis tilted from the downward
     normal by each tilt (deg) in each of ``azimuths`` evenly spread directions.
 
-    Grid row r holds azimuth r, column c tilt c, so the serpentine order sweeps the tilts up and down
-    while moving one cell at a time. The approach along tool z lands on the grid point.
+    Grid row r holds azimuth r and, in column c, tilt (r + c) mod len(tilts_deg): each row has every tilt once,
+    and every column holds several tilts, so a table height error that varies across the table does not
+    line up with the tilt. The serpentine order moves one cell at a time. The approach along tool z lands
+    on the grid point.
     """
     cells = _serpentine(azimuths, len(tilts_deg))
     azimuth_rad = 2 * np.pi * cells[:, 0] / azimuths
     axes = np.column_stack([-np.sin(azimuth_rad), np.cos(azimuth_rad), np.zeros(len(cells))])
-    leans = Rotation.from_rotvec(axes * np.radians(np.asarray(tilts_deg, float)[cells[:, 1]])[:, None])
+    tilt_index = (cells[:, 0] + cells[:, 1]) % len(tilts_deg)
+    leans = Rotation.from_rotvec(axes * np.radians(np.asarray(tilts_deg, float)[tilt_index])[:, None])
     return _hover_poses(base_T_table, tcp_p_tip_m, cells, spacing_m, leans.as_matrix() @ _TOOL_DOWN,
                         approach_height_m)
 
