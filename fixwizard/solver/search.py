@@ -12,9 +12,10 @@ The distance is 1-Lipschitz, so no pose inside a rejected cell can explain all t
 Each surviving cell keeps, per tap, an interval holding ``s`` at its query point. A child's
 query point lies ``|x_child - x_parent|`` from its parent's, so the parent's interval widened
 by that much holds the child's value: most children are accepted or rejected from it, and
-then a precomputed distance lattice (``distance_grid``) narrows the interval, and only
-those whose interval still straddles the band's edge need an Open3D query. Taps are tested
-one at a time over the cells still alive, the tap that rejected most at the previous level first.
+then a precomputed distance lattice (``distance_grid``) narrows the interval. Taps are tested
+one at a time over the cells still alive, the tap that rejected most at the previous level first;
+only after every tap has had its cheap test do Open3D queries settle the intervals that still
+straddle a band's edge, for the cells no tap rejected.
 """
 
 import threading
@@ -157,48 +158,76 @@ def _straddles(low: np.ndarray, high: np.ndarray, band_low: np.ndarray, band_hig
 def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: int, parents: Survivors | None,
                   grid: DistanceGrid, tap_order: np.ndarray, rejected: np.ndarray,
                   cancel: threading.Event | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Survivor mask, ``R_c^T t_c`` and distance intervals of the survivors among cells ``first .. first + count``."""
+    """Survivor mask, ``R_c^T t_c`` and distance intervals of the survivors among cells ``first .. first + count``.
+
+    Two passes: every tap first rejects what the inherited intervals and the lattice decide, then exact
+    queries settle the intervals still straddling the band, only for cells no tap has rejected yet.
+    """
     chunk = slice(first, first + count)
     rotated_positions = frames.rotated_positions(chunk)
     rotation_index = frames.rotation_index[chunk]
     chords = chord(frames.gammas_rad[rotation_index])
-    position_bound = frames.cells.position_bound_m
     alive = np.ones(count, bool)
     low = np.zeros((len(problem.base_p_taps), count), np.float32)
     high = np.zeros_like(low)
+    straddling = np.zeros((len(problem.base_p_taps), count), bool)
+
+    def band(tap_index: int, local: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Query points (m) of the cells ``local`` for a tap, and the band their distance must meet (m)."""
+        queries = frames.rotated_tap(problem.base_p_taps[tap_index])[rotation_index[local]] - rotated_positions[local]
+        tolerance = problem.sample_bound_m + discretisation_bound_m(problem, queries, chords[local],
+                                                                    frames.cells.position_bound_m)
+        return queries, problem.ball_radius_m - tolerance, problem.ball_radius_m + tolerance
+
+    def settle(tap_index: int, local: np.ndarray, interval_low: np.ndarray, interval_high: np.ndarray,
+               band_low: np.ndarray, band_high: np.ndarray) -> np.ndarray:
+        """Reject the cells whose interval misses the band; keep the others' intervals; the kept mask."""
+        keep = (interval_high >= band_low) & (interval_low <= band_high)
+        alive[local[~keep]] = False
+        rejected[tap_index] += int(np.count_nonzero(~keep))
+        low[tap_index, local[keep]] = _round_down_f32(interval_low[keep])
+        high[tap_index, local[keep]] = _round_up_f32(interval_high[keep])
+        return keep
+
     for tap_index in tap_order:
         if cancel is not None and cancel.is_set():
             raise SearchCancelled
         local = np.flatnonzero(alive)
-        tap = problem.base_p_taps[tap_index]
-        queries = frames.rotated_tap(tap)[rotation_index[local]] - rotated_positions[local]
-        tolerance = problem.sample_bound_m + discretisation_bound_m(problem, queries, chords[local], position_bound)
-        band_low, band_high = problem.ball_radius_m - tolerance, problem.ball_radius_m + tolerance
+        queries, band_low, band_high = band(tap_index, local)
         if parents is None:
             interval_low = np.full(len(local), -np.inf)
             interval_high = np.full(len(local), np.inf)
         else:
-            parent = (first + local) // 8
-            parent_queries = (parents.frames.rotated_tap(tap)[parents.frames.rotation_index[parent]]
-                              - parents.rotated_positions[parent])
-            shift = np.linalg.norm(queries - parent_queries, axis=1)
-            interval_low = parents.low_m[tap_index, parent] - shift
-            interval_high = parents.high_m[tap_index, parent] + shift
+            interval_low, interval_high = _inherited_interval(problem, parents, tap_index, first + local, queries)
         undecided = _straddles(interval_low, interval_high, band_low, band_high)
         if np.any(undecided):
             grid_low, grid_high = grid.interval_m(queries[undecided])
             interval_low[undecided] = np.maximum(interval_low[undecided], grid_low)
             interval_high[undecided] = np.minimum(interval_high[undecided], grid_high)
             undecided &= _straddles(interval_low, interval_high, band_low, band_high)
-        if np.any(undecided):
-            interval_low[undecided], interval_high[undecided] = exact_distance_interval_m(problem.oracle,
-                                                                                          queries[undecided])
-        keep = (interval_high >= band_low) & (interval_low <= band_high)
-        alive[local[~keep]] = False
-        rejected[tap_index] += int(np.count_nonzero(~keep))
-        low[tap_index, local[keep]] = _round_down_f32(interval_low[keep])
-        high[tap_index, local[keep]] = _round_up_f32(interval_high[keep])
+        keep = settle(tap_index, local, interval_low, interval_high, band_low, band_high)
+        straddling[tap_index, local[keep & undecided]] = True
+    for tap_index in tap_order:
+        if cancel is not None and cancel.is_set():
+            raise SearchCancelled
+        local = np.flatnonzero(alive & straddling[tap_index])
+        if len(local) == 0:
+            continue
+        queries, band_low, band_high = band(tap_index, local)
+        interval_low, interval_high = exact_distance_interval_m(problem.oracle, queries)
+        settle(tap_index, local, interval_low, interval_high, band_low, band_high)
     return alive, rotated_positions[alive], low[:, alive], high[:, alive]
+
+
+def _inherited_interval(problem: SearchProblem, parents: Survivors, tap_index: int, cells: np.ndarray,
+                        queries: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The parents' intervals (m) for one tap, widened by how far each child's query point lies from its
+    parent's (``cells`` are level indices; eight children per parent, in order)."""
+    parent = cells // 8
+    parent_queries = (parents.frames.rotated_tap(problem.base_p_taps[tap_index])[parents.frames.rotation_index[parent]]
+                      - parents.rotated_positions[parent])
+    shift = np.linalg.norm(queries - parent_queries, axis=1)
+    return parents.low_m[tap_index, parent] - shift, parents.high_m[tap_index, parent] + shift
 
 
 def _filter(problem: SearchProblem, cells: CellSet, parents: Survivors | None, grid: DistanceGrid,
