@@ -17,6 +17,8 @@ from fixwizard.geometry.so3_grid import chord
 from fixwizard.solver.cells import CellSet
 
 CENTER_ITERATIONS = 200
+# Below this many effective samples, sample_cells draws a second, importance-weighted round.
+MIN_EFFECTIVE_SAMPLES = 1000
 
 
 @dataclass(frozen=True)
@@ -105,23 +107,46 @@ def bounds_from_figures(centre: BoundCentre, largest: np.ndarray) -> Bounds:
 
 def sample_cells(cells: CellSet, oracle: DistanceOracle, base_p_taps: np.ndarray, ball_radius_m: float,
                  sigma_m: float, max_samples: int, rng: np.random.Generator) -> Samples:
-    """One uniform pose in each of (at most ``max_samples`` randomly chosen) cells, weighted by the likelihood.
+    """Poses inside the cells, weighted so that weighted sums estimate the likelihood-weighted posterior.
 
-    Likelihood: independent Gaussians on the signed point-to-surface residual ``d(x_i) - r_ball``.
-    All cells have equal volume, so the weight is the likelihood alone.
+    Likelihood: independent Gaussians on the signed point-to-surface residual ``d(x_i) - r_ball``; all cells
+    have equal volume, so the prior over cells is uniform. First one uniform pose in each of (at most
+    ``max_samples`` randomly chosen) cells. When a few cells carry almost all the weight (effective sample
+    size under ``MIN_EFFECTIVE_SAMPLES``, usual for coarse cells), a second round draws ``max_samples``
+    poses from cells picked in proportion to a half-and-half mix of the first weights and uniform, weighted
+    by likelihood over the picking probability (importance sampling), and replaces the first.
     """
     count = len(cells)
     chosen = np.arange(count) if count <= max_samples else np.sort(rng.choice(count, max_samples, replace=False))
-    rotations = cells.rotation_grid.sample(cells.rotation_level, cells.rotation_cells[chosen], rng)
+    samples = _weighted_draws(cells, oracle, base_p_taps, ball_radius_m, sigma_m, chosen, np.zeros(len(chosen)),
+                              rng)
+    if effective_sample_size(samples.weights) >= MIN_EFFECTIVE_SAMPLES:
+        return samples
+    pick_probability = 0.5 * samples.weights + 0.5 / len(chosen)
+    picks = rng.choice(len(chosen), max_samples, p=pick_probability / pick_probability.sum())
+    return _weighted_draws(cells, oracle, base_p_taps, ball_radius_m, sigma_m, chosen[picks],
+                           -np.log(pick_probability[picks]), rng)
+
+
+def effective_sample_size(weights: np.ndarray) -> float:
+    """Kish's effective number of samples of normalised weights: 1 / sum(w^2)."""
+    return float(1.0 / np.sum(weights ** 2))
+
+
+def _weighted_draws(cells: CellSet, oracle: DistanceOracle, base_p_taps: np.ndarray, ball_radius_m: float,
+                    sigma_m: float, cell_index: np.ndarray, log_weight_offset: np.ndarray,
+                    rng: np.random.Generator) -> Samples:
+    """One uniform pose in each listed cell (repeats allowed), weight = likelihood x exp(offset), normalised."""
+    rotations = cells.rotation_grid.sample(cells.rotation_level, cells.rotation_cells[cell_index], rng)
     side = cells.position_grid.cell_side_m(cells.position_level)
-    positions = cells.positions_m(chosen) + (rng.random((len(chosen), 3)) - 0.5) * side
+    positions = cells.positions_m(cell_index) + (rng.random((len(cell_index), 3)) - 0.5) * side
     fix_R_base = rotations.inv()
-    log_likelihood = np.zeros(len(chosen))
+    log_weight = log_weight_offset.astype(float)
     for tap in base_p_taps:
         residual = oracle.signed_distance_m(fix_R_base.apply(tap - positions)) - ball_radius_m
-        log_likelihood -= 0.5 * (residual / sigma_m) ** 2
-    weights = np.exp(log_likelihood - logsumexp(log_likelihood))
-    return Samples(rotations, positions, chosen, weights / weights.sum())
+        log_weight -= 0.5 * (residual / sigma_m) ** 2
+    weights = np.exp(log_weight - logsumexp(log_weight))
+    return Samples(rotations, positions, cell_index, weights / weights.sum())
 
 
 def expected_pose(samples: Samples, mask: np.ndarray, fix_T_cad: np.ndarray) -> np.ndarray:
