@@ -1,0 +1,347 @@
+"""A Universal Robots e-Series controller on a loopback address that the real ur_rtde client talks to: RTDE (30004),
+dashboard (29999) and script (30003) ports, the uploaded control program emulated cycle by cycle, a simulated
+arm with a contact surface, and the faults a cell can throw at fixwizard.
+
+Ports are fixed (ur_rtde has no way to choose them), so one controller runs at a time.
+"""
+
+import threading
+import time
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ur_loopback.arm import COLLISION_FORCE_N, SimulatedArm, transform
+from ur_loopback.control_program import ZERO_FT_SENSOR, ControlProgram, Registers
+from ur_loopback.dashboard_server import DASHBOARD_PORT, serve_dashboard
+from ur_loopback.listener import Listener
+from ur_loopback.rtde_server import RTDE_PORT, RtdeSession
+from ur_loopback.rtde_wire import TYPE_FORMATS, field_type
+from ur_loopback.script_server import SCRIPT_PORT, serve_scripts
+
+CONTROLLER_VERSION = (5, 15, 0, 0)
+POLYSCOPE_VERSION = "URSoftware 5.15.0.1234 (Nov 11 2023)"
+CYCLE_S = 0.002
+UNLOCK_REFUSED = ("Cannot unlock protective stop until 5s after occurrence. Always inspect cause of protective "
+                  "stop before unlocking")
+
+# robot_mode, safety_mode and runtime_state values, and bit numbers of the status words (RTDE guide)
+ROBOT_MODE = {"POWER_OFF": 3, "IDLE": 5, "RUNNING": 7}
+SAFETY_MODE = {"NORMAL": 1, "PROTECTIVE_STOP": 3, "ROBOT_EMERGENCY_STOP": 7}
+SAFETY_STATUS_BITS = {"NORMAL": 1 << 0, "PROTECTIVE_STOP": (1 << 2) | (1 << 10),
+                      "ROBOT_EMERGENCY_STOP": (1 << 6) | (1 << 7) | (1 << 10)}
+RUNTIME_STOPPED, RUNTIME_PLAYING = 1, 2
+POWER_ON_BIT, PROGRAM_RUNNING_BIT = 1 << 0, 1 << 1
+
+
+class LoopbackController:
+    """The fake controller; ``ur_loopback.process`` runs it in its own process (ur_rtde's constructors hold
+    the GIL while they wait for the controller, so it cannot share the test's process).
+
+    Stand-ins for the cell and its operator: ``when`` (a fault on an event), ``protective_stop``,
+    ``unlock_on_pendant``, ``emergency_stop``, ``release_emergency_stop``, ``power_on``, ``set_remote_control``,
+    ``move_by_hand``, ``go_offline``, ``go_online``. Queries return copies of what the controller saw and did.
+    """
+
+    def __init__(self, base_T_flange: np.ndarray | None = None, surface_z_m: float = 0.0,
+                 tcp_offset: list[float] | None = None, unlock_delay_s: float = 5.0, host: str = "127.0.0.1") -> None:
+        if base_T_flange is None:  # tool pointing straight down, tip 8 mm above the surface
+            base_T_flange = np.eye(4)
+            base_T_flange[:3, :3] = Rotation.from_euler("x", np.pi).as_matrix()
+            base_T_flange[:3, 3] = [0.4, -0.1, surface_z_m + 0.108]
+        self._lock = threading.RLock()
+        self._arm = SimulatedArm(np.array(base_T_flange, float), surface_z_m=surface_z_m)
+        if tcp_offset is not None:
+            self._arm.flange_T_tcp = transform(tcp_offset)
+        self._registers = Registers()
+        self._program: ControlProgram | None = None
+        self._programs: list[ControlProgram] = []
+        self._uploaded_scripts: list[str] = []
+        self._dashboard_commands: list[str] = []
+        self._contact_poses: list[np.ndarray] = []
+        self._watchdog_trips = 0
+        self._zeroed_in_contact = False
+        self._remote_control = True
+        self._safety = "NORMAL"
+        self._robot_mode = "RUNNING"
+        self._unlock_delay_s = unlock_delay_s
+        self._protective_stop_at = 0.0
+        self._time_s = 0.0
+        self._last_watchdog_input = time.monotonic()
+        self._was_in_contact = False
+        self._triggers: dict[str, list[tuple[str, tuple]]] = {}
+        self._input_owners: dict[str, object] = {}
+        self._running = threading.Event()
+        self._listeners = [Listener(host, RTDE_PORT, self._serve_rtde),
+                           Listener(host, DASHBOARD_PORT, self._serve_dashboard),
+                           Listener(host, SCRIPT_PORT, self._serve_scripts)]
+
+    # --- lifetime ---
+
+    def start(self) -> None:
+        self._running.set()
+        threading.Thread(target=self._simulate, name="loopback-controller", daemon=True).start()
+        self.go_online()
+
+    def close(self) -> None:
+        self.go_offline()
+        self._running.clear()
+
+    def go_offline(self) -> None:
+        """The network link fails: every connection drops and nothing answers."""
+        for listener in self._listeners:
+            listener.stop()
+
+    def go_online(self) -> None:
+        for listener in self._listeners:
+            listener.start()
+
+    # --- the cell and its operator ---
+
+    def when(self, event: str, action: str, *args) -> None:
+        """Call the method named ``action`` with ``args`` once, the next time ``event`` happens: ``contact``
+        (the tool tip touches the surface), ``force_mode`` (force mode starts), ``movel`` (a linear move starts)."""
+        with self._lock:
+            self._triggers.setdefault(event, []).append((action, args))
+
+    def protective_stop(self) -> None:
+        """The controller makes a protective stop: motion halts and the program ends."""
+        with self._lock:
+            self._safety = "PROTECTIVE_STOP"
+            self._protective_stop_at = time.monotonic()
+            self._end_program()
+
+    def unlock_on_pendant(self) -> None:
+        """The operator unlocks a protective stop on the teach pendant."""
+        with self._lock:
+            if self._safety == "PROTECTIVE_STOP":
+                self._safety = "NORMAL"
+
+    def emergency_stop(self) -> None:
+        with self._lock:
+            self._safety = "ROBOT_EMERGENCY_STOP"
+            self._robot_mode = "POWER_OFF"
+            self._end_program()
+
+    def release_emergency_stop(self) -> None:
+        with self._lock:
+            self._safety = "NORMAL"
+
+    def power_on(self) -> None:
+        """Power on and release the brakes, as on the teach pendant."""
+        with self._lock:
+            self._robot_mode = "RUNNING"
+
+    def set_remote_control(self, on: bool) -> None:
+        """Switch between remote and local control on the pendant; leaving remote control stops the program."""
+        with self._lock:
+            self._remote_control = on
+            if not on:
+                self._end_program()
+
+    def move_by_hand(self, base_T_flange: np.ndarray) -> None:
+        """The operator moves the arm in freedrive (raises ``RuntimeError`` if freedrive is off)."""
+        with self._lock:
+            self._arm.move_by_hand(base_T_flange)
+
+    # --- queries ---
+
+    def flange_pose(self) -> np.ndarray:
+        with self._lock:
+            return self._arm.base_T_flange.copy()
+
+    def in_freedrive(self) -> bool:
+        with self._lock:
+            return self._arm.freedrive
+
+    def program_running(self) -> bool:
+        with self._lock:
+            return self._program is not None and self._program.running
+
+    def commands(self) -> list[int]:
+        """Command numbers every control program run so far has processed, in order."""
+        with self._lock:
+            return [command for program in self._programs for command in program.commands]
+
+    def unhandled_commands(self) -> list[int]:
+        with self._lock:
+            return [command for program in self._programs for command in program.unhandled]
+
+    def watchdog_frequency_hz(self) -> float | None:
+        """Minimum input frequency of the RTDE watchdog the current program set (None if not set)."""
+        with self._lock:
+            return None if self._program is None else self._program.watchdog_min_frequency_hz
+
+    def watchdog_trips(self) -> int:
+        with self._lock:
+            return self._watchdog_trips
+
+    def uploaded_scripts(self) -> list[str]:
+        with self._lock:
+            return list(self._uploaded_scripts)
+
+    def dashboard_commands(self) -> list[str]:
+        with self._lock:
+            return list(self._dashboard_commands)
+
+    def contact_poses(self) -> list[np.ndarray]:
+        """Flange poses (base frame, m) at which force mode ended with the tool on the surface."""
+        with self._lock:
+            return [pose.copy() for pose in self._contact_poses]
+
+    def zeroed_in_contact(self) -> bool:
+        """Whether the force sensor was ever zeroed while the tool touched the surface."""
+        with self._lock:
+            return self._zeroed_in_contact
+
+    # --- controller internals ---
+
+    def _end_program(self) -> None:
+        self._arm.halt()
+        if self._program is not None:
+            self._program.stop()
+
+    def _fire(self, event: str) -> None:
+        for action, args in self._triggers.pop(event, []):
+            getattr(self, action)(*args)
+
+    def _on_program_event(self, event: str) -> None:
+        if event == "protective_stop":
+            self.protective_stop()
+        elif event == "force_mode_stop" and self._arm.in_contact():
+            self._contact_poses.append(self._arm.base_T_flange.copy())
+        else:
+            self._fire(event)
+
+    def _simulate(self) -> None:
+        last = time.monotonic()
+        while self._running.is_set():
+            time.sleep(CYCLE_S)
+            now = time.monotonic()
+            with self._lock:
+                self._cycle(min(now - last, 0.02), now)
+            last = now
+
+    def _cycle(self, dt: float, now: float) -> None:
+        self._time_s += dt
+        self._arm.step(dt)
+        in_contact = self._arm.in_contact()
+        if in_contact and not self._was_in_contact:
+            self._fire("contact")
+        self._was_in_contact = in_contact
+        if self._arm.force_mode is None and np.linalg.norm(self._arm.contact_force_n()) > COLLISION_FORCE_N:
+            self.protective_stop()
+        program = self._program
+        if program is None or not program.running:
+            return
+        watchdog_hz = program.watchdog_min_frequency_hz
+        if watchdog_hz and now - self._last_watchdog_input > 1.0 / watchdog_hz:
+            self._watchdog_trips += 1
+            self._end_program()
+            return
+        before = len(program.commands)
+        program.step()
+        if len(program.commands) > before and program.commands[-1] == ZERO_FT_SENSOR and in_contact:
+            self._zeroed_in_contact = True
+
+    def _run_program(self, text: str) -> None:
+        with self._lock:
+            self._uploaded_scripts.append(text)
+            if not self._remote_control or self._safety != "NORMAL" or self._robot_mode != "RUNNING":
+                return  # the controller does not start programs from outside in these states
+            self._end_program()
+            self._last_watchdog_input = time.monotonic()
+            self._program = ControlProgram(self._arm, self._registers, self._on_program_event)
+            self._programs.append(self._program)
+
+    # --- what the clients see ---
+
+    def _read_outputs(self, names: list[str]) -> list:
+        with self._lock:
+            running = self._program is not None and self._program.running
+            values = {
+                "timestamp": self._time_s,
+                "actual_TCP_pose": self._arm.tcp_pose(), "target_TCP_pose": self._arm.tcp_pose(),
+                "actual_TCP_speed": self._arm.tcp_speed(), "target_TCP_speed": self._arm.tcp_speed(),
+                "actual_TCP_force": self._arm.tcp_force(), "ft_raw_wrench": self._arm.tcp_force(),
+                "robot_mode": ROBOT_MODE[self._robot_mode], "safety_mode": SAFETY_MODE[self._safety],
+                "safety_status": SAFETY_MODE[self._safety], "safety_status_bits": SAFETY_STATUS_BITS[self._safety],
+                "runtime_state": RUNTIME_PLAYING if running else RUNTIME_STOPPED,
+                "robot_status_bits": (POWER_ON_BIT if self._robot_mode == "RUNNING" else 0)
+                | (PROGRAM_RUNNING_BIT if running else 0),
+                "speed_scaling": 1.0, "target_speed_fraction": 1.0,
+                **self._registers.outputs,
+            }
+            return [values[name] if name in values else _zero(field_type(name)) for name in names]
+
+    def _write_inputs(self, values: dict) -> None:
+        with self._lock:
+            self._registers.inputs.update(values)
+            if "input_int_register_0" in values:
+                self._last_watchdog_input = time.monotonic()
+
+    def _claim_inputs(self, session: object, names: list[str]) -> bool:
+        with self._lock:
+            if any(self._input_owners.get(name, session) is not session for name in names):
+                return False
+            self._input_owners.update(dict.fromkeys(names, session))
+            return True
+
+    def _release_inputs(self, session: object) -> None:
+        with self._lock:
+            self._input_owners = {name: owner for name, owner in self._input_owners.items() if owner is not session}
+
+    def _dashboard_reply(self, command: str) -> str:
+        with self._lock:
+            self._dashboard_commands.append(command)
+            running = self._program is not None and self._program.running
+            if command == "PolyscopeVersion":
+                return POLYSCOPE_VERSION
+            if command == "get serial number":
+                return "20235500042"
+            if command == "get robot model":
+                return "UR5"
+            if command == "is in remote control":
+                return "true" if self._remote_control else "false"
+            if command == "robotmode":
+                return f"Robotmode: {self._robot_mode}"
+            if command == "safetystatus":
+                return f"Safetystatus: {self._safety}"
+            if command == "safetymode":
+                return f"Safetymode: {self._safety}"
+            if command == "programState":
+                return f"{'PLAYING' if running else 'STOPPED'} <unnamed>"
+            if command == "running":
+                return f"Program running: {'true' if running else 'false'}"
+            if command == "stop":
+                self._end_program()
+                return "Stopped"
+            if command.startswith("popup "):
+                return "showing popup"
+            if command == "close popup":
+                return "closing popup"
+            if command == "close safety popup":
+                return "closing safety popup"
+            if command == "unlock protective stop":
+                if self._safety == "PROTECTIVE_STOP" and time.monotonic() - self._protective_stop_at < self._unlock_delay_s:
+                    return UNLOCK_REFUSED
+                if self._safety == "PROTECTIVE_STOP":
+                    self._safety = "NORMAL"
+                return "Protective stop releasing"
+            return f"could not understand: '{command}'"
+
+    def _serve_rtde(self, client) -> None:
+        RtdeSession(client, CONTROLLER_VERSION, self._read_outputs, self._write_inputs, self._claim_inputs,
+                    self._release_inputs).serve()
+
+    def _serve_dashboard(self, client) -> None:
+        serve_dashboard(client, self._dashboard_reply)
+
+    def _serve_scripts(self, client) -> None:
+        serve_scripts(client, self._run_program)
+
+
+def _zero(rtde_type: str):
+    """A zero value of an RTDE type, for fields the fake does not model."""
+    count = int(TYPE_FORMATS[rtde_type][:-1] or 1)
+    return 0 if count == 1 else [0] * count
