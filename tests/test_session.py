@@ -161,3 +161,20 @@ def test_find_unfinished_lists_only_open_sessions(tmp_path):
     assert find_unfinished(tmp_path) == [tmp_path / "open.jsonl"]
     with SamplingSession.open(tmp_path / "done.jsonl") as done, pytest.raises(SessionError, match="finished"):
         done.record_tap(pose(1))
+
+
+def test_drop_removes_any_active_tap_by_journaling_it_and_survives_resume(tmp_path):
+    with new_session(tmp_path) as session:
+        for index in range(4):
+            session.record_tap(pose(index))
+        journal_before = session.path.read_bytes()
+        assert session.drop(2).id == 2
+        assert [tap.id for tap in session.taps] == [1, 3, 4]
+        assert session.path.read_bytes().startswith(journal_before)  # appended, never rewritten
+        np.testing.assert_allclose(session.base_p_taps[:, 1], [0.0, 0.02, 0.03])
+        with pytest.raises(SessionError, match="tap id 2 is not an active tap"):
+            session.drop(2)
+        assert session.undo().id == 4
+        assert session.record_tap(pose(5)).id == 5
+    with SamplingSession.open(session.path) as resumed:
+        assert [tap.id for tap in resumed.taps] == [1, 3, 5]

@@ -6,6 +6,7 @@ The journal is JSON Lines, appended to and never rewritten. Line 1 is the header
 - ``{"kind": "tap", "id", "time", "base_T_tcp_ur": [x, y, z, rx, ry, rz] (m, rad), "base_p_ball_m": [3],
   "force": {...} or null}``
 - ``{"kind": "undo", "id": <id of the tap undone>, "time"}``
+- ``{"kind": "drop", "id": <id of any active tap>, "time"}``: that tap no longer counts (e.g. the solver's suspect)
 - ``{"kind": "closed", "time", ...}`` once the session is finished.
 
 Every line carries ``"crc"``, the CRC32 (8 hex digits) of the line's canonical JSON without that key, so
@@ -224,6 +225,13 @@ class SamplingSession:
         self._write({"kind": "undo", "id": last.id, "time": _now()})
         return last
 
+    def drop(self, tap_id: int) -> Tap:
+        """Journal that the active tap ``tap_id`` no longer counts (it stays in the journal) and return it."""
+        if tap_id not in self._taps:
+            raise SessionError(f"tap id {tap_id} is not an active tap of the session {self.path}; "
+                               "choose one of the taps shown")
+        return self._write({"kind": "drop", "id": tap_id, "time": _now()})
+
     def export_points(self, path: str | Path) -> Path:
         """Write the active taps as a POINTS YAML for ``fixwizard solve``, naming this session as source."""
         if not self._taps:
@@ -266,8 +274,8 @@ class SamplingSession:
 
     def _apply(self, record: dict, number: int | None) -> Tap | None:
         """Replay one record; ``number`` is its journal line when replaying from the file."""
-        invalid = SessionError(f"line {number} of the session {self.path} is not a valid tap, undo or closed "
-                               "record; keep the file and start a new session")
+        invalid = SessionError(f"line {number} of the session {self.path} is not a valid tap, undo, drop or "
+                               "closed record; keep the file and start a new session")
         try:
             kind = record["kind"]
             if kind == "tap":
@@ -275,7 +283,7 @@ class SamplingSession:
                 self._taps[tap.id] = tap
                 self._next_id = max(self._next_id, tap.id + 1)
                 return tap
-            if kind == "undo":
+            if kind in ("undo", "drop"):
                 return self._taps.pop(int(record["id"]))
         except (KeyError, TypeError, ValueError):
             raise invalid from None
