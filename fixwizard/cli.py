@@ -1,4 +1,6 @@
-"""The ``fixwizard`` command: headless sub-commands (solve, import-poses, calibrate-tip).
+"""The ``fixwizard`` command: without a sub-command the interactive wizard (simulated demo cell, or a UR
+arm with ``--robot HOST``; ``--resume`` reopens an unfinished session); the headless sub-commands solve,
+import-poses and calibrate-tip.
 
 Exit codes: 0 success (unique or ambiguous), 1 bad input, 2 inconsistent taps, 130 cancelled.
 """
@@ -54,6 +56,16 @@ def solve_command(args: argparse.Namespace) -> int:
     return EXIT_INCONSISTENT if outcome.solution.status == "inconsistent" else EXIT_OK
 
 
+def wizard_command(args: argparse.Namespace) -> int:
+    from fixwizard.tui.app import FixwizardApp
+    from fixwizard.tui.launch import session_to_resume, simulated_context, ur_context
+
+    context = ur_context(args.robot) if args.robot else simulated_context(args.seed)
+    FixwizardApp(context, session_to_resume(context, args.resume)).run()
+    context.robot.close()
+    return EXIT_OK
+
+
 def import_poses_command(args: argparse.Namespace) -> int:
     paths, base_p_taps = import_pose_dir(args.directory, load_tip(args.tip))
     write_points(args.output, base_p_taps, source=[path.name for path in paths], tip=str(args.tip))
@@ -71,7 +83,11 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="fixwizard", description="Fixture pose calibration with guaranteed bounds from a few "
-                     "robot taps.")
+                     "robot taps. Without a COMMAND it starts the interactive wizard.")
+    parser.add_argument("--robot", metavar="HOST", help="wizard: the UR arm at HOST (default: the simulated demo cell)")
+    parser.add_argument("--resume", nargs="?", const="", metavar="SESSION",
+                        help="wizard: reopen SESSION, or the newest unfinished session, straight into sampling")
+    parser.add_argument("--seed", type=int, default=0, help="wizard: seed of the simulated demo cell (default 0)")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
     solve_parser = commands.add_parser("solve", help="find every fixture pose that explains the taps; write a report")
@@ -100,11 +116,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    if args.command is None:
-        parser.print_help()
-        return EXIT_OK
     try:
-        return args.func(args)
+        return args.func(args) if args.command else wizard_command(args)
     except FixwizardError as error:
         print(f"fixwizard: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT

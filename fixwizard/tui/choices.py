@@ -1,0 +1,74 @@
+"""What the start screen offers: fixture meshes, stored tip calibrations and unfinished sessions, each with
+the one line an operator needs to choose. Lengths are shown in mm."""
+
+from dataclasses import dataclass
+from datetime import datetime
+from pathlib import Path
+
+from fixwizard.calibration.errors import CalibrationFileError
+from fixwizard.calibration.store import TipCalibration, load_calibration
+from fixwizard.demo import DEMO_MESH, DEMO_MESH_UNITS
+from fixwizard.fixture import MESH_SUFFIXES, Fixture
+from fixwizard.workflow.session import find_unfinished
+
+CAD_UNITS = "mm"  # what CAD exports usually use; the operator confirms it on the start screen
+
+
+@dataclass(frozen=True)
+class FixtureChoice:
+    """A mesh the operator can pick and the units to try first."""
+
+    label: str
+    path: Path
+    units: str
+
+
+@dataclass(frozen=True, eq=False)
+class CalibrationChoice:
+    """A stored tip calibration, or why it cannot be used (``problem``)."""
+
+    path: Path
+    calibration: TipCalibration | None
+    problem: str | None = None
+
+
+def fixture_choices(fixtures_dir: Path) -> list[FixtureChoice]:
+    """The bundled demo bracket, then every mesh in ``fixtures_dir`` by name."""
+    meshes = sorted(path for path in fixtures_dir.glob("*") if path.suffix.lower() in MESH_SUFFIXES) \
+        if fixtures_dir.is_dir() else []
+    return [FixtureChoice("Demo bracket (bundled)", DEMO_MESH, DEMO_MESH_UNITS),
+            *(FixtureChoice(path.name, path, CAD_UNITS) for path in meshes)]
+
+
+def calibration_choices(calibrations_dir: Path) -> list[CalibrationChoice]:
+    """Every ``*.yaml`` in ``calibrations_dir``: readable ones newest first, then unreadable ones."""
+    readable, unreadable = [], []
+    for path in sorted(calibrations_dir.glob("*.yaml")) if calibrations_dir.is_dir() else []:
+        try:
+            readable.append(CalibrationChoice(path, load_calibration(path)))
+        except CalibrationFileError as error:
+            unreadable.append(CalibrationChoice(path, None, str(error)))
+    return sorted(readable, key=lambda choice: choice.calibration.created, reverse=True) + unreadable
+
+
+def describe_calibration(calibration: TipCalibration) -> str:
+    """Date, robot, residuals and proposed sample bound in one or two lines."""
+    created = calibration.created.replace("T", " ")[:16]
+    return (f"{created} on {calibration.robot or 'an unknown robot'}\n"
+            f"residuals: pivot max {calibration.pivot_residuals.max_m * 1e3:.2f} mm, table max "
+            f"{calibration.table_residuals.max_m * 1e3:.2f} mm, tip max {calibration.tip_residuals.max_m * 1e3:.2f} "
+            f"mm; proposed sample bound {calibration.sample_bound_m * 1e3:.1f} mm")
+
+
+def describe_fixture(fixture: Fixture) -> str:
+    """Size (mm) and units of a loaded fixture, and its warnings."""
+    size_mm = " x ".join(f"{extent * 1e3:.1f}" for extent in fixture.mesh.extents)
+    lines = [f"{size_mm} mm (file units: {fixture.units}); check that this is the fixture's real size"]
+    lines += [message for _, message in fixture.warnings]
+    return "\n".join(lines)
+
+
+def session_choices(sessions_dir: Path) -> dict[Path, datetime]:
+    """Unfinished sessions, newest first, with the time of their last change."""
+    changed = {path: datetime.fromtimestamp(path.stat().st_mtime) for path in find_unfinished(sessions_dir)}
+    return dict(sorted(changed.items(), key=lambda item: item[1], reverse=True))

@@ -1,0 +1,169 @@
+"""The results screen: the solution in words and numbers, pictures of the rotation set and of the taps on
+the fixture, the report (default path shown, editable) and what to do next. Dismisses with "resample"
+(back to sampling, after dropping the suspect tap of an inconsistent result if asked) or "done"."""
+
+import datetime as dt
+from collections.abc import Callable
+from pathlib import Path
+from typing import Literal
+
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, VerticalScroll
+from textual.screen import Screen
+from textual.widgets import Footer, Input, Label, Static, TabbedContent, TabPane, Tabs
+
+from fixwizard.errors import FixwizardError
+from fixwizard.plots import rotation_map_for_solution, taps_view_for_solution
+from fixwizard.tui.context import WizardContext
+from fixwizard.tui.errors import error_message
+from fixwizard.tui.picture_view import PictureView
+from fixwizard.tui.results_text import headline, modes_lines, search_line, summary_lines, suspect_lines, warning_lines
+from fixwizard.workflow.advice import distinguishing_tap
+from fixwizard.workflow.wizard_report import default_report_path, write_session_report
+
+Outcome = Literal["resample", "done"]
+TABS = ("summary", "rotations", "taps")
+
+
+class ResultsScreen(Screen[Outcome]):
+    """Shows ``context.solution`` for the session's taps and writes the report."""
+
+    DEFAULT_CSS = """
+    ResultsScreen { layout: vertical; }
+    ResultsScreen #headline { text-style: bold reverse; padding: 0 1; }
+    ResultsScreen TabbedContent { height: 1fr; }
+    ResultsScreen TabPane { padding: 0 1; }
+    ResultsScreen #report-row { height: 1; padding: 0 1; }
+    ResultsScreen #report-row Label { width: auto; padding-right: 1; }
+    ResultsScreen #report-path { width: 1fr; }
+    ResultsScreen #written { height: auto; padding: 0 1; }
+    ResultsScreen #written.-problem { text-style: bold; border: heavy $error; }
+    """
+    BINDINGS = [
+        Binding("w", "write", "Write"),
+        Binding("e", "edit_path", "Edit path"),
+        Binding("v", "next_view", "View"),
+        Binding("d", "drop_suspect", "Drop tap"),
+        Binding("r", "resample", "Resample"),
+        Binding("q", "done", "Done"),
+        Binding("escape", "leave_path", "Done editing", show=False),
+        Binding("down", "scroll_summary(1)", "Scroll down", show=False),
+        Binding("up", "scroll_summary(-1)", "Scroll up", show=False),
+        Binding("pagedown", "scroll_summary(10)", "Page down", show=False),
+        Binding("pageup", "scroll_summary(-10)", "Page up", show=False),
+    ]
+    now: Callable[[], dt.datetime] = staticmethod(dt.datetime.now)
+
+    def __init__(self, context: WizardContext) -> None:
+        super().__init__()
+        self.context = context
+        self.solution = context.solution
+        self.written: Path | None = None
+        self._warned_unwritten = False
+
+    def compose(self) -> ComposeResult:
+        context, solution = self.context, self.solution
+        simulated = "SIMULATED: " if context.simulated else ""
+        yield Static(f"{simulated}{headline(solution, len(context.session.taps))}", id="headline", markup=False)
+        with TabbedContent(id="views"):
+            with TabPane("Summary", id="summary"):
+                yield VerticalScroll(Static("\n".join(self._summary()), id="summary-text", markup=False))
+            with TabPane("Rotation set", id="rotations"):
+                yield self._rotations_view()
+            with TabPane("Taps on fixture", id="taps"):
+                yield PictureView(lambda width, height: taps_view_for_solution(
+                    solution, context.fixture, context.session.base_p_taps, width, height), id="taps-view")
+        with Horizontal(id="report-row"):
+            yield Label("Report:")
+            path = default_report_path(context.reports_dir, context.fixture, self.now())
+            yield Input(str(path), id="report-path", compact=True)
+        yield Static("Press w to write the report there (e to edit the path first).", id="written", markup=False)
+        yield Footer()
+
+    def on_mount(self) -> None:
+        self.action_leave_path()
+
+    def _summary(self) -> list[str]:
+        solution = self.solution
+        if solution.status == "inconsistent":
+            lines = suspect_lines(solution)
+        else:
+            lines = summary_lines(solution)
+            if solution.status == "ambiguous":
+                first, second = solution.modes[0].base_T_cad, solution.modes[1].base_T_cad
+                lines += modes_lines(solution, distinguishing_tap(self.context.fixture, first, second))
+        return [*lines, *warning_lines(solution), search_line(solution)]
+
+    def _rotations_view(self) -> PictureView | Static:
+        if self.solution.status == "inconsistent":
+            return Static("No orientation of the fixture explains the taps, so there is no rotation set to draw.",
+                          markup=False)
+        return PictureView(lambda width, height: rotation_map_for_solution(self.solution, width, height),
+                           id="rotations-view")
+
+    # --- keys ---
+
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        if action == "drop_suspect":
+            return self.solution.suspect_tap is not None
+        return True
+
+    def action_next_view(self) -> None:
+        views = self.query_one("#views", TabbedContent)
+        views.active = TABS[(TABS.index(views.active) + 1) % len(TABS)]
+
+    def action_scroll_summary(self, lines: int) -> None:
+        """Arrow keys scroll the summary while the tabs have the focus (the summary can be longer than the screen)."""
+        self.query_one("#summary", TabPane).query_one(VerticalScroll).scroll_relative(y=lines, animate=False)
+
+    def action_edit_path(self) -> None:
+        self.query_one("#report-path", Input).focus()
+
+    def action_leave_path(self) -> None:
+        """Focus the view tabs, where the screen's letter keys work."""
+        self.query_one("#views", TabbedContent).query_one(Tabs).focus()
+
+    def on_input_submitted(self, event: Input.Submitted) -> None:
+        self.action_write()
+        self.action_leave_path()
+
+    def action_write(self) -> None:
+        context = self.context
+        target = self.query_one("#report-path", Input).value.strip()
+        if not target:
+            self._say("Type where the report should go (e), then press w.", problem=True)
+            return
+        try:
+            self.written = write_session_report(target, self.solution, context.fixture, context.session,
+                                                context.calibration, context.simulated)
+        except (FixwizardError, OSError) as error:
+            self._say(f"The report was not written: {error_message(error)}", problem=True)
+            return
+        context.report_path = self.written
+        self._say(f"Report written to {self.written}")
+
+    def action_drop_suspect(self) -> None:
+        session, suspect = self.context.session, self.solution.suspect_tap
+        try:
+            session.drop(session.taps[suspect.index].id)
+        except (FixwizardError, OSError) as error:
+            self._say(error_message(error), problem=True)
+            return
+        self.dismiss("resample")
+
+    def action_resample(self) -> None:
+        self.dismiss("resample")
+
+    def action_done(self) -> None:
+        if self.written is None and not self._warned_unwritten:
+            self._warned_unwritten = True
+            self._say("The report is not written yet: press w to write it, or q again to finish without it.",
+                      problem=True)
+            return
+        self.dismiss("done")
+
+    def _say(self, text: str, problem: bool = False) -> None:
+        written = self.query_one("#written", Static)
+        written.update(text)
+        written.set_class(problem, "-problem")

@@ -1,0 +1,91 @@
+"""The results screen's text: the pose in mm and degrees with its UR literal, the guaranteed bounds and
+intervals, warnings, the modes of an ambiguous result with what to tap next, and the suspect tap of an
+inconsistent one."""
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from fixwizard.geometry.se3 import format_ur_pose
+from fixwizard.solver.estimates import Bounds
+from fixwizard.solver.solve import Mode, Solution
+from fixwizard.workflow.advice import TapAdvice
+
+HEADLINES = {"unique": "UNIQUE: one pose of the fixture explains the {taps} taps.",
+             "ambiguous": "AMBIGUOUS: {modes} distinct poses explain the {taps} taps.",
+             "inconsistent": "INCONSISTENT: no pose of the fixture explains all {taps} taps."}
+
+SAID_BY_SUSPECT_LINES = ("inconsistent", "suspect_tap")
+
+
+def headline(solution: Solution, tap_count: int) -> str:
+    return HEADLINES[solution.status].format(taps=tap_count, modes=len(solution.modes))
+
+
+def pose_lines(base_T_cad: np.ndarray) -> list[str]:
+    """Position (mm), rotation vector (deg, as the UR pendant shows it) and the UR pose literal."""
+    x, y, z = base_T_cad[:3, 3] * 1e3
+    rx, ry, rz = np.degrees(Rotation.from_matrix(base_T_cad[:3, :3]).as_rotvec())
+    return [f"  position  x {x:.2f}  y {y:.2f}  z {z:.2f} mm",
+            f"  rotation  rx {rx:.2f}  ry {ry:.2f}  rz {rz:.2f} deg (rotation vector)",
+            f"  UR pose   {format_ur_pose(base_T_cad)}"]
+
+
+def bounds_text(bounds: Bounds) -> str:
+    return (f"CAD origin within {bounds.position_m * 1e3:.2f} mm, rotation within "
+            f"{np.degrees(bounds.rotation_rad):.2f} deg")
+
+
+def summary_lines(solution: Solution) -> list[str]:
+    """The expected pose, its guaranteed bounds and the 95/99 % intervals (unique or ambiguous)."""
+    bounds = solution.bounds
+    lines = ["Fixture pose (CAD frame in the robot base frame, most probable):", *pose_lines(solution.base_T_cad),
+             "Guaranteed: the true pose lies within these of the centre pose",
+             f"  centre    {format_ur_pose(bounds.base_T_cad_center)}",
+             f"  {bounds_text(bounds)}",
+             f"  any point of the fixture within {bounds.max_point_displacement_m * 1e3:.2f} mm"]
+    if solution.intervals:
+        lines.append("Likely: " + "; ".join(
+            f"{interval.level:.0%} within {interval.position_m * 1e3:.2f} mm, "
+            f"{np.degrees(interval.rotation_rad):.2f} deg" for interval in solution.intervals))
+    return lines
+
+
+def mode_line(number: int, mode: Mode) -> str:
+    x, y, z = mode.base_T_cad[:3, 3] * 1e3
+    angle = np.degrees(Rotation.from_matrix(mode.base_T_cad[:3, :3]).magnitude())
+    return (f"  {number}. {mode.probability:6.1%}  x {round(x)} y {round(y)} z {round(z)} mm, turned {round(angle)} "
+            f"deg; within {mode.bounds.position_m * 1e3:.1f} mm, {np.degrees(mode.bounds.rotation_rad):.1f} deg")
+
+
+def modes_lines(solution: Solution, advice: TapAdvice | None) -> list[str]:
+    """The modes, most probable first, and one sentence on where to tap to tell the first two apart."""
+    lines = ["Poses that explain the taps (probability, pose, guaranteed bounds):",
+             *(mode_line(number, mode) for number, mode in enumerate(solution.modes, start=1))]
+    if advice is not None:
+        lines.append(f"Next: {advice.sentence()} Then press r to tap it and solve again.")
+    return lines
+
+
+def suspect_lines(solution: Solution) -> list[str]:
+    """What to do about an inconsistent result: drop the suspect tap, or check the inputs."""
+    suspect = solution.suspect_tap
+    if suspect is None:
+        return [("No single tap is to blame. Check the mesh and its units, the tip calibration and the sample "
+                 "bound, then press r to go back to sampling.")]
+    return [(f"Tap {suspect.index + 1} lies about {suspect.distance_m * 1e3:.1f} mm off the surface under the "
+             "poses the other taps allow: it probably missed the fixture."),
+            f"Press d to drop tap {suspect.index + 1} (the journal keeps it, marked dropped), then solve again."]
+
+
+def warning_lines(solution: Solution) -> list[str]:
+    """The solver's warnings, except those ``suspect_lines`` already says in other words."""
+    warnings = [warning for warning in solution.warnings if warning.code not in SAID_BY_SUSPECT_LINES]
+    if not warnings:
+        return ["Warnings: none."]
+    return ["Warnings:", *(f"  - {warning.message}" for warning in warnings)]
+
+
+def search_line(solution: Solution) -> str:
+    stats = solution.stats
+    return (f"Search: {stats.cells:,} cells survive of a budget of {stats.max_cells:,.0f}, "
+            f"{stats.elapsed_s:.1f} s.")

@@ -1,0 +1,274 @@
+"""The sampling screen: freedrive on, one key taps, the taps in a table with their distance from the surface
+under the current estimate, undo, and a live quick solve after each tap. Dismisses with True to solve.
+
+Robot calls and the quick solve run in thread workers; every tap is journaled (fsynced) by the session
+before the table shows it, so an error never loses a recorded tap.
+"""
+
+import threading
+from collections.abc import Callable
+from typing import TypeVar
+
+import numpy as np
+from rich.text import Text
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.screen import Screen
+from textual.widgets import DataTable, Footer, Static
+
+from fixwizard.errors import FixwizardError
+from fixwizard.robot.base import ProtectiveStop, RobotError, TapResult
+from fixwizard.solver.search import SearchCancelled
+from fixwizard.solver.solve import MIN_TAPS
+from fixwizard.tui.context import WizardContext
+from fixwizard.tui.errors import error_message
+from fixwizard.tui.sampling_text import live_text, robot_problem_text
+from fixwizard.workflow.live import LiveCheck, quick_check, tap_surface_distances_m
+from fixwizard.workflow.session import Tap
+
+SIMULATED_ACTIONS = {"simulated_move", "simulated_unlock"}
+ROBOT_ACTIONS = {"tap", "undo", "solve", "leave", "simulated_move", "simulated_unlock"}
+COLUMNS = ("#", "x mm", "y mm", "z mm", "off surface mm")
+T = TypeVar("T")
+ShownError = FixwizardError | OSError
+
+
+class SamplingScreen(Screen[bool]):
+    """Tap the fixture; dismisses with True to solve, False to leave (the session stays resumable)."""
+
+    DEFAULT_CSS = """
+    SamplingScreen { layout: vertical; }
+    SamplingScreen #title { text-style: bold; padding: 0 1; }
+    SamplingScreen #help { padding: 0 1; color: $text-muted; }
+    SamplingScreen DataTable { height: 1fr; margin: 0 1; }
+    SamplingScreen #live { height: auto; padding: 0 1; }
+    SamplingScreen #note { height: auto; padding: 0 1; text-style: italic; }
+    SamplingScreen #note.-empty { display: none; }
+    SamplingScreen #problem { height: auto; padding: 0 1; text-style: bold; border: heavy $error; }
+    SamplingScreen #problem.-empty { display: none; }
+    """
+    BINDINGS = [
+        Binding("t", "tap", "Tap"),
+        Binding("u", "undo", "Undo last"),
+        Binding("s", "solve", "Solve"),
+        Binding("m", "simulated_move", "SIM: move arm"),
+        Binding("k", "simulated_unlock", "SIM: unlock"),
+        Binding("escape", "leave", "Leave"),
+    ]
+
+    def __init__(self, context: WizardContext) -> None:
+        super().__init__()
+        self.context = context
+        self.busy = False
+        self.live: LiveCheck | None = None
+        self._live_cancel = threading.Event()
+        self._spread_index = len(context.session.taps)
+        self._stopped = False
+
+    def compose(self) -> ComposeResult:
+        yield Static("", id="title", markup=False)
+        yield Static("Freedrive is on: guide the ball 5-10 mm above the fixture, tool pointing at the surface, "
+                     "then press t. Spread 10-20 taps over several faces.", id="help", markup=False)
+        yield DataTable(id="taps", cursor_type="row", zebra_stripes=True)
+        yield Static("", id="live", markup=False)
+        yield Static("", id="note", classes="-empty", markup=False)
+        yield Static("", id="problem", classes="-empty", markup=False)
+        yield Footer()
+
+    def on_mount(self) -> None:
+        table = self.query_one(DataTable)
+        for column in COLUMNS:
+            table.add_column(column, key=column)
+        self._show_taps()
+        self._start_live_check()
+        self._run_robot(lambda: self.context.robot.freedrive(True), lambda _: None)
+
+    def on_unmount(self) -> None:
+        self._live_cancel.set()  # nobody is left to show it
+
+    # --- keys ---
+
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        if action in SIMULATED_ACTIONS and self.context.hands is None:
+            return False
+        if action == "simulated_unlock" and not self._stopped:
+            return False
+        if action in ROBOT_ACTIONS and self.busy:
+            return None
+        return True
+
+    def action_tap(self) -> None:
+        self._run_robot(self._tap_and_record, self._tap_recorded)
+
+    def action_undo(self) -> None:
+        try:
+            tap = self.context.session.undo()
+        except (FixwizardError, OSError) as error:
+            self._problem(error_message(error))
+            return
+        if tap is None:
+            self._say("There is no tap to undo.")
+            return
+        self._say(f"Tap {len(self.context.session.taps) + 1} undone; the journal keeps it, marked undone.")
+        self._taps_changed()
+
+    def action_solve(self) -> None:
+        if len(self.context.session.taps) < MIN_TAPS:
+            self._problem(f"Tap at least {MIN_TAPS} points before solving; 10-20 over several faces give tight "
+                          "bounds.")
+            return
+        self._live_cancel.set()
+        self._run_robot(lambda: self.context.robot.freedrive(False), lambda _: self.dismiss(True),
+                        on_failed=lambda _: self.dismiss(True))
+
+    def action_leave(self) -> None:
+        self._live_cancel.set()
+        self._run_robot(lambda: self.context.robot.freedrive(False), lambda _: self.dismiss(False),
+                        on_failed=lambda _: self.dismiss(False))
+
+    def action_simulated_move(self) -> None:
+        index = self._spread_index
+        self._spread_index += 1
+        self._run_robot(lambda: self.context.hands.near_spread_point(index),
+                        lambda _: self._say("SIMULATED: the operator's hands brought the ball above the fixture; "
+                                            "press t to tap."))
+
+    def action_simulated_unlock(self) -> None:
+        self.context.hands.cell.unlock()
+        self._stopped = False
+        self.refresh_bindings()
+        self._say("SIMULATED: the protective stop is unlocked, as on the teach pendant; press t to tap again.")
+
+    # --- robot work in a thread ---
+
+    def _run_robot(self, call: Callable[[], T], on_done: Callable[[T], None],
+                   on_failed: Callable[[ShownError], None] | None = None) -> None:
+        """Run a robot call in a thread worker with the robot keys disabled; errors are shown on this screen
+        unless ``on_failed`` takes them."""
+        self.busy = True
+        self.refresh_bindings()
+
+        def finish(callback: Callable, result) -> None:
+            self.busy = False
+            if self.is_attached:
+                self.refresh_bindings()
+                callback(result)
+
+        def work() -> None:
+            try:
+                result = call()
+            except (FixwizardError, OSError) as error:
+                self.app.call_from_thread(finish, on_failed or self._robot_failed, error)
+            else:
+                self.app.call_from_thread(finish, on_done, result)
+
+        self.run_worker(work, thread=True, group="robot")
+
+    def _tap_and_record(self) -> Tap:
+        """Freedrive off, tap, journal the tap, freedrive on again (also after a failed tap)."""
+        robot = self.context.robot
+        try:
+            robot.freedrive(False)
+            result: TapResult = robot.tap()
+            return self.context.session.record_tap(
+                result.base_T_tcp_contact,
+                force={"peak_n": result.peak_force_n, "travel_m": result.travel_m, "settle_s": result.settle_s})
+        finally:
+            try:
+                robot.freedrive(True)
+            except RobotError:
+                pass  # the tap's own error (or the next robot call) tells the operator
+
+    def _tap_recorded(self, tap: Tap) -> None:
+        self._stopped = False
+        count = len(self.context.session.taps)
+        self._say(f"Tap {count} recorded and saved. Move to the next point and press t.")
+        self._taps_changed()
+
+    def _robot_failed(self, error: ShownError) -> None:
+        self._stopped = self._stopped or isinstance(error, ProtectiveStop)
+        self.refresh_bindings()
+        self._problem(robot_problem_text(error_message(error), len(self.context.session.taps),
+                                         self.context.session.path))
+
+    # --- the live check ---
+
+    def _start_live_check(self) -> None:
+        """Cancel the running quick solve and start one for the current taps (from 3 taps on)."""
+        self._live_cancel.set()
+        cancel = self._live_cancel = threading.Event()
+        calibration, fixture = self.context.calibration, self.context.fixture
+        base_p_taps = self.context.session.base_p_taps
+        self._show_live(running=len(base_p_taps) >= MIN_TAPS)
+        if len(base_p_taps) < MIN_TAPS:
+            return
+
+        def work() -> None:
+            try:
+                check = quick_check(fixture, base_p_taps, calibration.ball_diameter_m, calibration.sample_bound_m,
+                                    cancel)
+            except SearchCancelled:
+                return
+            except FixwizardError as error:
+                self.app.call_from_thread(self._live_failed, cancel, error)
+                return
+            self.app.call_from_thread(self._live_done, cancel, check)
+
+        self.run_worker(work, thread=True, group="live", exclusive=True)
+
+    def _live_done(self, cancel: threading.Event, check: LiveCheck) -> None:
+        if cancel.is_set() or not self.is_attached:
+            return
+        self.live = check
+        self._show_taps()
+        self._show_live(running=False)
+
+    def _live_failed(self, cancel: threading.Event, error: FixwizardError) -> None:
+        if not cancel.is_set() and self.is_attached:
+            self.query_one("#live", Static).update(f"Live check: {error_message(error)}")
+
+    # --- display ---
+
+    def _taps_changed(self) -> None:
+        self._show_taps()
+        self._start_live_check()
+
+    def _show_taps(self) -> None:
+        taps = self.context.session.base_p_taps
+        self.query_one("#title", Static).update(
+            f"Sampling{' (SIMULATED)' if self.context.simulated else ''}: {len(taps)} "
+            f"tap{'s' if len(taps) != 1 else ''} of {self.context.fixture.path.name}")
+        estimate = self.live.estimate_base_T_cad if self.live is not None else None
+        distances_mm = (tap_surface_distances_m(self.context.fixture, taps, self.context.calibration.ball_diameter_m,
+                                                estimate) * 1e3 if estimate is not None and len(taps)
+                        else np.full(len(taps), np.nan))
+        table = self.query_one(DataTable)
+        table.clear()
+        for number, (base_p_mm, distance_mm) in enumerate(zip(taps * 1e3, distances_mm, strict=True), start=1):
+            table.add_row(Text(str(number), justify="right"),
+                          *(Text(f"{value:.1f}", justify="right") for value in base_p_mm),
+                          Text("-" if np.isnan(distance_mm) else f"{distance_mm:+.1f}", justify="right"))
+        if len(taps):
+            table.move_cursor(row=len(taps) - 1)
+
+    def _show_live(self, running: bool) -> None:
+        self.query_one("#live", Static).update(live_text(self.live, len(self.context.session.taps), running))
+
+    def _say(self, text: str) -> None:
+        """What just happened, in the note line; clears any problem shown."""
+        problem = self.query_one("#problem", Static)
+        problem.update("")
+        problem.add_class("-empty")
+        note = self.query_one("#note", Static)
+        note.update(text)
+        note.set_class(not text, "-empty")
+
+    def _problem(self, text: str) -> None:
+        problem = self.query_one("#problem", Static)
+        problem.update(text)
+        problem.remove_class("-empty")
+        note = self.query_one("#note", Static)
+        note.update("")
+        note.add_class("-empty")
+        table = self.query_one(DataTable)
+        table.call_after_refresh(table.scroll_end, animate=False)  # the latest taps stay in view

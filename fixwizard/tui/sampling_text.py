@@ -1,0 +1,47 @@
+"""The sampling screen's sentences: the live check in words, and a robot problem with the next step."""
+
+from pathlib import Path
+
+import numpy as np
+
+from fixwizard.solver.solve import MIN_TAPS
+from fixwizard.workflow.live import LIVE_MAX_CELLS, LiveCheck
+
+
+def bounds_text(check: LiveCheck) -> str:
+    bounds = check.solution.bounds
+    return (f"origin within {bounds.position_m * 1e3:.1f} mm, rotation within {np.degrees(bounds.rotation_rad):.1f} "
+            f"deg, any point within {bounds.max_point_displacement_m * 1e3:.1f} mm")
+
+
+def live_text(check: LiveCheck | None, tap_count: int, running: bool) -> str:
+    """What the latest quick solve says about the taps; ``running`` when a newer one is on its way."""
+    if tap_count < MIN_TAPS:
+        return (f"Live check: starts at {MIN_TAPS} taps ({MIN_TAPS - tap_count} to go). 10-20 taps over several "
+                "faces give tight bounds.")
+    if check is None:
+        return f"Live check of {tap_count} taps: solving quickly ({LIVE_MAX_CELLS:.0e} cells)..."
+    head = f"Live check of {check.tap_count} taps{' (updating...)' if running else ''}: "
+    solution = check.solution
+    if check.verdict == "inconsistent":
+        suspect = solution.suspect_tap
+        if suspect is None:
+            return (head + "INCONSISTENT, no pose explains the taps and no single tap is to blame: check the mesh, "
+                    "its units and the tip calibration.")
+        return (head + f"INCONSISTENT, tap {suspect.index + 1} lies about {suspect.distance_m * 1e3:.0f} mm off "
+                "the surface the others allow; if it missed the fixture, undo it (if last) or drop it on the "
+                "results screen.")
+    if check.verdict == "open":
+        return head + "the pose is not pinned down yet; keep tapping, on other faces too."
+    if check.verdict == "ambiguous":
+        top = solution.modes[0]
+        return (head + f"AMBIGUOUS so far, {len(solution.modes)} poses fit (most likely {top.probability:.0%}); tap "
+                f"features that tell them apart. Guaranteed now: {bounds_text(check)}.")
+    return head + f"unique so far. Guaranteed now: {bounds_text(check)}; the full solve is tighter."
+
+
+def robot_problem_text(message: str, tap_count: int, session_path: Path) -> str:
+    """A robot or file problem and the promise that the recorded taps are kept."""
+    sentence = message if message.endswith((".", "!", "?")) else f"{message}."
+    return (f"{sentence}\nNothing recorded is lost: {tap_count} tap{'s are' if tap_count != 1 else ' is'} saved in "
+            f"{session_path}.")

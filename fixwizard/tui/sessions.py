@@ -1,0 +1,60 @@
+"""Sampling sessions as the wizard opens them: a new journal for the chosen fixture, tip calibration and
+robot, or an unfinished one resumed with the fixture and calibration its header names. Blocking (files,
+mesh loading): call from a worker thread."""
+
+from datetime import datetime
+from pathlib import Path
+
+from fixwizard.calibration.store import load_calibration
+from fixwizard.fixture import load_fixture
+from fixwizard.tui.context import WizardContext
+from fixwizard.workflow.session import SUFFIX, SamplingSession, SessionError, find_unfinished
+
+
+def start_session(context: WizardContext) -> SamplingSession:
+    """Create ``sessions_dir/<fixture>-<time>.jsonl`` for the context's fixture and tip calibration."""
+    fixture, calibration = context.fixture, context.calibration
+    if fixture is None or calibration is None or context.calibration_path is None:
+        raise SessionError("a session needs a fixture and a saved tip calibration: choose both on the start screen")
+    fixture_info = {"name": fixture.path.stem, "path": str(fixture.path.resolve()), "units": fixture.units,
+                    "sha256": fixture.sha256}
+    tip_info = {"name": calibration.name, "calibration": str(context.calibration_path.resolve()),
+                "tcp_p_tip_m": calibration.tcp_p_tip_m.tolist(), "ball_diameter_m": calibration.ball_diameter_m,
+                "sample_bound_m": calibration.sample_bound_m}
+    path = context.sessions_dir / f"{fixture.path.stem}-{datetime.now():%Y%m%d-%H%M%S}{SUFFIX}"
+    return SamplingSession.create(path, fixture_info, tip_info, robot=context.robot_name)
+
+
+def resume_session(context: WizardContext, path: Path) -> None:
+    """Open the session at ``path`` and set the context's session, fixture and tip calibration from it.
+    Refused when it was recorded on another robot or its mesh changed since."""
+    session = SamplingSession.open(path)
+    try:
+        header = session.header
+        if header.get("robot") != context.robot_name:
+            raise SessionError(f"the session {path.name} was recorded on '{header.get('robot')}', not on "
+                               f"'{context.robot_name}': resume it with that robot, or start a new session")
+        fixture_info, tip_info = header["fixture"], header["tip"]
+        fixture = load_fixture(fixture_info["path"], fixture_info["units"])
+        if fixture.sha256 != fixture_info["sha256"]:
+            raise SessionError(f"the mesh {fixture.path} changed since the session {path.name} started: put the "
+                               "original mesh back, or start a new session")
+        calibration_path = Path(tip_info["calibration"])
+        calibration = load_calibration(calibration_path)
+    except KeyError as missing:
+        session.release()
+        raise SessionError(f"the session {path.name} was not started by the wizard (its header has no {missing}): "
+                           "solve its points with `fixwizard solve`, or start a new session") from None
+    except BaseException:
+        session.release()
+        raise
+    context.session, context.fixture = session, fixture
+    context.calibration, context.calibration_path = calibration, calibration_path
+
+
+def newest_unfinished(sessions_dir: Path) -> Path:
+    """The most recently changed unfinished session in ``sessions_dir``."""
+    unfinished = find_unfinished(sessions_dir)
+    if not unfinished:
+        raise SessionError(f"there is no unfinished session in {sessions_dir}: start fixwizard without --resume")
+    return max(unfinished, key=lambda path: path.stat().st_mtime)

@@ -1,0 +1,130 @@
+"""The solve screen: the full solve of the session's taps in a thread worker, with its level, surviving cells,
+elapsed time and how much of the cell budget the search has used; Esc cancels. Dismisses with the
+``Solution`` (also stored in ``context.solution``), or None when cancelled or after an input problem."""
+
+import threading
+import time
+from collections.abc import Callable
+
+import numpy as np
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.screen import Screen
+from textual.widgets import Footer, ProgressBar, Static
+from textual.worker import Worker, WorkerState
+
+from fixwizard.errors import FixwizardError
+from fixwizard.solver.search import SearchCancelled, SearchProgress
+from fixwizard.solver.solve import Solution, solve
+from fixwizard.tui.context import WizardContext
+from fixwizard.tui.errors import error_message
+
+TICK_S = 0.25
+Solver = Callable[..., Solution]
+
+
+def budget_used(progress: SearchProgress, max_cells: float) -> float:
+    """How far (0-1, log scale) the surviving cells are towards ending the search: it stops once the next
+    level would pass the budget (8 children per cell) or nothing survives."""
+    if progress.survivors == 0:
+        return 1.0
+    return float(np.clip(np.log(8.0 * progress.survivors) / np.log(max_cells), 0.0, 1.0))
+
+
+def search_finished(progress: SearchProgress, max_cells: float) -> bool:
+    return progress.survivors == 0 or 8 * progress.survivors > max_cells
+
+
+class SolveScreen(Screen[Solution | None]):
+    """Runs the full solve; ``solver`` is ``fixwizard.solver.solve.solve`` (another for tests)."""
+
+    DEFAULT_CSS = """
+    SolveScreen { layout: vertical; padding: 0 1; }
+    SolveScreen #title { text-style: bold; margin-bottom: 1; }
+    SolveScreen #about { color: $text-muted; margin-bottom: 1; }
+    SolveScreen ProgressBar { margin-bottom: 1; }
+    SolveScreen #figures { height: auto; }
+    SolveScreen #problem { height: auto; margin-top: 1; text-style: bold; border: heavy $error; }
+    SolveScreen #problem.-empty { display: none; }
+    """
+    BINDINGS = [Binding("escape", "cancel", "Cancel")]
+    clock: Callable[[], float] = staticmethod(time.monotonic)
+
+    def __init__(self, context: WizardContext, solver: Solver = solve) -> None:
+        super().__init__()
+        self.context = context
+        self.solver = solver
+        self.cancel = threading.Event()
+        self.progress: SearchProgress | None = None
+        self._started = 0.0
+        self._budget_shown = 0.0
+
+    def compose(self) -> ComposeResult:
+        context = self.context
+        yield Static(f"Solving{' (SIMULATED)' if context.simulated else ''}: {len(context.session.taps)} taps on "
+                     f"{context.fixture.path.name}, cell budget {context.max_cells:,.0f}", id="title", markup=False)
+        yield Static("Every fixture pose that explains the taps survives the search; each level splits the cells "
+                     "finer until the budget is used. The bar shows how much of it is used.", id="about",
+                     markup=False)
+        yield ProgressBar(total=1.0, show_eta=False, id="budget")
+        yield Static("", id="figures", markup=False)
+        yield Static("", id="problem", classes="-empty", markup=False)
+        yield Footer()
+
+    def on_mount(self) -> None:
+        self._started = self.clock()
+        self._show()
+        self.set_interval(TICK_S, self._show)
+        self.run_worker(self._solve, thread=True, name="solve")
+
+    def on_unmount(self) -> None:
+        self.cancel.set()  # nobody is left to show the result
+
+    def action_cancel(self) -> None:
+        self.cancel.set()
+        self.dismiss(None)
+
+    def _solve(self) -> Solution | FixwizardError | None:
+        """The worker: the solution, an input problem to show, or None when cancelled."""
+        context = self.context
+        calibration = context.calibration
+        try:
+            return self.solver(context.fixture, context.session.base_p_taps, calibration.ball_diameter_m,
+                               calibration.sample_bound_m, max_cells=context.max_cells, progress=self._progressed,
+                               cancel=self.cancel)
+        except SearchCancelled:
+            return None
+        except FixwizardError as error:
+            return error
+
+    def _progressed(self, progress: SearchProgress) -> None:
+        """Called in the worker thread after each level; the timer shows it."""
+        self.progress = progress
+
+    def on_worker_state_changed(self, event: Worker.StateChanged) -> None:
+        if event.worker.name != "solve" or event.state != WorkerState.SUCCESS or self.cancel.is_set():
+            return
+        outcome = event.worker.result
+        if isinstance(outcome, Solution):
+            self.context.solution = outcome
+            self.dismiss(outcome)
+        elif isinstance(outcome, FixwizardError):
+            problem = self.query_one("#problem", Static)
+            problem.update(f"{error_message(outcome)}\nPress Esc to go back to sampling.")
+            problem.remove_class("-empty")
+
+    def _show(self) -> None:
+        elapsed_s = self.clock() - self._started
+        progress, max_cells = self.progress, self.context.max_cells
+        if progress is None:
+            lines = ["Level: starting (building the distance lattice)", "Surviving cells: -"]
+        else:
+            self._budget_shown = max(self._budget_shown, budget_used(progress, max_cells))
+            lines = [f"Level: rotation {progress.rotation_level}, position {progress.position_level}",
+                     f"Surviving cells: {progress.survivors:,} of {progress.evaluated:,} tested"]
+            if search_finished(progress, max_cells):
+                lines.append("No pose fits all taps: looking for the tap that does not fit..."
+                             if progress.survivors == 0 else "Search done: computing bounds and estimates...")
+        lines.insert(0, f"Elapsed: {elapsed_s:.0f} s")
+        self.query_one("#budget", ProgressBar).update(progress=self._budget_shown)
+        self.query_one("#figures", Static).update("\n".join(lines))

@@ -1,0 +1,207 @@
+"""The start screen: the robot, the fixture (listed or typed, with its units and size), the tip calibration
+(stored or new) and, when there are any, an unfinished session to resume. It fills the context and
+dismisses with True; the app decides what comes next."""
+
+from pathlib import Path
+
+from textual.app import ComposeResult
+from textual.containers import Horizontal, VerticalScroll
+from textual.screen import Screen
+from textual.widgets import Button, Input, Select, Static
+
+from fixwizard.demo import DEMO_MESH
+from fixwizard.errors import MeshError
+from fixwizard.fixture import Fixture, load_fixture
+from fixwizard.tui.background import ShownError, run_in_thread
+from fixwizard.tui.choices import (
+    CalibrationChoice,
+    calibration_choices,
+    describe_calibration,
+    describe_fixture,
+    fixture_choices,
+    session_choices,
+)
+from fixwizard.tui.context import WizardContext
+from fixwizard.tui.sessions import resume_session
+
+NEW = "new"
+UNITS = [("mm", "mm"), ("m", "m")]
+
+
+class StartScreen(Screen[bool]):
+    """Choose robot, fixture, tip calibration, or an unfinished session to resume."""
+
+    DEFAULT_CSS = """
+    StartScreen VerticalScroll { padding: 0 1; }
+    StartScreen .title { text-style: bold; margin-bottom: 1; }
+    StartScreen .row { height: auto; margin-top: 1; }
+    StartScreen .label { width: 12; text-style: bold; }
+    StartScreen .detail { margin-left: 12; color: $text-muted; }
+    StartScreen .problem { margin-left: 12; text-style: bold; color: $text-error; }
+    StartScreen #fixture { width: 38; }
+    StartScreen #units-label { width: 8; padding-left: 2; }
+    StartScreen #units { width: 10; }
+    StartScreen #fixture-path { margin-left: 12; width: 60; }
+    StartScreen #calibration, StartScreen #session { width: 60; }
+    StartScreen #continue { margin: 1 0 0 12; }
+    """
+
+    def __init__(self, context: WizardContext) -> None:
+        super().__init__()
+        self.context = context
+        self._fixtures = fixture_choices(context.fixtures_dir)
+        self._calibrations = {str(choice.path): choice for choice in calibration_choices(context.calibrations_dir)}
+        self._sessions = session_choices(context.sessions_dir)
+        self._requested: tuple[Path, str] | None = None
+        self._loaded: tuple[Path, str] | None = None
+
+    def compose(self) -> ComposeResult:
+        robot_note = " (no real arm moves)" if self.context.simulated else ""
+        with VerticalScroll():
+            yield Static("Start: choose the fixture and the tip calibration. Tab moves between fields, Enter "
+                         "opens a list or presses a button.", classes="title")
+            with Horizontal(classes="row"):
+                yield Static("Robot", classes="label")
+                yield Static(f"{self.context.robot_name}{robot_note}", id="robot", markup=False)
+            with Horizontal(classes="row"):
+                yield Static("Fixture", classes="label")
+                yield Select([(choice.label, str(choice.path)) for choice in self._fixtures], id="fixture",
+                             value=str(self._fixtures[0].path), allow_blank=False, compact=True)
+                yield Static("Units", id="units-label")
+                yield Select(UNITS, id="units", value=self._fixtures[0].units, allow_blank=False, compact=True)
+            yield Input(placeholder="or type a mesh path (STL, PLY, OBJ) and press Enter", id="fixture-path",
+                        compact=True)
+            yield Static("loading...", id="fixture-info", classes="detail", markup=False)
+            with Horizontal(classes="row"):
+                yield Static("Tip", classes="label")
+                yield Select([("New tip calibration (about 5 minutes)", NEW),
+                              *((self._calibration_label(choice), key) for key, choice in self._calibrations.items())],
+                             id="calibration", value=NEW, allow_blank=False, compact=True)
+            yield Static("", id="calibration-info", classes="detail", markup=False)
+            if self._sessions:
+                with Horizontal(classes="row"):
+                    yield Static("Session", classes="label")
+                    yield Select([("Start a new session", NEW),
+                                  *((f"Resume {path.stem}", str(path)) for path in self._sessions)],
+                                 id="session", value=NEW, allow_blank=False, compact=True)
+                yield Static("", id="session-info", classes="detail")
+            yield Button("Continue", id="continue", variant="primary", compact=True)
+
+    def on_mount(self) -> None:
+        self.query_one("#fixture", Select).focus()
+        self._show_calibration()
+        self._load_fixture()
+
+    @staticmethod
+    def _calibration_label(choice: CalibrationChoice) -> str:
+        if choice.calibration is None:
+            return f"{choice.path.name} (unreadable)"
+        return f"{choice.path.name} ({choice.calibration.created[:10]})"
+
+    # --- fixture ---
+
+    def _selected_fixture(self) -> tuple[Path, str]:
+        return Path(str(self.query_one("#fixture", Select).value)), str(self.query_one("#units", Select).value)
+
+    def on_select_changed(self, event: Select.Changed) -> None:
+        if event.select.id == "fixture":
+            path = Path(str(event.value))
+            units = next((choice.units for choice in self._fixtures if choice.path == path), None)
+            if units is not None and units != self.query_one("#units", Select).value:
+                self.query_one("#units", Select).value = units  # its own Changed event loads the fixture
+                return
+            self._load_fixture()
+        elif event.select.id == "units":
+            self._load_fixture()
+        elif event.select.id == "calibration":
+            self._show_calibration()
+        elif event.select.id == "session":
+            changed = self._sessions.get(Path(str(event.value)))
+            self.query_one("#session-info", Static).update(
+                "" if changed is None else f"Last change {changed:%Y-%m-%d %H:%M}; Continue reopens it with its own "
+                "fixture and tip calibration.")
+
+    def on_input_submitted(self, event: Input.Submitted) -> None:
+        text = event.value.strip()
+        if not text:
+            return
+        path = Path(text).expanduser()
+        fixture_select = self.query_one("#fixture", Select)
+        if all(choice.path != path for choice in self._fixtures):
+            options = [(choice.label, str(choice.path)) for choice in self._fixtures]
+            fixture_select.set_options([*options, (path.name, str(path))])
+        fixture_select.value = str(path)
+        self._load_fixture()
+
+    def _load_fixture(self) -> None:
+        selected = self._selected_fixture()
+        if selected == self._requested:
+            return
+        self._requested, self._loaded = selected, None
+        self.context.fixture = None
+        self._show_fixture("loading...", problem=False)
+        run_in_thread(self, lambda: load_fixture(*selected), lambda fixture: self._fixture_loaded(selected, fixture),
+                      lambda error: self._fixture_failed(selected, error), group="fixture", modal=False)
+
+    def _fixture_loaded(self, selected: tuple[Path, str], fixture: Fixture) -> None:
+        if selected != self._selected_fixture():
+            return
+        self._loaded = selected
+        self.context.fixture = fixture
+        text = describe_fixture(fixture)
+        if self.context.simulated and fixture.path.resolve() != DEMO_MESH:
+            text += "\nSIMULATED: the simulated cell holds the demo bracket, so taps will not fit this mesh"
+        self._show_fixture(text, problem=False)
+
+    def _fixture_failed(self, selected: tuple[Path, str], error: ShownError) -> None:
+        if selected != self._selected_fixture():
+            return
+        self._requested = None
+        hint = "\nChoose another mesh, or switch Units (m / mm) when the size is implausible." \
+            if isinstance(error, MeshError) else ""
+        self._show_fixture(f"{error}{hint}", problem=True)
+
+    def _show_fixture(self, text: str, problem: bool) -> None:
+        info = self.query_one("#fixture-info", Static)
+        info.update(text)
+        info.set_class(problem, "problem")
+        info.set_class(not problem, "detail")
+
+    # --- calibration ---
+
+    def _chosen_calibration(self) -> CalibrationChoice | None:
+        return self._calibrations.get(str(self.query_one("#calibration", Select).value))
+
+    def _show_calibration(self) -> None:
+        choice = self._chosen_calibration()
+        info = self.query_one("#calibration-info", Static)
+        if choice is None:
+            info.update("Calibrate the ball tip on this robot: pivot, three table points, then automatic taps.")
+        elif choice.calibration is None:
+            info.update(choice.problem or "")
+        else:
+            info.update(describe_calibration(choice.calibration))
+
+    # --- continue ---
+
+    def on_button_pressed(self, event: Button.Pressed) -> None:
+        if event.button.id == "continue":
+            self._continue()
+
+    def _continue(self) -> None:
+        session_value = str(self.query_one("#session", Select).value) if self._sessions else NEW
+        if session_value != NEW:
+            run_in_thread(self, lambda: resume_session(self.context, Path(session_value)), lambda _: self.dismiss(True),
+                          group="session")
+            return
+        if self.context.fixture is None or self._loaded != self._selected_fixture():
+            self.notify("Choose a fixture that loads first (see the message under Fixture).", severity="warning")
+            return
+        choice = self._chosen_calibration()
+        if choice is not None and choice.calibration is None:
+            self.notify("That tip calibration cannot be read; choose another or a new one.", severity="warning")
+            return
+        self.context.calibration = None if choice is None else choice.calibration
+        self.context.calibration_path = None if choice is None else choice.path
+        self.context.session = None
+        self.dismiss(True)

@@ -1,0 +1,26 @@
+"""The tip-calibration screens in order: pivot, table points, automatic taps, result. Back goes one step
+back with everything recorded kept; redo starts again with nothing recorded."""
+
+from textual.app import App
+
+from fixwizard.tui.context import WizardContext
+from fixwizard.tui.tip_calibration_auto import AutoTapsScreen
+from fixwizard.tui.tip_calibration_hands import PivotScreen, TablePointsScreen
+from fixwizard.tui.tip_calibration_result import DEFAULT_BALL_DIAMETER_M, CalibrationResultScreen
+from fixwizard.workflow.robot_calibration import RobotTipCalibration
+
+STEPS = (PivotScreen, TablePointsScreen, AutoTapsScreen, CalibrationResultScreen)
+
+
+async def calibrate_tip_on_screens(app: App, context: WizardContext) -> bool:
+    """Walk the operator through a new tip calibration (call from an async worker). True once one is accepted
+    and saved (``context.calibration`` and ``calibration_path`` set), False when they went back from the pivot."""
+    workflow = RobotTipCalibration(context.robot, DEFAULT_BALL_DIAMETER_M)
+    step = 0
+    while 0 <= step < len(STEPS):
+        outcome = await app.push_screen_wait(STEPS[step](context, workflow))
+        if outcome == "redo":
+            workflow, step = RobotTipCalibration(context.robot, DEFAULT_BALL_DIAMETER_M), 0
+        else:
+            step += 1 if outcome == "next" else -1
+    return step == len(STEPS)

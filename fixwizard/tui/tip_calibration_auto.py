@@ -1,0 +1,114 @@
+"""The automatic tip-calibration step: the robot taps the table grid, then the tilted taps, with progress
+bars and cancel. Recorded taps survive a cancel, a STOP or a robot error; starting again continues."""
+
+import threading
+
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal
+from textual.widgets import ProgressBar, Static
+
+from fixwizard.tui.tip_calibration_step import CalibrationStepScreen
+from fixwizard.workflow.robot_calibration import Cancelled, Step
+
+AUTO_TEXT = (
+    "The robot now moves by itself: it lifts the ball {height_mm:.0f} mm above the table, taps a {rows} x {cols} "
+    "grid in the corner between A, B and C, then taps {tilted} times near B with the tool tilted. Keep clear of "
+    "the cell; the STOP key (F12) halts it at once. Press G to start.")
+AUTO_STEPS: tuple[Step, ...] = ("table", "tilted")
+STEP_LABELS = {"table": "Table taps", "tilted": "Tilted taps"}
+
+
+class AutoTapsScreen(CalibrationStepScreen):
+    """Run the table and tilted taps in a worker; cancel stops between two taps."""
+
+    STEP = 3
+    TITLE_TEXT = "automatic taps"
+    DEFAULT_CSS = """
+    AutoTapsScreen .progress-row { height: 1; margin-top: 1; }
+    AutoTapsScreen .progress-label { width: 14; }
+    """
+    BINDINGS = [Binding("g", "start", "Go"),
+                Binding("c", "cancel", "Cancel"),
+                Binding("n", "next", "Next")]
+
+    _cancel: threading.Event | None = None
+
+    def body(self) -> ComposeResult:
+        workflow = self.workflow
+        rows, cols = workflow.table_grid
+        yield Static(AUTO_TEXT.format(height_mm=workflow.approach_height_m * 1e3, rows=rows, cols=cols,
+                                      tilted=self._totals()["tilted"]))
+        for step in AUTO_STEPS:
+            with Horizontal(classes="progress-row"):
+                yield Static(STEP_LABELS[step], classes="progress-label")
+                yield ProgressBar(total=self._totals()[step], show_eta=False, id=f"progress-{step}")
+        yield Static("", id="auto-state", classes="state", markup=False)
+
+    def _totals(self) -> dict[Step, int]:
+        rows, cols = self.workflow.table_grid
+        return {"table": rows * cols, "tilted": self.workflow.azimuths * len(self.workflow.tilts_deg)}
+
+    def _finished(self) -> bool:
+        return all(len(self.workflow.poses(step)) == total for step, total in self._totals().items())
+
+    def on_mount(self) -> None:
+        for step in AUTO_STEPS:
+            self._progress(step, len(self.workflow.poses(step)))
+        self._show("All taps are done: press N for the result." if self._finished() else "")
+
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        if action == "cancel":
+            return True if self._cancel is not None else None
+        allowed = super().check_action(action, parameters)
+        if allowed and ((action == "next") != self._finished()):
+            return None
+        return allowed
+
+    def action_start(self) -> None:
+        robot, workflow, app = self.context.robot, self.workflow, self.app
+        cancel = threading.Event()
+        self._cancel = cancel
+        app.cancel_on_stop(cancel)
+
+        def progress(step: Step, done: int, total: int) -> None:
+            app.call_from_thread(self._progress, step, done)
+
+        def run() -> Cancelled | None:
+            robot.freedrive(False)
+            try:
+                workflow.run_table_taps(progress, cancel)
+                workflow.run_tilted_taps(progress, cancel)
+            except Cancelled as cancelled:
+                return cancelled
+            return None
+
+        self._show("Tapping... press C to cancel after the current tap.")
+        self.run_robot(run, self._ended, lambda error: self._ended(error))
+
+    def action_cancel(self) -> None:
+        if self._cancel is not None:
+            self._cancel.set()
+            self._show("Cancelling after the current tap...")
+
+    def action_next(self) -> None:
+        self.dismiss("next")
+
+    def _ended(self, outcome: Exception | None) -> None:
+        if self._cancel is not None:
+            self.app.forget_cancel(self._cancel)
+        self._cancel = None
+        self.refresh_bindings()
+        if outcome is None:
+            self.dismiss("next")
+        elif isinstance(outcome, Cancelled):
+            self._show(f"{outcome}. Press G to continue.")
+        else:
+            self._show(f"Stopped: {outcome}\nPress G to continue once the cell is ready.")
+
+    def _progress(self, step: Step, done: int) -> None:
+        if self.is_attached:
+            self.query_one(f"#progress-{step}", ProgressBar).update(progress=done)
+
+    def _show(self, text: str) -> None:
+        self.query_one("#auto-state", Static).update(text)

@@ -1,0 +1,173 @@
+"""The tip-calibration steps the operator does by hand in freedrive: the pivot (coarse tip, live residual)
+and the three table points A, B, C. On a simulated cell a SIMULATED key lets the simulated hands do the
+moving; on a real robot the text says what to do with the arm."""
+
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.widgets import Static
+
+from fixwizard.calibration.errors import CalibrationError
+from fixwizard.calibration.pivot import MIN_POSES
+from fixwizard.tui.background import ShownError
+from fixwizard.tui.tip_calibration_step import CalibrationStepScreen
+from fixwizard.workflow.robot_calibration import TABLE_POINTS
+
+PIVOT_TEXT = (
+    "Freedrive is on. Put the ball on one fixed point of the table, away from the fixture (a small dimple or "
+    "centre-punch mark helps). Keep the ball on that point, tilt the tool 20-30 degrees in different directions "
+    "(forwards, sideways, backwards) and press Space after each pose. 5 to 8 poses are good.")
+TABLE_POINTS_TEXT = (
+    "Choose a flat, clear corner of the table. For each point, bring the ball 5-10 mm above it in freedrive with "
+    "the tool pointing down, then press T: freedrive turns off, the robot taps straight down along the tool axis "
+    "and freedrive turns on again. Tap A, then the corner B, then C, A and C at least {reach_mm:.0f} mm from B "
+    "(the automatic taps use the square between them).")
+TABLE_POINTS_PICTURE = (
+    "   C\n"
+    "   |     seen from above: A and C on the two edges of the corner B,\n"
+    "   |     C a quarter turn counter-clockwise from A\n"
+    "   B-------A")
+
+
+class PivotScreen(CalibrationStepScreen):
+    """Capture pivot poses until the pivot fit is good; shows its residuals live."""
+
+    STEP = 1
+    TITLE_TEXT = "pivot (coarse tip)"
+    BINDINGS = [Binding("space", "capture", "Capture"),
+                Binding("s", "simulated_hands", "SIM hands"),
+                Binding("f", "freedrive", "Freedrive"),
+                Binding("n", "next", "Next")]
+
+    def body(self) -> ComposeResult:
+        yield Static(PIVOT_TEXT)
+        if self.context.hands is not None:
+            yield Static("SIMULATED: no hands can move a simulated arm. Press S and the simulated hands put the "
+                         "tool in the next pivot pose, then the pose is captured.", classes="simulated")
+        yield Static("", id="pivot-state", classes="state", markup=False)
+
+    _fit_ok = False
+
+    def on_mount(self) -> None:
+        self._show_fit()
+        self.action_freedrive()
+
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        allowed = super().check_action(action, parameters)
+        if allowed and action == "next" and not self._fit_ok:
+            return None
+        return allowed
+
+    def action_freedrive(self) -> None:
+        self.run_robot(lambda: self.context.robot.freedrive(True), lambda _: None)
+
+    def action_capture(self) -> None:
+        self.run_robot(self.workflow.capture_pivot_pose, lambda _: self._show_fit())
+
+    def action_simulated_hands(self) -> None:
+        robot, hands = self.context.robot, self.context.hands
+        pose_index = len(self.workflow.poses("pivot"))
+
+        def move_and_capture() -> None:
+            # The simulated hands move the arm through the cell's own motion, which freedrive would refuse.
+            robot.freedrive(False)
+            hands.pivot(pose_index)
+            robot.freedrive(True)
+            self.workflow.capture_pivot_pose()
+
+        self.run_robot(move_and_capture, lambda _: self._show_fit())
+
+    def action_next(self) -> None:
+        self.dismiss("next")
+
+    def _show_fit(self) -> None:
+        count = len(self.workflow.poses("pivot"))
+        lines = [f"Poses captured: {count}"]
+        try:
+            fit = self.workflow.pivot_fit()
+        except CalibrationError as problem:
+            self._fit_ok = False
+            lines.append(f"Not enough yet: {problem}" if count < MIN_POSES else str(problem))
+        else:
+            self._fit_ok = True
+            lines.append(f"Pivot fit: residuals max {fit.stats.max_m * 1e3:.2f} mm, rms {fit.stats.rms_m * 1e3:.2f} "
+                         f"mm; weakest tilt {fit.tilt_spread_deg[-1]:.0f} degrees.")
+            lines.append("Capture more poses to check it, or press N for the table points.")
+        self.query_one("#pivot-state", Static).update("\n".join(lines))
+        self.refresh_bindings()
+
+
+class TablePointsScreen(CalibrationStepScreen):
+    """Tap the table points A, B (the corner) and C."""
+
+    STEP = 2
+    TITLE_TEXT = "table points A, B, C"
+    BINDINGS = [Binding("t", "tap", "Tap"),
+                Binding("s", "simulated_hands", "SIM hands"),
+                Binding("f", "freedrive", "Freedrive"),
+                Binding("n", "next", "Next")]
+
+    def body(self) -> ComposeResult:
+        rows, cols = self.workflow.table_grid
+        reach_mm = max(rows, cols) * self.workflow.table_spacing_m * 1e3
+        yield Static(TABLE_POINTS_TEXT.format(reach_mm=reach_mm))
+        yield Static(TABLE_POINTS_PICTURE, markup=False)
+        if self.context.hands is not None:
+            yield Static("SIMULATED: press S and the simulated hands bring the ball above the next point, then "
+                         "the robot taps it.", classes="simulated")
+        yield Static("", id="points-state", classes="state", markup=False)
+
+    def on_mount(self) -> None:
+        self._show_points()
+        if self._tapped() < len(TABLE_POINTS):
+            self.action_freedrive()
+
+    def _tapped(self) -> int:
+        return len(self.workflow.poses("table_coarse"))
+
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        allowed = super().check_action(action, parameters)
+        done = self._tapped() == len(TABLE_POINTS)
+        if allowed and ((action == "next" and not done) or (action in ("tap", "simulated_hands") and done)):
+            return None
+        return allowed
+
+    def action_freedrive(self) -> None:
+        self.run_robot(lambda: self.context.robot.freedrive(True), lambda _: None)
+
+    def action_tap(self) -> None:
+        self.run_robot(self._tap, lambda _: self._show_points(), self._tap_failed)
+
+    def action_simulated_hands(self) -> None:
+        hands, label = self.context.hands, TABLE_POINTS[self._tapped()]
+
+        def place_and_tap() -> None:
+            hands.table_point(label)
+            self._tap()
+
+        self.run_robot(place_and_tap, lambda _: self._show_points(), self._tap_failed)
+
+    def action_next(self) -> None:
+        self.dismiss("next")
+
+    def _tap(self) -> None:
+        """Freedrive off, tap, and freedrive on again while points are left (worker thread)."""
+        self.context.robot.freedrive(False)
+        self.workflow.tap_table_point()
+        if self._tapped() < len(TABLE_POINTS):
+            self.context.robot.freedrive(True)
+
+    def _tap_failed(self, error: ShownError) -> None:
+        self._show_points("Freedrive is off after the failed tap: when the cell is safe, press F and place the "
+                          "ball again.")
+
+    def _show_points(self, note: str = "") -> None:
+        tapped = self._tapped()
+        marks = ["tapped" if index < tapped else "next" if index == tapped else "-"
+                 for index in range(len(TABLE_POINTS))]
+        lines = ["   ".join(f"{label}: {mark}" for label, mark in zip(TABLE_POINTS, marks))]
+        if tapped == len(TABLE_POINTS):
+            lines.append("All three points are tapped: press N for the automatic taps.")
+        if note:
+            lines.append(note)
+        self.query_one("#points-state", Static).update("\n".join(lines))
+        self.refresh_bindings()

@@ -1,0 +1,111 @@
+"""The last tip-calibration step: residuals and the proposed sample bound; accept (name, ball diameter,
+saved under ``calibrations_dir``) or redo from the pivot."""
+
+import re
+from datetime import datetime
+from pathlib import Path
+
+from textual.app import ComposeResult
+from textual.containers import Horizontal
+from textual.widgets import Button, Input, Static
+
+from fixwizard.calibration.calibrate import MAX_BALL_DIAMETER_M
+from fixwizard.calibration.store import TipCalibration, save_calibration
+from fixwizard.tui.tip_calibration_step import CalibrationStepScreen
+from fixwizard.workflow.tip_calibration import summary_lines
+
+DEFAULT_BALL_DIAMETER_M = 0.003
+NAME_PATTERN = re.compile(r"[A-Za-z0-9_.-]+")
+
+
+def default_name(simulated: bool) -> str:
+    return f"{'simulated-' if simulated else ''}tip-{datetime.now():%Y%m%d-%H%M}"
+
+
+def result_lines(calibration: TipCalibration) -> list[str]:
+    """The residual figures, then the proposed sample bound with its reason."""
+    figures = [line for line in summary_lines(calibration) if not line.startswith("proposed sample bound")]
+    return [*figures, f"Proposed sample bound {calibration.sample_bound_reason}"]
+
+
+class CalibrationResultScreen(CalibrationStepScreen):
+    """Show the calibration; Accept saves it and fills the context, Redo starts again."""
+
+    STEP = 4
+    TITLE_TEXT = "result"
+    DEFAULT_CSS = """
+    CalibrationResultScreen .field { height: 1; margin-top: 1; }
+    CalibrationResultScreen .field-label { width: 16; }
+    CalibrationResultScreen #name { width: 36; }
+    CalibrationResultScreen #ball-diameter { width: 8; }
+    CalibrationResultScreen .buttons { height: 1; margin-top: 1; }
+    CalibrationResultScreen Button { margin-right: 2; }
+    """
+
+    def body(self) -> ComposeResult:
+        yield Static("Computing...", id="result-figures", markup=False)
+        with Horizontal(classes="field"):
+            yield Static("Save as", classes="field-label")
+            yield Input(default_name(self.context.simulated), id="name", compact=True)
+        with Horizontal(classes="field"):
+            yield Static("Ball diameter", classes="field-label")
+            yield Input(f"{DEFAULT_BALL_DIAMETER_M * 1e3:g}", id="ball-diameter", compact=True, type="number")
+            yield Static(" mm (as measured or from the data sheet)")
+        with Horizontal(classes="buttons"):
+            yield Button("Accept and save", id="accept", variant="primary", compact=True)
+            yield Button("Redo from the pivot", id="redo", compact=True)
+
+    def on_mount(self) -> None:
+        self.query_one("#accept", Button).disabled = True
+        self.run_robot(lambda: self.workflow.result(robot=self.context.robot_name), self._show_result,
+                       self._show_problem)
+        self.query_one("#accept", Button).focus()
+
+    def _show_result(self, calibration: TipCalibration) -> None:
+        self.query_one("#result-figures", Static).update("\n".join(result_lines(calibration)))
+        accept = self.query_one("#accept", Button)
+        accept.disabled = False
+        accept.focus()
+
+    def _show_problem(self, error: Exception) -> None:
+        self.query_one("#result-figures", Static).update(f"No calibration: {error}\nRedo it from the pivot.")
+        self.query_one("#redo", Button).focus()
+
+    def on_button_pressed(self, event: Button.Pressed) -> None:
+        if self.busy:
+            return
+        if event.button.id == "redo":
+            self.dismiss("redo")
+        elif event.button.id == "accept":
+            self._accept()
+
+    def _accept(self) -> None:
+        name = self.query_one("#name", Input).value.strip()
+        if not NAME_PATTERN.fullmatch(name):
+            self.notify("Give a file name of letters, digits, '-', '_' or '.'.", severity="warning")
+            return
+        path = self.context.calibrations_dir / f"{name}.yaml"
+        if path.exists():
+            self.notify(f"{path} exists already: choose another name.", severity="warning")
+            return
+        try:
+            ball_diameter_m = float(self.query_one("#ball-diameter", Input).value) / 1e3
+        except ValueError:
+            ball_diameter_m = 0.0
+        if not 0.0 < ball_diameter_m <= MAX_BALL_DIAMETER_M:
+            self.notify(f"Give the ball diameter in mm, between 0 and {MAX_BALL_DIAMETER_M * 1e3:.0f}.",
+                        severity="warning")
+            return
+        self.run_robot(lambda: self._save(name, ball_diameter_m, path), self._saved)
+
+    def _save(self, name: str, ball_diameter_m: float, path: Path) -> tuple[TipCalibration, Path]:
+        """The calibration with the operator's name and ball diameter, written to ``path`` (worker thread)."""
+        self.workflow.ball_diameter_m = ball_diameter_m
+        calibration = self.workflow.result(name, self.context.robot_name)
+        return calibration, save_calibration(calibration, path)
+
+    def _saved(self, saved: tuple[TipCalibration, Path]) -> None:
+        self.context.calibration, self.context.calibration_path = saved
+        self.notify(f"Tip calibration saved to {saved[1]}")
+        self.dismiss("next")
+

@@ -1,0 +1,77 @@
+"""What every tip-calibration screen shares: the step title, the workflow it drives, robot calls in a
+worker with the step's keys disabled meanwhile, and dismissing with "next", "back" or "redo"."""
+
+from collections.abc import Callable
+from typing import Literal, TypeVar
+
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import VerticalScroll
+from textual.screen import Screen
+from textual.widgets import Static
+
+from fixwizard.tui.background import ShownError, run_in_thread
+from fixwizard.tui.context import WizardContext
+from fixwizard.workflow.robot_calibration import RobotTipCalibration
+
+StepOutcome = Literal["next", "back", "redo"]
+T = TypeVar("T")
+STEP_COUNT = 4
+# Keys that only exist on a simulated cell (the simulated operator's hands).
+SIMULATED_ACTIONS = {"simulated_hands"}
+
+
+class CalibrationStepScreen(Screen[StepOutcome]):
+    """A step of the tip calibration; subclasses set ``STEP``, ``TITLE_TEXT`` and compose ``body``."""
+
+    DEFAULT_CSS = """
+    CalibrationStepScreen VerticalScroll { padding: 0 1; }
+    CalibrationStepScreen .title { text-style: bold; margin-bottom: 1; }
+    CalibrationStepScreen .simulated { text-style: bold; margin-top: 1; }
+    CalibrationStepScreen .state { margin-top: 1; }
+    """
+    BINDINGS = [Binding("escape", "back", "Back")]
+    STEP = 0
+    TITLE_TEXT = ""
+
+    def __init__(self, context: WizardContext, workflow: RobotTipCalibration) -> None:
+        super().__init__()
+        self.context = context
+        self.workflow = workflow
+        self.busy = False
+
+    def compose(self) -> ComposeResult:
+        with VerticalScroll():
+            yield Static(f"Tip calibration, step {self.STEP} of {STEP_COUNT}: {self.TITLE_TEXT}", classes="title")
+            yield from self.body()
+
+    def body(self) -> ComposeResult:
+        yield from ()
+
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        if action in SIMULATED_ACTIONS and self.context.hands is None:
+            return False
+        return None if self.busy else True
+
+    def run_robot(self, call: Callable[[], T], on_done: Callable[[T], None],
+                  on_failed: Callable[[ShownError], None] | None = None) -> None:
+        """Run a robot call in a worker with this step's keys disabled until it finishes."""
+        self._set_busy(True)
+
+        def done(result: T) -> None:
+            self._set_busy(False)
+            on_done(result)
+
+        def failed(error: ShownError) -> None:
+            self._set_busy(False)
+            if on_failed is not None:
+                on_failed(error)
+
+        run_in_thread(self, call, done, failed)
+
+    def _set_busy(self, busy: bool) -> None:
+        self.busy = busy
+        self.refresh_bindings()
+
+    def action_back(self) -> None:
+        self.dismiss("back")

@@ -1,0 +1,69 @@
+"""What the sampling screen shows after each tap: a quick solve at a small cell budget and each tap's distance
+from the fixture surface under the pose it estimates.
+
+The quick solve is the real solver with a small budget, so what it says is still guaranteed: an empty set
+means the taps are inconsistent. A non-empty set at a small budget is coarse; while the most probable mode
+still spans more than ``OPEN_ROTATION_RAD`` of rotation the pose is called "open" (not pinned down yet)
+and no estimate is offered.
+"""
+
+import threading
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from fixwizard.fixture import Fixture
+from fixwizard.geometry.se3 import invert, transform_points
+from fixwizard.solver.solve import MIN_TAPS, Solution, solve
+
+LIVE_MAX_CELLS = 3e5  # about two seconds for a dozen taps on two cores
+LIVE_MAX_SAMPLES = 1000
+OPEN_ROTATION_RAD = np.radians(45.0)
+
+Verdict = Literal["open", "unique", "ambiguous", "inconsistent"]
+
+
+def tap_surface_distances_m(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float,
+                            base_T_cad: np.ndarray) -> np.ndarray:
+    """Distance (N,) in m of each ball centre (base frame) from where it would touch the surface with the
+    fixture at ``base_T_cad``: signed distance minus ball radius (positive: the ball stops short of the
+    surface; negative: it would be inside; unsigned for an open mesh)."""
+    fix_T_base = fixture.fix_T_cad @ invert(base_T_cad)
+    fix_p_taps = transform_points(fix_T_base, np.asarray(base_p_taps, float).reshape(-1, 3))
+    return fixture.oracle.signed_distance_m(fix_p_taps) - ball_diameter_m / 2.0
+
+
+@dataclass(frozen=True)
+class LiveCheck:
+    """A quick solve of the first ``tap_count`` taps and what it allows one to say."""
+
+    verdict: Verdict
+    solution: Solution
+    tap_count: int
+
+    @property
+    def estimate_base_T_cad(self) -> np.ndarray | None:
+        """The most probable pose when the set is narrow enough for it to mean something, else None."""
+        return self.solution.base_T_cad if self.verdict in ("unique", "ambiguous") else None
+
+
+def verdict_of(solution: Solution) -> Verdict:
+    """Inconsistent, or open while the most probable mode spans a wide rotation, else the solver's status."""
+    if solution.status == "inconsistent":
+        return "inconsistent"
+    if solution.modes[0].bounds.rotation_rad > OPEN_ROTATION_RAD:
+        return "open"
+    return solution.status
+
+
+def quick_check(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sample_bound_m: float,
+                cancel: threading.Event | None = None, max_cells: float = LIVE_MAX_CELLS) -> LiveCheck | None:
+    """A quick solve of the taps (None with fewer than the solver's minimum); raises ``SearchCancelled``
+    when ``cancel`` is set meanwhile."""
+    base_p_taps = np.asarray(base_p_taps, float).reshape(-1, 3)
+    if len(base_p_taps) < MIN_TAPS:
+        return None
+    solution = solve(fixture, base_p_taps, ball_diameter_m, sample_bound_m, max_cells=max_cells, cancel=cancel,
+                     max_samples=LIVE_MAX_SAMPLES)
+    return LiveCheck(verdict_of(solution), solution, len(base_p_taps))

@@ -1,0 +1,36 @@
+"""The report the wizard writes after a solve: the ``fixwizard.report/1`` document of the session's taps, with
+where the taps came from (the session journal) and, on a simulated cell, ``simulated: true``."""
+
+import datetime as dt
+from pathlib import Path
+
+from fixwizard import report
+from fixwizard.calibration.store import TipCalibration
+from fixwizard.fixture import Fixture
+from fixwizard.solver.solve import Solution
+from fixwizard.workflow.session import SamplingSession
+
+REPORT_SUFFIX = ".yaml"
+
+
+def default_report_path(reports_dir: Path, fixture: Fixture, now: dt.datetime) -> Path:
+    """``<reports_dir>/<mesh file stem>-<local time as YYYYmmdd-HHMMSS>.yaml``."""
+    return reports_dir / f"{fixture.path.stem}-{now:%Y%m%d-%H%M%S}{REPORT_SUFFIX}"
+
+
+def session_report(solution: Solution, fixture: Fixture, session: SamplingSession, calibration: TipCalibration,
+                   simulated: bool) -> dict:
+    """The report of a solve of the session's active taps, with the calibration's ball and sample bound."""
+    data = report.report_dict(solution, fixture, session.base_p_taps, calibration.ball_diameter_m,
+                              calibration.sample_bound_m, calibration.sample_bound_m / 3.0)
+    data["session"] = {"journal": str(session.path), "tap_ids": [tap.id for tap in session.taps],
+                       "tip_calibration": calibration.name}
+    if simulated:
+        data["simulated"] = True
+    return data
+
+
+def write_session_report(path: str | Path, solution: Solution, fixture: Fixture, session: SamplingSession,
+                         calibration: TipCalibration, simulated: bool) -> Path:
+    """Write the report atomically and return its absolute path (OSError when the folder is not writable)."""
+    return report.write(Path(path), session_report(solution, fixture, session, calibration, simulated)).resolve()

@@ -1,0 +1,337 @@
+"""The wizard as an operator drives it with the keyboard, on the simulated demo cell (fixed seeds, tmp
+folders): the start screen, a whole new tip calibration, cancel, protective stop, STOP and resume."""
+
+import asyncio
+import shutil
+from pathlib import Path
+
+import numpy as np
+from textual.pilot import Pilot
+from textual.widgets import Button, Select, Static
+
+from pilot_wait import until
+from fixwizard.calibration.store import load_calibration
+from fixwizard.cli import main
+from fixwizard.demo import DEMO_MESH, demo_fixture
+from fixwizard.tui.app import FixwizardApp
+from fixwizard.tui.context import WizardContext
+from fixwizard.tui.errors import ErrorModal
+from fixwizard.tui.launch import session_to_resume, simulated_context, ur_context
+from fixwizard.tui.sessions import start_session
+from fixwizard.tui.start import StartScreen
+from fixwizard.tui.status import StatusBar
+from fixwizard.tui.tip_calibration_auto import AutoTapsScreen
+from fixwizard.tui.tip_calibration_hands import PivotScreen, TablePointsScreen
+from fixwizard.tui.tip_calibration_result import CalibrationResultScreen
+
+SEED = 3
+SIZE = (80, 24)
+REPO = Path(__file__).resolve().parents[1]
+
+
+def text_of(app: FixwizardApp, selector: str) -> str:
+    return str(app.screen.query_one(selector, Static).render())
+
+
+def screen_text(app: FixwizardApp) -> str:
+    return "\n".join(str(widget.render()) for widget in app.screen.query(Static))
+
+
+def wizard(tmp_path: Path, pace_s: float = 0.0) -> WizardContext:
+    return simulated_context(SEED, pace_s=pace_s, folder=tmp_path)
+
+
+async def at_start(pilot: Pilot) -> None:
+    app = pilot.app
+    await until(pilot, lambda: isinstance(app.screen, StartScreen) and app.context.fixture is not None
+                and app.robot_status is not None and app.robot_status.connected)
+
+
+async def choose(pilot: Pilot, selector: str, value: str) -> None:
+    """Pick ``value`` in a Select, as Enter, arrows and Enter would."""
+    pilot.app.screen.query_one(selector, Select).value = value
+    await pilot.pause()
+
+
+async def press_button(pilot: Pilot, selector: str) -> None:
+    """Tab to the button and press Enter."""
+    pilot.app.screen.query_one(selector, Button).focus()
+    await pilot.press("enter")
+
+
+async def calibrate_by_hand(pilot: Pilot) -> None:
+    """From the start screen with a new calibration: the pivot and table points with the SIMULATED hands."""
+    app = pilot.app
+    await press_button(pilot, "#continue")
+    await until(pilot, lambda: isinstance(app.screen, PivotScreen) and not app.screen.busy)
+    for _ in range(app.context.hands.pivot_count):
+        await pilot.press("s")
+        await until(pilot, lambda: not app.screen.busy)
+    await pilot.press("n")
+    await until(pilot, lambda: isinstance(app.screen, TablePointsScreen) and not app.screen.busy)
+    for _ in range(3):
+        await pilot.press("s")
+        await until(pilot, lambda: not app.screen.busy)
+    await pilot.press("n")
+    await until(pilot, lambda: isinstance(app.screen, AutoTapsScreen))
+
+
+def test_launch_shows_the_start_screen_marked_simulated(tmp_path):
+    async def run():
+        app = FixwizardApp(wizard(tmp_path))
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            status = str(app.screen.query_one(StatusBar).render())
+            assert status.startswith(" SIMULATED ") and "connected | idle" in status and "F12 STOP" in status
+            assert "SIMULATED demo cell (seed 3) (no real arm moves)" in text_of(app, "#robot")
+            assert app.context.fixture.path == DEMO_MESH
+            assert "160.0 x 90.0 x 60.0 mm (file units: mm)" in text_of(app, "#fixture-info")
+            assert app.screen.query_one("#calibration", Select).value == "new"
+    asyncio.run(run())
+
+
+def test_a_fixture_in_the_wrong_units_is_explained_and_switching_units_loads_it(tmp_path):
+    bracket_m = demo_fixture().mesh.copy()
+    (tmp_path / "fixtures").mkdir()
+    bracket_m.export(tmp_path / "fixtures" / "bracket_in_metres.stl")
+
+    async def run():
+        app = FixwizardApp(wizard(tmp_path))
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            await choose(pilot, "#fixture", str(tmp_path / "fixtures" / "bracket_in_metres.stl"))
+            await until(pilot, lambda: "implausible" in text_of(app, "#fixture-info"))
+            message = text_of(app, "#fixture-info")
+            assert "0.16 mm small fixture with units 'mm'" in message and "switch Units (m / mm)" in message
+            assert app.context.fixture is None
+            await press_button(pilot, "#continue")
+            assert isinstance(app.screen, StartScreen)
+            await choose(pilot, "#units", "m")
+            await until(pilot, lambda: app.context.fixture is not None)
+            assert app.context.fixture.units == "m"
+            assert "160.0 x 90.0 x 60.0 mm (file units: m)" in text_of(app, "#fixture-info")
+            assert "SIMULATED: the simulated cell holds the demo bracket" in text_of(app, "#fixture-info")
+    asyncio.run(run())
+
+
+def test_a_typed_path_that_is_no_mesh_is_refused_with_the_reason(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    Path("notes.txt").write_text("not a mesh")
+
+    async def run():
+        app = FixwizardApp(wizard(tmp_path))
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            await pilot.press("tab", "tab", *"notes.txt", "enter")
+            await until(pilot, lambda: "notes.txt is not a mesh file fixwizard reads" in text_of(app, "#fixture-info"))
+            assert app.context.fixture is None
+    asyncio.run(run())
+
+
+def test_a_new_tip_calibration_through_the_screens_is_saved_and_finds_the_hidden_tip(tmp_path):
+    async def run():
+        context = wizard(tmp_path)
+        app = FixwizardApp(context)
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            await calibrate_by_hand(pilot)
+            await pilot.press("g")
+            await until(pilot, lambda: isinstance(app.screen, CalibrationResultScreen) and not app.screen.busy)
+            assert "Proposed sample bound" in text_of(app, "#result-figures")
+            await pilot.press("shift+tab", "shift+tab", "end", "ctrl+u", *"sim-tip", "tab", "tab", "enter")
+            await until(pilot, lambda: context.session is not None)
+            return context, context.session
+
+    context, session = asyncio.run(run())
+    saved = load_calibration(tmp_path / "calibrations" / "sim-tip.yaml")
+    assert saved.robot == "SIMULATED demo cell (seed 3)" and saved.ball_diameter_m == 0.003
+    assert context.calibration_path == tmp_path / "calibrations" / "sim-tip.yaml"
+    assert np.linalg.norm(saved.tcp_p_tip_m - context.robot.truth.tcp_p_tip_m) < 0.0005
+    assert saved.sample_bound_m >= context.robot.truth.fk_error_bound_m
+    assert session.path.parent == tmp_path / "sessions"
+    assert session.header["tip"]["calibration"] == str(tmp_path / "calibrations" / "sim-tip.yaml")
+
+
+def recorded(workflow) -> dict[str, int]:
+    return {step: len(workflow.poses(step)) for step in ("table", "tilted")}
+
+
+def test_cancel_during_the_automatic_taps_keeps_the_taps_and_going_on_continues(tmp_path):
+    async def run():
+        context = wizard(tmp_path, pace_s=0.02)
+        app = FixwizardApp(context)
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            await calibrate_by_hand(pilot)
+            screen = app.screen
+            await pilot.press("g")
+            await until(pilot, lambda: recorded(screen.workflow)["table"] >= 2)
+            await pilot.press("c")
+            await until(pilot, lambda: not screen.busy)
+            kept = recorded(screen.workflow)
+            assert kept["table"] >= 2 and sum(kept.values()) < 56
+            step, done, total = ("table taps", kept["table"], 16) if kept["table"] < 16 else \
+                ("tilted taps", kept["tilted"], 40)
+            assert f"the {step} were cancelled after {done} of {total} taps; the recorded taps are kept" in \
+                text_of(app, "#auto-state")
+            await pilot.press("g")
+            await until(pilot, lambda: isinstance(app.screen, CalibrationResultScreen), timeout_s=20)
+            assert recorded(screen.workflow) == {"table": 16, "tilted": 40}
+    asyncio.run(run())
+
+
+def test_a_protective_stop_during_a_tap_is_explained_and_unlocking_recovers(tmp_path):
+    async def run():
+        context = wizard(tmp_path)
+        app = FixwizardApp(context)
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            await press_button(pilot, "#continue")
+            await until(pilot, lambda: isinstance(app.screen, PivotScreen) and not app.screen.busy)
+            for _ in range(3):
+                await pilot.press("s")
+                await until(pilot, lambda: not app.screen.busy)
+            await pilot.press("n")
+            await until(pilot, lambda: isinstance(app.screen, TablePointsScreen) and not app.screen.busy)
+            context.robot.inject_fault("protective_stop_during_tap")
+            await pilot.press("s")
+            await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+            message = text_of(app, "#error-message")
+            assert message.startswith("Table point A: the robot made a protective stop during the tap: unlock")
+            assert "Traceback" not in screen_text(app)
+            await until(pilot, lambda: app.robot_status.protective_stop)
+            await press_button(pilot, "#unlock")
+            await until(pilot, lambda: isinstance(app.screen, TablePointsScreen)
+                        and not app.robot_status.protective_stop)
+            assert "press F and place the ball again" in text_of(app, "#points-state")
+            await pilot.press("s")
+            await until(pilot, lambda: "A: tapped   B: next" in text_of(app, "#points-state"))
+    asyncio.run(run())
+
+
+class StopCounter:
+    """The simulated cell, counting ``stop`` calls."""
+
+    def __init__(self, cell) -> None:
+        self.cell = cell
+        self.stops = 0
+
+    def stop(self) -> None:
+        self.stops += 1
+        self.cell.stop()
+
+    def __getattr__(self, name: str):
+        return getattr(self.cell, name)
+
+
+def test_the_stop_key_halts_the_robot_from_any_screen_and_keeps_the_taps(tmp_path):
+    async def run():
+        context = wizard(tmp_path, pace_s=0.03)
+        context.robot = StopCounter(context.robot)
+        app = FixwizardApp(context)
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            await pilot.press("f12")
+            await until(pilot, lambda: context.robot.stops == 1)
+            await calibrate_by_hand(pilot)
+            screen = app.screen
+            await pilot.press("g")
+            await until(pilot, lambda: len(screen.workflow.poses("table")) >= 1)
+            await pilot.press("ctrl+x")
+            await until(pilot, lambda: not screen.busy)
+            assert context.robot.stops == 2
+            kept = recorded(screen.workflow)
+            assert kept["table"] >= 1 and sum(kept.values()) < 56
+            state = str(screen.query_one("#auto-state", Static).render())
+            assert "was stopped on request; nothing was recorded from it" in state or "were cancelled after" in state
+    asyncio.run(run())
+
+
+def test_quitting_during_the_automatic_taps_stops_them_after_the_current_tap(tmp_path):
+    async def run():
+        app = FixwizardApp(wizard(tmp_path, pace_s=0.02))
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            await calibrate_by_hand(pilot)
+            screen = app.screen
+            await pilot.press("g")
+            await until(pilot, lambda: recorded(screen.workflow)["table"] >= 1)
+            await pilot.press("ctrl+q")
+        return screen.workflow
+
+    assert 1 <= sum(recorded(asyncio.run(run())).values()) < 56
+
+
+def unfinished_session(tmp_path: Path) -> Path:
+    """A session with one tap on the demo bracket, calibrated with the stored example calibration."""
+    context = wizard(tmp_path)
+    shutil.copytree(REPO / "calibrations", tmp_path / "calibrations")
+    context.fixture = demo_fixture()
+    context.calibration_path = tmp_path / "calibrations" / "example_matlab_logo.yaml"
+    context.calibration = load_calibration(context.calibration_path)
+    session = start_session(context)
+    session.record_tap(np.eye(4))
+    session.release()
+    return session.path
+
+
+def test_the_start_screen_describes_stored_calibrations_and_resumes_an_unfinished_session(tmp_path):
+    path = unfinished_session(tmp_path)
+
+    async def run():
+        context = wizard(tmp_path)
+        app = FixwizardApp(context)
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            await choose(pilot, "#calibration", str(tmp_path / "calibrations" / "example_matlab_logo.yaml"))
+            details = text_of(app, "#calibration-info")
+            assert details.startswith("2026-11-24 03:09 on Universal Robots arm")
+            assert "tip max 0.34 mm; proposed sample bound 0.8 mm" in details
+            await choose(pilot, "#session", str(path))
+            await press_button(pilot, "#continue")
+            await until(pilot, lambda: type(app.screen).__name__ == "SamplingScreen")
+            assert context.session.path == path and len(context.session.taps) == 1
+            assert context.calibration.name == "example_matlab_logo"
+    asyncio.run(run())
+
+
+def test_resume_opens_the_session_with_its_fixture_and_calibration(tmp_path):
+    path = unfinished_session(tmp_path)
+
+    async def run():
+        resumed = wizard(tmp_path)
+        app = FixwizardApp(resumed, session_to_resume(resumed, ""))
+        async with app.run_test(size=SIZE) as pilot:
+            await until(pilot, lambda: type(app.screen).__name__ == "SamplingScreen" and app.screen.query(StatusBar))
+            assert resumed.session.path == path and len(resumed.session.taps) == 1
+            assert resumed.fixture.path == DEMO_MESH and resumed.fixture.units == "mm"
+            assert resumed.calibration.name == "example_matlab_logo"
+    asyncio.run(run())
+
+
+def test_resume_without_an_unfinished_session_says_so(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main(["--resume"]) == 1
+    assert "there is no unfinished session in sessions: start fixwizard without --resume" in capsys.readouterr().err
+
+
+def test_an_unreachable_ur_arm_is_explained_and_nothing_says_simulated(tmp_path):
+    async def run():
+        context = ur_context("ur-arm.invalid", folder=tmp_path)
+        app = FixwizardApp(context)
+        async with app.run_test(size=SIZE) as pilot:
+            await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+            message = text_of(app, "#error-message")
+            assert message.startswith("The connection to the robot is lost to ur-arm.invalid:29999")
+            assert app.screen.query("#reconnect") and not app.screen.query("#unlock")
+            await press_button(pilot, "#ok")
+            await until(pilot, lambda: isinstance(app.screen, StartScreen) and context.fixture is not None)
+            assert "UR arm at ur-arm.invalid | " in str(app.screen.query_one(StatusBar).render())
+            assert " DISCONNECTED " in str(app.screen.query_one(StatusBar).render())
+            await press_button(pilot, "#continue")
+            await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+            await press_button(pilot, "#ok")
+            await until(pilot, lambda: isinstance(app.screen, PivotScreen))
+            assert "SIMULATED" not in screen_text(app) + str(app.screen.query_one(StatusBar).render())
+            assert app.screen.check_action("simulated_hands", ()) is False
+    asyncio.run(run())

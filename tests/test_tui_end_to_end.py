@@ -1,0 +1,89 @@
+"""The whole wizard as an operator drives it with the keyboard on the simulated demo cell: launch, a new tip
+calibration, 12 taps, solve, the report written; the report loads and its guaranteed bounds hold the
+simulator's hidden pose of the fixture."""
+
+import asyncio
+
+from textual.pilot import Pilot
+from textual.widgets import Button, Static
+from pilot_wait import until
+from tui_cell import bounds_contain
+
+from fixwizard import report
+from fixwizard.tui.app import FixwizardApp
+from fixwizard.tui.launch import simulated_context
+from fixwizard.tui.results import ResultsScreen
+from fixwizard.tui.sampling import SamplingScreen
+from fixwizard.tui.solve_screen import SolveScreen
+from fixwizard.tui.start import StartScreen
+from fixwizard.tui.tip_calibration_auto import AutoTapsScreen
+from fixwizard.tui.tip_calibration_hands import PivotScreen, TablePointsScreen
+from fixwizard.tui.tip_calibration_result import CalibrationResultScreen
+
+SEED = 5
+SIZE = (80, 24)
+TAPS = 12
+MAX_CELLS = 1e6
+
+
+async def press_when_ready(pilot: Pilot, key: str) -> None:
+    """Press ``key`` once the current screen has finished its robot call, and wait for the next one to end."""
+    await until(pilot, lambda: not pilot.app.screen.busy)
+    await pilot.press(key)
+    await until(pilot, lambda: not pilot.app.screen.busy)
+
+
+def test_launch_calibrate_tap_solve_and_write_a_report_holding_the_hidden_pose(tmp_path):
+    context = simulated_context(SEED, pace_s=0.0, folder=tmp_path)
+    context.max_cells = MAX_CELLS
+    cell = context.hands.cell
+
+    async def run() -> None:
+        app = FixwizardApp(context)
+        async with app.run_test(size=SIZE) as pilot:
+            await until(pilot, lambda: isinstance(app.screen, StartScreen) and context.fixture is not None
+                        and app.robot_status is not None and app.robot_status.connected)
+            app.screen.query_one("#continue", Button).focus()
+            await pilot.press("enter")  # a new tip calibration is the default
+
+            await until(pilot, lambda: isinstance(app.screen, PivotScreen))
+            for _ in range(context.hands.pivot_count):
+                await press_when_ready(pilot, "s")
+            await pilot.press("n")
+            await until(pilot, lambda: isinstance(app.screen, TablePointsScreen))
+            for _ in range(3):
+                await press_when_ready(pilot, "s")
+            await pilot.press("n")
+            await until(pilot, lambda: isinstance(app.screen, AutoTapsScreen))
+            await pilot.press("g")
+            await until(pilot, lambda: isinstance(app.screen, CalibrationResultScreen) and not app.screen.busy)
+            app.screen.query_one("#accept", Button).focus()
+            await pilot.press("enter")
+
+            await until(pilot, lambda: isinstance(app.screen, SamplingScreen) and context.session is not None)
+            sampling = app.screen
+            for _ in range(TAPS):
+                await press_when_ready(pilot, "m")
+                await press_when_ready(pilot, "t")
+            assert len(context.session.taps) == TAPS
+            await pilot.press("s")
+
+            await until(pilot, lambda: isinstance(app.screen, SolveScreen))
+            await until(pilot, lambda: isinstance(app.screen, ResultsScreen))
+            assert sampling.is_attached is False
+            assert "UNIQUE" in str(app.screen.query_one("#headline", Static).content)
+            await pilot.press("w")
+            assert str(app.screen.query_one("#written", Static).content) == f"Report written to {context.report_path}"
+            written = context.report_path
+            await pilot.press("q")
+            await until(pilot, lambda: isinstance(app.screen, StartScreen))
+            return written
+
+    written = asyncio.run(run())
+    assert written.parent == (tmp_path / "reports").resolve()
+    loaded = report.load(written)
+    assert loaded.status == "unique" and loaded.data["simulated"] is True
+    assert len(loaded.data["inputs"]["points_m"]) == TAPS
+    assert bounds_contain(loaded, cell, cell.truth.base_T_cad)
+    journal = (tmp_path / "sessions").glob("*.jsonl")
+    assert any(f'"report":"{written}"' in path.read_text() for path in journal)  # the session is closed

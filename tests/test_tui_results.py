@@ -1,0 +1,168 @@
+"""The solve and results screens on the simulated cell: the solve shows its progress and can be cancelled, the
+results show the pose and write a report whose bounds hold the hidden truth, an ambiguous result says where
+to tap next, and an inconsistent one names the suspect tap, which can be dropped to solve again."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+from textual.widgets import Input, Static
+from pilot_wait import until
+from tui_cell import ScreenHost, bounds_contain, cell_of, point_above_fixture_m, record_spread_taps, wizard_context
+
+from fixwizard import report
+from fixwizard.geometry.se3 import format_ur_pose
+from fixwizard.solver.solve import Solution, solve
+from fixwizard.tui.results import ResultsScreen
+from fixwizard.tui.solve_screen import SolveScreen
+
+pytestmark = pytest.mark.asyncio
+SIZE = (80, 24)
+
+
+def text_of(screen, selector: str) -> str:
+    return str(screen.query_one(selector, Static).content)
+
+
+def solved(context) -> None:
+    """Solve the session's taps as the solve screen does and keep the solution in the context."""
+    calibration = context.calibration
+    context.solution = solve(context.fixture, context.session.base_p_taps, calibration.ball_diameter_m,
+                             calibration.sample_bound_m, max_cells=context.max_cells)
+
+
+@pytest.fixture
+def tapped(tmp_path):
+    """A context with 12 spread taps."""
+    context = wizard_context(tmp_path)
+    record_spread_taps(context, 12)
+    yield context
+    context.session.release()
+
+
+async def test_solve_shows_progress_then_results_write_a_report_holding_the_true_pose(tapped):
+    app = ScreenHost(lambda: SolveScreen(tapped))
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        await until(pilot, lambda: screen.progress is not None)
+        await pilot.pause(0.3)
+        figures = text_of(screen, "#figures")
+        assert "Elapsed:" in figures and "Level: rotation" in figures and "Surviving cells:" in figures
+        await until(pilot, lambda: app.results)
+        solution = app.results[0]
+        assert isinstance(solution, Solution) and tapped.solution is solution
+        assert solution.status == "unique"
+
+        app.push_screen(ResultsScreen(tapped), app.results.append)
+        await pilot.pause()
+        results = app.screen
+        assert "UNIQUE: one pose of the fixture explains the 12 taps" in text_of(results, "#headline")
+        summary = text_of(results, "#summary-text")
+        assert f"UR pose   {format_ur_pose(solution.base_T_cad)}" in summary
+        assert "Guaranteed" in summary and "any point of the fixture within" in summary and "99% within" in summary
+        default_path = results.query_one("#report-path", Input).value
+        assert default_path.startswith(str(tapped.reports_dir / "demo_bracket-")) and default_path.endswith(".yaml")
+        await pilot.press("w")
+        assert text_of(results, "#written") == f"Report written to {tapped.reports_dir.resolve()}/" \
+                                               f"{default_path.rsplit('/', 1)[1]}"
+        assert tapped.report_path.is_file()
+        loaded = report.load(tapped.report_path)
+        assert loaded.status == "unique"
+        assert bounds_contain(loaded, cell_of(tapped), cell_of(tapped).truth.base_T_cad)
+        assert loaded.data["simulated"] is True
+        assert loaded.data["session"]["journal"] == str(tapped.session.path)
+        assert len(loaded.data["inputs"]["points_m"]) == 12
+        await pilot.press("q")
+        assert app.results[-1] == "done"
+
+
+async def test_cancel_stops_the_solve_and_goes_back(tapped):
+    app = ScreenHost(lambda: SolveScreen(tapped))
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        await until(pilot, lambda: screen.progress is not None)
+        await pilot.press("escape")
+        assert app.results == [None] and screen.cancel.is_set()
+        assert tapped.solution is None
+
+
+async def test_a_solve_input_problem_is_explained_and_esc_goes_back(tapped):
+    tapped.calibration = dataclasses.replace(tapped.calibration, sample_bound_m=0.05)  # 50 mm: a unit mistake
+    app = ScreenHost(lambda: SolveScreen(tapped))
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        await until(pilot, lambda: not screen.query_one("#problem").has_class("-empty"))
+        problem = text_of(screen, "#problem")
+        assert "A sample bound of 50 mm is implausible for a robot tap" in problem
+        assert problem.endswith("Press Esc to go back to sampling.")
+        await pilot.press("escape")
+        assert app.results == [None] and tapped.solution is None
+
+
+async def test_the_report_path_can_be_edited_and_a_bad_one_is_explained(tapped, tmp_path):
+    tapped.max_cells = 1e5  # a coarse result is enough to write
+    solved(tapped)
+    app = ScreenHost(lambda: ResultsScreen(tapped))
+    blocked = tmp_path / "a-file"
+    blocked.write_text("not a folder")
+    async with app.run_test(size=SIZE) as pilot:
+        results = app.screen
+        await pilot.press("e")
+        path_input = results.query_one("#report-path", Input)
+        assert path_input.has_focus
+        path_input.value = ""
+        await pilot.press(*str(blocked / "report.yaml"), "enter")
+        assert results.query_one("#written").has_class("-problem")
+        assert text_of(results, "#written").startswith("The report was not written: cannot read or write")
+        await pilot.press("q")
+        assert "not written yet" in text_of(results, "#written") and app.results == []
+        await pilot.press("e")
+        path_input.value = str(tmp_path / "elsewhere" / "pose.yaml")
+        await pilot.press("enter")
+        assert report.load(tmp_path / "elsewhere" / "pose.yaml").status == tapped.solution.status
+        await pilot.press("q")
+        assert app.results == ["done"]
+
+
+async def test_an_inconsistent_result_names_the_suspect_and_dropping_it_solves(tapped):
+    tapped.session.record_tap(np.eye(4), base_p_ball_m=point_above_fixture_m(tapped, 0.05))
+    solved(tapped)
+    app = ScreenHost(lambda: ResultsScreen(tapped))
+    async with app.run_test(size=SIZE) as pilot:
+        results = app.screen
+        assert "INCONSISTENT: no pose of the fixture explains all 13 taps" in text_of(results, "#headline")
+        summary = text_of(results, "#summary-text")
+        assert "Tap 13 lies about" in summary and "Press d to drop tap 13" in summary
+        await pilot.press("d")
+        assert app.results == ["resample"]
+        assert len(tapped.session.taps) == 12
+        kinds = [json.loads(line)["kind"] for line in tapped.session.path.read_text().splitlines()[1:]]
+        assert kinds == ["tap"] * 13 + ["drop"]
+
+        app.push_screen(SolveScreen(tapped), app.results.append)
+        await until(pilot, lambda: len(app.results) == 2)
+        again = app.results[1]
+        assert again.status == "unique" and again.contains(cell_of(tapped).truth.base_T_cad)
+
+
+async def test_an_ambiguous_result_lists_the_modes_and_says_where_to_tap_next(tmp_path):
+    context = wizard_context(tmp_path)
+    record_spread_taps(context, 6)
+    solved(context)
+    assert context.solution.status == "ambiguous"
+    app = ScreenHost(lambda: ResultsScreen(context))
+    async with app.run_test(size=SIZE) as pilot:
+        summary = text_of(app.screen, "#summary-text")
+        assert "AMBIGUOUS: 2 distinct poses explain the 6 taps" in text_of(app.screen, "#headline")
+        assert "Poses that explain the taps (probability, pose, guaranteed bounds):" in summary
+        assert "  1. " in summary and "  2. " in summary
+        assert "Next: Tap the " in summary and "mm apart there" in summary
+        scroll = app.screen.query_one("#summary VerticalScroll")
+        assert scroll.max_scroll_y > 0  # longer than the screen: the arrow keys scroll it
+        await pilot.press("pagedown")
+        assert scroll.scroll_y == scroll.max_scroll_y
+        assert not app.screen.check_action("drop_suspect", ())
+        await pilot.press("r")
+        assert app.results == ["resample"]
+    context.session.release()

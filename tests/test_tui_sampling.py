@@ -1,0 +1,150 @@
+"""The sampling screen on the simulated cell: the simulated hands and the tap key fill the table and the
+journal, undo is journaled, the live check follows the taps, robot problems are explained and lose nothing."""
+
+import asyncio
+import json
+
+import numpy as np
+import pytest
+from textual.widgets import DataTable, Static
+from pilot_wait import until
+from tui_cell import ScreenHost, cell_of, wizard_context
+
+from fixwizard.tui.sampling import SamplingScreen
+
+pytestmark = pytest.mark.asyncio
+SIZE = (80, 24)
+
+
+@pytest.fixture
+def context(tmp_path):
+    context = wizard_context(tmp_path)
+    yield context
+    context.session.release()
+
+
+async def tap(pilot, screen: SamplingScreen, keys: str = "mt") -> None:
+    """Press each key once the screen is ready for robot keys again."""
+    for key in keys:
+        await until(pilot, lambda: not screen.busy)
+        await pilot.press(key)
+    await until(pilot, lambda: not screen.busy)
+
+
+def text_of(screen, selector: str) -> str:
+    return str(screen.query_one(selector, Static).content)
+
+
+def journal_kinds(context) -> list[str]:
+    return [json.loads(line)["kind"] for line in context.session.path.read_text().splitlines()[1:]]
+
+
+async def test_twelve_taps_fill_the_table_and_the_journal_and_the_live_check_finds_the_pose(context):
+    app = ScreenHost(lambda: SamplingScreen(context))
+    cell = cell_of(context)
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        await until(pilot, lambda: not screen.busy)
+        assert cell.status().mode == "freedrive"
+        assert "starts at 3 taps (3 to go)" in text_of(screen, "#live")
+        for _ in range(12):
+            await tap(pilot, screen)
+        table = screen.query_one(DataTable)
+        assert table.row_count == 12 and len(context.session.taps) == 12
+        assert journal_kinds(context) == ["tap"] * 12
+        first_row = table.get_row_at(0)
+        np.testing.assert_allclose([float(value.plain) for value in first_row[1:4]],
+                                   context.session.base_p_taps[0] * 1e3, atol=0.05)
+        assert cell.status().mode == "freedrive"
+        await until(pilot, lambda: screen.live is not None and screen.live.tap_count == 12)
+        assert screen.live.verdict == "unique" and screen.live.solution.contains(cell.truth.base_T_cad)
+        assert "Live check of 12 taps: unique so far. Guaranteed now: origin within" in text_of(screen, "#live")
+        distances_mm = [float(table.get_row_at(row)[4].plain) for row in range(12)]
+        assert max(abs(distance) for distance in distances_mm) < 5.0
+        await pilot.press("s")
+        await until(pilot, lambda: app.results == [True])
+        assert cell.status().mode == "idle"  # freedrive off while solving
+
+
+async def test_undo_removes_the_last_tap_and_journals_it(context):
+    app = ScreenHost(lambda: SamplingScreen(context))
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        for _ in range(4):
+            await tap(pilot, screen)
+        ids = [tap.id for tap in context.session.taps]
+        await pilot.press("u")
+        assert [tap.id for tap in context.session.taps] == ids[:3]
+        assert screen.query_one(DataTable).row_count == 3
+        assert journal_kinds(context) == ["tap"] * 4 + ["undo"]
+        assert "Tap 4 undone" in text_of(screen, "#note")
+
+
+async def test_protective_stop_during_a_tap_is_explained_and_loses_nothing(context):
+    app = ScreenHost(lambda: SamplingScreen(context))
+    cell = cell_of(context)
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        for _ in range(3):
+            await tap(pilot, screen)
+        await tap(pilot, screen, "m")
+        cell.inject_fault("protective_stop_during_tap")
+        await tap(pilot, screen, "t")
+        problem = text_of(screen, "#problem")
+        assert "protective stop during the tap: unlock the protective stop on the teach pendant" in problem
+        assert f"Nothing recorded is lost: 3 taps are saved in {context.session.path}" in problem
+        assert len(context.session.taps) == 3 and screen.query_one(DataTable).row_count == 3
+        await tap(pilot, screen, "t")  # still locked
+        assert "still locked" in text_of(screen, "#problem")
+        assert app.screen.active_bindings["k"].enabled
+        await tap(pilot, screen, "k")  # SIMULATED unlock, as on the teach pendant
+        assert not cell.status().protective_stop
+        await tap(pilot, screen, "t")
+        assert len(context.session.taps) == 4 and screen.query_one("#problem").has_class("-empty")
+        assert journal_kinds(context) == ["tap"] * 4
+
+
+@pytest.mark.parametrize("fault, shown", [("connection_loss", "check that the robot is powered on"),
+                                          ("no_surface", "found no surface within 20 mm: move the tool closer")])
+async def test_other_robot_problems_say_what_to_do_next(context, fault, shown):
+    app = ScreenHost(lambda: SamplingScreen(context))
+    cell = cell_of(context)
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        await tap(pilot, screen)
+        cell.inject_fault(fault)
+        await tap(pilot, screen, "mt")
+        assert shown in text_of(screen, "#problem")
+        assert "Nothing recorded is lost: 1 tap is saved" in text_of(screen, "#problem")
+        assert len(context.session.taps) == 1
+
+
+async def test_solving_needs_three_taps(context):
+    app = ScreenHost(lambda: SamplingScreen(context))
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        await tap(pilot, screen)
+        await pilot.press("s")
+        await asyncio.sleep(0.1)
+        assert app.results == []
+        assert "Tap at least 3 points before solving" in text_of(screen, "#problem")
+
+
+async def test_a_real_cell_has_no_simulated_keys(context):
+    context.hands, context.simulated = None, False
+    app = ScreenHost(lambda: SamplingScreen(context))
+    async with app.run_test(size=SIZE) as pilot:
+        await until(pilot, lambda: not app.screen.busy)
+        assert app.screen.check_action("simulated_move", ()) is False
+        assert app.screen.check_action("simulated_unlock", ()) is False
+        assert app.screen.check_action("tap", ()) is True
+
+
+async def test_leaving_turns_freedrive_off_and_keeps_the_session_open(context):
+    app = ScreenHost(lambda: SamplingScreen(context))
+    async with app.run_test(size=SIZE) as pilot:
+        await tap(pilot, app.screen)
+        await pilot.press("escape")
+        await until(pilot, lambda: app.results == [False])
+        assert cell_of(context).status().mode == "idle"
+        assert not context.session.closed and len(context.session.taps) == 1

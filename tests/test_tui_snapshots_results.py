@@ -1,0 +1,104 @@
+"""Snapshots at 80x24 of the sampling, solve and results screens on the simulated demo cell (fixed seeds; the
+clock, the report folder and the solve time are pinned so that only the screens can change)."""
+
+import dataclasses
+import datetime as dt
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pilot_wait import until
+from tui_cell import ScreenHost, point_above_fixture_m, record_spread_taps, wizard_context
+
+from fixwizard.solver.search import SearchCancelled, SearchProgress
+from fixwizard.solver.solve import solve
+from fixwizard.tui.results import ResultsScreen
+from fixwizard.tui.sampling import SamplingScreen
+from fixwizard.tui.solve_screen import SolveScreen
+
+SIZE = (80, 24)
+NOW = dt.datetime(2026, 11, 24, 10, 15, 0)
+SOLVE_S = 4.2
+TIMEOUT_S = 60.0
+
+
+@pytest.fixture(autouse=True)
+def pinned_clocks(monkeypatch):
+    monkeypatch.setattr(ResultsScreen, "now", staticmethod(lambda: NOW))
+    monkeypatch.setattr(SolveScreen, "clock", staticmethod(lambda: 100.0))
+
+
+def demo_context(folder: Path, taps: int, max_cells: float, in_the_air: bool = False, solved: bool = True):
+    """A demo-cell context with ``taps`` spread taps (and one 5 cm above the fixture), solved at ``max_cells``
+    with the solve time pinned; reports go to ./reports (shown, never written here)."""
+    context = wizard_context(folder, max_cells=max_cells)
+    context.reports_dir = Path("reports")
+    record_spread_taps(context, taps)
+    if in_the_air:
+        context.session.record_tap(np.eye(4), base_p_ball_m=point_above_fixture_m(context, 0.05))
+    if solved:
+        calibration = context.calibration
+        solution = solve(context.fixture, context.session.base_p_taps, calibration.ball_diameter_m,
+                         calibration.sample_bound_m, max_cells=max_cells)
+        context.solution = dataclasses.replace(solution, stats=dataclasses.replace(solution.stats, elapsed_s=SOLVE_S))
+    return context
+
+
+@pytest.fixture(scope="module")
+def unique(tmp_path_factory):
+    context = demo_context(tmp_path_factory.mktemp("unique"), 12, 1e6)
+    yield context
+    context.session.release()
+
+
+def test_sampling_screen_after_eight_taps(snap_compare, tmp_path):
+    context = demo_context(tmp_path, 8, 1e6, solved=False)
+
+    async def live_check_done(pilot) -> None:
+        screen = pilot.app.screen
+        await until(pilot, lambda: not screen.busy and screen.live is not None and screen.live.tap_count == 8)
+
+    assert snap_compare(ScreenHost(lambda: SamplingScreen(context)), terminal_size=SIZE, run_before=live_check_done)
+    context.session.release()
+
+
+def test_solve_screen_during_the_search(snap_compare, tmp_path):
+    context = demo_context(tmp_path, 3, 1e7, solved=False)
+
+    def paused_solver(*args, progress, cancel, **kwargs):
+        progress(SearchProgress(rotation_level=3, position_level=4, evaluated=663_552, survivors=41_317,
+                                elapsed_s=2.0))
+        cancel.wait(TIMEOUT_S)
+        raise SearchCancelled()
+
+    async def progress_shown(pilot) -> None:
+        await until(pilot, lambda: pilot.app.screen.progress is not None)
+        await pilot.pause(0.5)
+
+    assert snap_compare(ScreenHost(lambda: SolveScreen(context, paused_solver)), terminal_size=SIZE,
+                        run_before=progress_shown)
+    context.session.release()
+
+
+@pytest.mark.parametrize("view", ["summary", "rotations", "taps"])
+def test_results_screen_of_a_unique_pose(snap_compare, unique, view):
+    async def show_view(pilot) -> None:
+        for _ in range(("summary", "rotations", "taps").index(view)):
+            await pilot.press("v")
+        await pilot.pause(0.2)
+
+    assert snap_compare(ScreenHost(lambda: ResultsScreen(unique)), terminal_size=SIZE, run_before=show_view)
+
+
+def test_results_screen_of_an_inconsistent_result(snap_compare, tmp_path):
+    context = demo_context(tmp_path, 12, 3e5, in_the_air=True)
+    assert context.solution.status == "inconsistent"
+    assert snap_compare(ScreenHost(lambda: ResultsScreen(context)), terminal_size=SIZE)
+    context.session.release()
+
+
+def test_results_screen_of_an_ambiguous_result(snap_compare, tmp_path):
+    context = demo_context(tmp_path, 6, 1e6)
+    assert context.solution.status == "ambiguous"
+    assert snap_compare(ScreenHost(lambda: ResultsScreen(context)), terminal_size=SIZE)
+    context.session.release()

@@ -1,0 +1,69 @@
+"""The sampling screen's live figures: each tap's distance from the surface under a pose, and the quick solve
+that says after each tap whether the pose is open, unique, ambiguous or inconsistent."""
+
+import threading
+
+import numpy as np
+import pytest
+from shapes import as_fixture
+from tui_cell import SAMPLE_BOUND_M, spread_taps
+
+from fixwizard.demo import demo_cell
+from fixwizard.geometry.se3 import make_transform
+from fixwizard.solver.search import SearchCancelled
+from fixwizard.workflow.live import quick_check, tap_surface_distances_m
+
+BALL_DIAMETER_M = 0.003
+
+
+@pytest.fixture(scope="module")
+def tapped():
+    """The demo cell and 12 spread taps on it."""
+    cell = demo_cell(0)
+    cell.connect()
+    return cell, spread_taps(cell, 12)
+
+
+def test_distance_is_from_where_the_ball_would_touch_the_surface():
+    brick = as_fixture("brick")  # 100 x 60 x 30 mm box centred on the CAD origin
+    base_T_cad = make_transform(np.eye(3), [0.4, 0.1, 0.015])
+    base_p_taps = np.array([[0.4, 0.1, 0.03 + 0.0015],  # ball resting on the top face
+                            [0.4, 0.1, 0.03 + 0.0065],  # 5 mm above that
+                            [0.4 + 0.05 + 0.0015 - 0.002, 0.1, 0.01]])  # 2 mm into the +x side face
+    distances = tap_surface_distances_m(brick, base_p_taps, BALL_DIAMETER_M, base_T_cad)
+    np.testing.assert_allclose(distances, [0.0, 0.005, -0.002], atol=1e-6)
+
+
+def test_taps_of_the_simulated_cell_touch_the_surface_under_the_true_pose(tapped):
+    cell, base_p_taps = tapped
+    distances = tap_surface_distances_m(cell.fixture, base_p_taps, BALL_DIAMETER_M, cell.truth.base_T_cad)
+    assert np.all(np.abs(distances) <= cell.truth.fk_error_bound_m + 1e-6)
+
+
+def test_quick_check_needs_three_taps_and_pins_the_pose_down_with_enough_taps(tapped):
+    cell, base_p_taps = tapped
+    assert quick_check(cell.fixture, base_p_taps[:2], BALL_DIAMETER_M, SAMPLE_BOUND_M) is None
+    few = quick_check(cell.fixture, base_p_taps[:3], BALL_DIAMETER_M, SAMPLE_BOUND_M)
+    assert few.verdict == "open" and few.estimate_base_T_cad is None and few.tap_count == 3
+    assert few.solution.contains(cell.truth.base_T_cad)
+    many = quick_check(cell.fixture, base_p_taps, BALL_DIAMETER_M, SAMPLE_BOUND_M)
+    assert many.verdict == "unique"
+    assert many.solution.contains(cell.truth.base_T_cad)
+    distances = tap_surface_distances_m(cell.fixture, base_p_taps, BALL_DIAMETER_M, many.estimate_base_T_cad)
+    assert np.all(np.abs(distances) < 0.005)
+
+
+def test_quick_check_says_inconsistent_for_a_tap_in_the_air(tapped):
+    cell, base_p_taps = tapped
+    in_the_air = base_p_taps[np.argmax(base_p_taps[:, 2])] + [0.0, 0.0, 0.05]
+    check = quick_check(cell.fixture, np.vstack([base_p_taps, in_the_air]), BALL_DIAMETER_M, SAMPLE_BOUND_M)
+    assert check.verdict == "inconsistent" and check.estimate_base_T_cad is None
+    assert check.solution.suspect_tap.index == 12
+
+
+def test_quick_check_stops_when_cancelled(tapped):
+    cell, base_p_taps = tapped
+    cancel = threading.Event()
+    cancel.set()
+    with pytest.raises(SearchCancelled):
+        quick_check(cell.fixture, base_p_taps, BALL_DIAMETER_M, SAMPLE_BOUND_M, cancel)

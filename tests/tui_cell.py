@@ -1,0 +1,111 @@
+"""Test helpers for the wizard's sampling, solve and results screens: the demo cell with its hidden truth, a
+tip calibration taken from that truth, a wizard context around them, and a small app hosting one screen."""
+
+import datetime as dt
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+from textual.app import App
+from textual.screen import Screen
+
+from fixwizard.calibration.residuals import ResidualStats
+from fixwizard.calibration.store import TipCalibration
+from fixwizard.calibration.taps import ball_centres_m
+from fixwizard.demo import demo_cell
+from fixwizard.geometry.se3 import rotation_angle_rad, transform_points
+from fixwizard.report import Report
+from fixwizard.robot.sim import SimulatedCell
+from fixwizard.robot.sim_hands import SimulatedHands
+from fixwizard.tui.context import WizardContext
+from fixwizard.workflow.session import SamplingSession
+
+CELL_SEED = 0
+HANDS_SEED = 1
+# The cell's forward-kinematics error bound (0.3 mm) with a margin, as a tip calibration would propose.
+SAMPLE_BOUND_M = 0.00035
+TEST_MAX_CELLS = 1e6
+
+
+def truth_calibration(cell: SimulatedCell) -> TipCalibration:
+    """A tip calibration holding the cell's hidden tip and ball, as if calibrated perfectly."""
+    no_residuals = ResidualStats(0.0, 0.0)
+    return TipCalibration(
+        name="truth", created=dt.datetime.now(dt.timezone.utc).isoformat(), robot="simulated",
+        tcp_p_tip_m=cell.truth.tcp_p_tip_m, ball_diameter_m=cell.truth.ball_diameter_m,
+        sample_bound_m=SAMPLE_BOUND_M, sample_bound_reason="the simulated cell's error bound with a margin",
+        base_T_table=np.eye(4), pivot_tcp_p_tip_m=cell.truth.tcp_p_tip_m, pivot_residuals=no_residuals,
+        table_residuals=no_residuals, tip_residuals=no_residuals, tip_condition_number=1.0,
+        tip_standard_error_m=np.zeros(3), steps={})
+
+
+def wizard_context(folder: Path, cell_seed: int = CELL_SEED, max_cells: float = TEST_MAX_CELLS) -> WizardContext:
+    """A simulated demo cell (connected), the operator's hands, a truth calibration and a new session in
+    ``folder``."""
+    cell = demo_cell(cell_seed)
+    cell.connect()
+    calibration = truth_calibration(cell)
+    session = SamplingSession.create(folder / "sessions" / "demo.jsonl",
+                                     {"mesh": str(cell.fixture.path), "units": cell.fixture.units},
+                                     {"tcp_p_tip_m": calibration.tcp_p_tip_m.tolist(),
+                                      "ball_diameter_m": calibration.ball_diameter_m,
+                                      "sample_bound_m": calibration.sample_bound_m}, robot="simulated")
+    return WizardContext(robot=cell, robot_name="simulated cell", simulated=True,
+                         hands=SimulatedHands(cell, seed=HANDS_SEED), reports_dir=folder / "reports",
+                         fixture=cell.fixture, calibration=calibration, session=session, max_cells=max_cells)
+
+
+def cell_of(context: WizardContext) -> SimulatedCell:
+    return context.hands.cell
+
+
+def spread_taps(cell: SimulatedCell, count: int, seed: int = HANDS_SEED) -> np.ndarray:
+    """Ball centres (count, 3, base frame, m) of ``count`` spread taps, computed with the true tip."""
+    hands = SimulatedHands(cell, seed=seed)
+    poses = []
+    for index in range(count):
+        hands.near_spread_point(index)
+        poses.append(cell.tap().base_T_tcp_contact)
+    return ball_centres_m(np.array(poses), cell.truth.tcp_p_tip_m)
+
+
+def record_spread_taps(context: WizardContext, count: int) -> None:
+    """Tap ``count`` spread points without the UI and journal them in the context's session."""
+    hands = context.hands
+    for index in range(count):
+        hands.near_spread_point(index)
+        context.session.record_tap(cell_of(context).tap().base_T_tcp_contact)
+
+
+def point_above_fixture_m(context: WizardContext, height_m: float) -> np.ndarray:
+    """A ball centre (base frame, m) ``height_m`` above the fixture's highest vertex."""
+    cell = cell_of(context)
+    base_p_vertices = cell.fixture.mesh.vertices @ cell.truth.base_T_cad[:3, :3].T + cell.truth.base_T_cad[:3, 3]
+    return base_p_vertices[np.argmax(base_p_vertices[:, 2])] + [0.0, 0.0, height_m]
+
+
+def bounds_contain(report: Report, cell: SimulatedCell, base_T_cad: np.ndarray) -> bool:
+    """Whether a loaded report's guaranteed bounds hold ``base_T_cad``: CAD origin, rotation and every vertex
+    of the fixture within their bounds of the centre pose (1 nm and 1e-9 deg of float slack)."""
+    centre = report.center_base_T_cad
+    vertices = cell.fixture.mesh.vertices
+    displacement_m = np.linalg.norm(transform_points(base_T_cad, vertices) - transform_points(centre, vertices), axis=1)
+    return bool(np.linalg.norm(base_T_cad[:3, 3] - centre[:3, 3]) <= report.position_bound_m + 1e-9
+                and np.degrees(rotation_angle_rad(centre[:3, :3].T @ base_T_cad[:3, :3]))
+                <= report.rotation_bound_deg + 1e-9
+                and displacement_m.max() <= report.max_point_displacement_m + 1e-9)
+
+
+class ScreenHost(App):
+    """An app that shows one screen on start and keeps what it dismisses with in ``results``; like the wizard,
+    without the command palette."""
+
+    ENABLE_COMMAND_PALETTE = False
+
+    def __init__(self, make_screen: Callable[[], Screen]) -> None:
+        super().__init__()
+        self.make_screen = make_screen
+        self.results: list = []
+
+    def on_mount(self) -> None:
+        self.push_screen(self.make_screen(), self.results.append)
