@@ -364,6 +364,7 @@ def test_remote_control_switched_off_while_connected(robot, controller):
 
 
 def test_connection_dropped_mid_tap_raises_and_reconnect_works(robot, controller):
+    base_T_start = robot.base_T_tcp()
     controller.when("force_mode", "go_offline")
     started = time.monotonic()
     with pytest.raises(ConnectionLost, match="during the tap .*robot stops by itself.*check that the robot is "
@@ -377,7 +378,8 @@ def test_connection_dropped_mid_tap_raises_and_reconnect_works(robot, controller
     controller.go_online()
     robot.connect()
     assert robot.status().connected
-    result = robot.tap(**FAST_TAP)  # from where the watchdog stopped the arm, part of the way down
+    robot.move_linear(base_T_start)  # the arm went on in force mode until the watchdog stopped it
+    result = robot.tap(**FAST_TAP)
     np.testing.assert_allclose(result.base_T_tcp_contact, controller.contact_poses()[-1], atol=2e-6)
 
 

@@ -48,8 +48,10 @@ CONNECT_TIMEOUT_S = 3.0  # each port check and the dashboard connection
 SCRIPT_START_TIMEOUT_S = 5.0  # the uploaded control script must be running by then
 COMMAND_TIMEOUT_S = 5.0  # one ur_rtde command; ur_rtde itself may wait up to 300 s
 STALE_STATE_S = 0.5  # no new RTDE state for this long means the link is down
-WATCHDOG_HZ = 5.0  # the arm stops when fixwizard sends nothing for 1 / WATCHDOG_HZ seconds
-KICK_PERIOD_S = 0.04  # watchdog kicks; five per watchdog period
+# The arm stops when fixwizard sends nothing for 1 / WATCHDOG_HZ seconds: long enough that a busy PC (the
+# wizard redrawing, a solve in the background) does not stop a tap, short enough to stop within 0.5 s.
+WATCHDOG_HZ = 2.0
+KICK_PERIOD_S = 0.04  # watchdog kicks when idle; a dozen per watchdog period
 POLL_S = 0.004  # motion monitoring period
 LOCK_TIMEOUT_S = 2 * COMMAND_TIMEOUT_S
 LINEAR_ACCELERATION_M_S2 = 0.5
