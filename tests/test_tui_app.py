@@ -2,6 +2,7 @@
 folders): the start screen, a whole new tip calibration, cancel, protective stop, STOP and resume."""
 
 import asyncio
+import dataclasses
 import shutil
 from pathlib import Path
 
@@ -10,7 +11,7 @@ from textual.pilot import Pilot
 from textual.widgets import Button, Select, Static
 
 from pilot_wait import until
-from fixwizard.calibration.store import load_calibration
+from fixwizard.calibration.store import load_calibration, save_calibration
 from fixwizard.cli import main
 from fixwizard.demo import DEMO_MESH, demo_fixture
 from fixwizard.tui.app import FixwizardApp
@@ -18,7 +19,7 @@ from fixwizard.tui.context import WizardContext
 from fixwizard.tui.errors import ErrorModal
 from fixwizard.tui.launch import session_to_resume, simulated_context, ur_context
 from fixwizard.tui.sessions import start_session
-from fixwizard.tui.start import StartScreen
+from fixwizard.tui.start import NEW, StartScreen
 from fixwizard.tui.status import StatusBar
 from fixwizard.tui.tip_calibration_auto import AutoTapsScreen
 from fixwizard.tui.tip_calibration_hands import PivotScreen, TablePointsScreen
@@ -293,6 +294,25 @@ def test_the_start_screen_describes_stored_calibrations_and_resumes_an_unfinishe
             assert context.session.path == path and len(context.session.taps) == 1
             assert context.calibration.name == "example_matlab_logo"
     asyncio.run(run())
+
+
+def test_the_start_screen_preselects_the_newest_calibration_of_this_robot_only(tmp_path):
+    shutil.copytree(REPO / "calibrations", tmp_path / "calibrations")  # made on another robot
+    context = wizard(tmp_path)
+    example = load_calibration(tmp_path / "calibrations" / "example_matlab_logo.yaml")
+    for name, created in (("older", "2026-11-20T08:00:00+00:00"), ("newer", "2026-11-21T08:00:00+00:00")):
+        save_calibration(dataclasses.replace(example, name=name, created=created, robot=context.robot_name),
+                         tmp_path / "calibrations" / f"{name}.yaml")
+
+    async def preselected(context: WizardContext) -> str:
+        async with FixwizardApp(context).run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            return str(pilot.app.screen.query_one("#calibration", Select).value)
+
+    assert asyncio.run(preselected(context)) == str(tmp_path / "calibrations" / "newer.yaml")
+    for name in ("older", "newer"):
+        (tmp_path / "calibrations" / f"{name}.yaml").unlink()
+    assert asyncio.run(preselected(wizard(tmp_path))) == NEW
 
 
 def test_resume_opens_the_session_with_its_fixture_and_calibration(tmp_path):

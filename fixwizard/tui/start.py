@@ -76,7 +76,8 @@ class StartScreen(Screen[bool]):
                 yield Static("Tip", classes="label")
                 yield Select([("New tip calibration (about 5 minutes)", NEW),
                               *((self._calibration_label(choice), key) for key, choice in self._calibrations.items())],
-                             id="calibration", value=NEW, allow_blank=False, compact=True)
+                             id="calibration", value=self._preselected_calibration(), allow_blank=False,
+                             compact=True)
             yield Static("", id="calibration-info", classes="detail", markup=False)
             if self._sessions:
                 with Horizontal(classes="row"):
@@ -91,6 +92,11 @@ class StartScreen(Screen[bool]):
         self.query_one("#fixture", Select).focus()
         self._show_calibration()
         self._load_fixture()
+
+    def _preselected_calibration(self) -> str:
+        """The newest calibration made on this robot (choices are newest first), else a new calibration."""
+        return next((key for key, choice in self._calibrations.items()
+                     if choice.calibration is not None and choice.calibration.robot == self.context.robot_name), NEW)
 
     @staticmethod
     def _calibration_label(choice: CalibrationChoice) -> str:
