@@ -1,6 +1,6 @@
 """The ``fixwizard`` command: without a sub-command the interactive wizard (simulated demo cell, or a UR
 arm with ``--robot HOST``; ``--resume`` reopens an unfinished session); the headless sub-commands solve,
-import-poses and calibrate-tip.
+import-poses, calibrate-tip and identify.
 
 Exit codes: 0 success (unique or ambiguous), 1 bad input, 2 inconsistent taps, 130 cancelled.
 """
@@ -14,6 +14,7 @@ from fixwizard.errors import FixwizardError, InputError
 from fixwizard.points import write_points
 from fixwizard.solver.search import SearchCancelled, SearchProgress
 from fixwizard.units import parse_length_m
+from fixwizard.workflow.identify import register_identify_parser
 from fixwizard.workflow.import_poses import import_pose_dir, load_tip
 from fixwizard.workflow.solve_run import SolveRequest, run_solve, summary_lines
 from fixwizard.workflow.tip_calibration import register_calibrate_tip_parser
@@ -110,6 +111,7 @@ def build_parser() -> argparse.ArgumentParser:
     import_parser.set_defaults(func=import_poses_command)
 
     register_calibrate_tip_parser(commands)
+    register_identify_parser(commands, _parse_cell_budget)
     return parser
 
 

@@ -78,8 +78,9 @@ class Solution:
         return self.cells is not None and self.cells.contains(base_T_cad @ invert(self.fix_T_cad))
 
 
-def _validate(base_p_taps: np.ndarray, ball_diameter_m: float, sample_bound_m: float, sigma_m: float,
-              max_cells: float) -> None:
+def validate_inputs(base_p_taps: np.ndarray, ball_diameter_m: float, sample_bound_m: float, sigma_m: float,
+                    max_cells: float) -> None:
+    """Raise ``InputError`` with the fix for taps (N, 3, m), lengths (m) or a cell budget a solve cannot use."""
     if base_p_taps.ndim != 2 or base_p_taps.shape[1] != 3:
         raise InputError("taps must be a list of [x, y, z] points in metres")
     if len(base_p_taps) < MIN_TAPS:
@@ -159,7 +160,7 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
     """
     base_p_taps = np.asarray(base_p_taps, dtype=float)
     sigma_m = sample_bound_m / 3.0 if sigma_m is None else sigma_m
-    _validate(base_p_taps, ball_diameter_m, sample_bound_m, sigma_m, max_cells)
+    validate_inputs(base_p_taps, ball_diameter_m, sample_bound_m, sigma_m, max_cells)
     started = time.perf_counter()
     problem = SearchProblem(fixture.oracle, fixture.radius_m, base_p_taps, ball_diameter_m / 2.0, sample_bound_m)
     cells = search(problem, max_cells, progress, cancel)

@@ -1,0 +1,56 @@
+"""Which fixture is this: the taps rule out every mesh no pose of which explains them, the right mesh fits, two
+fitting meshes give a warning, and a mesh that cannot be read is reported without stopping the others."""
+
+import shutil
+
+import pytest
+from shapes import l_prism
+
+from fixwizard.cli import main
+from fixwizard.demo import DEMO_MESH, DEMO_TAPS
+from fixwizard.points import load_points
+from fixwizard.workflow.identify import identify
+
+BUDGET = 2e5
+FLAGS = ["--mesh-units", "mm", "--sample-bound", "1mm", "--ball-diameter", "3mm", "--max-cells", "2e5"]
+
+
+@pytest.fixture
+def other_mesh(tmp_path):
+    """An L-shaped plate (120 x 80 x 10 mm) in millimetres: not the bracket the taps were made on."""
+    mesh = l_prism()
+    mesh.apply_scale(1e3)
+    path = tmp_path / "plate.stl"
+    mesh.export(path)
+    return path
+
+
+def test_the_right_mesh_fits_and_another_is_ruled_out(other_mesh):
+    verdicts = identify(load_points(DEMO_TAPS), [other_mesh, DEMO_MESH], "mm", 0.003, 0.001, BUDGET)
+    assert [(verdict.mesh, verdict.verdict) for verdict in verdicts] == [(other_mesh, "ruled out"),
+                                                                        (DEMO_MESH, "fits")]
+    assert verdicts[0].surviving_cells == 0 and verdicts[1].surviving_cells > 0
+
+
+def test_the_command_warns_when_two_meshes_fit(tmp_path, capsys):
+    twin = tmp_path / "twin.stl"
+    shutil.copy(DEMO_MESH, twin)
+    assert main(["identify", str(DEMO_TAPS), str(DEMO_MESH), str(twin), *FLAGS]) == 0
+    assert "warning: 2 meshes fit these taps (demo_bracket.stl, twin.stl)" in capsys.readouterr().out
+
+
+def test_no_fitting_mesh_exits_2_and_an_unreadable_one_is_reported(tmp_path, other_mesh, capsys):
+    text_file = tmp_path / "notes.stl"
+    text_file.write_text("not a mesh")
+    assert main(["identify", str(DEMO_TAPS), str(text_file), str(other_mesh), *FLAGS]) == 2
+    out = capsys.readouterr().out
+    assert f"unreadable {text_file}" in out
+    assert f"ruled out  {other_mesh}: no pose of this mesh explains the taps" in out
+    assert "no mesh fits: check the units" in out
+
+
+def test_two_taps_are_refused_before_any_mesh_is_searched(tmp_path, capsys):
+    points = tmp_path / "two.csv"
+    points.write_text("0.5,0,0.1\n0.5,0.01,0.1\n")
+    assert main(["identify", str(points), str(DEMO_MESH), *FLAGS]) == 1
+    assert "2 taps are not enough" in capsys.readouterr().err
