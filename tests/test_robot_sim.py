@@ -155,11 +155,14 @@ def test_no_surface_fault_raises_no_contact_once(cell):
     assert cell.tap().travel_m > 0
 
 
-def test_freedrive_blocks_robot_motion(cell):
+def test_freedrive_blocks_robot_motion_but_not_the_operators_hands(cell):
     cell.freedrive(True)
     assert cell.status().mode == "freedrive"
     with pytest.raises(RobotError, match="turn freedrive off"):
         cell.tap()
+    before = cell.base_T_tcp()
+    SimulatedHands(cell).pivot(1)
+    assert not np.allclose(cell.base_T_tcp()[:3, :3], before[:3, :3])
     cell.freedrive(False)
 
 

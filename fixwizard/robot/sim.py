@@ -175,6 +175,12 @@ class SimulatedCell:
         with self._lock:
             self._protective_stop = False
 
+    def guide_by_hand(self, base_T_tcp: np.ndarray) -> None:
+        """Put the flange at ``base_T_tcp`` (4x4, base frame, m) as the operator does by hand in freedrive."""
+        with self._lock:
+            self._require_connected()
+            self._base_T_tcp = np.array(base_T_tcp, float)
+
     def inject_fault(self, fault: Fault) -> None:
         """Make the next tap fail: a protective stop, a dropped connection, or no surface found."""
         with self._lock:

@@ -45,7 +45,7 @@ class SimulatedHands:
         tilt_x, tilt_y = PIVOT_TILTS[index % len(PIVOT_TILTS)]
         base_R_tcp = Rotation.from_rotvec([tilt_x, tilt_y, 0.0]) * TOOL_DOWN
         base_p_ball = np.array([*(PIVOT_REACH_M * self._base_d_away), self.cell.truth.ball_diameter_m / 2.0])
-        self.cell.move_linear(make_transform(base_R_tcp, base_p_ball - base_R_tcp.apply(self.cell.truth.tcp_p_tip_m)))
+        self.cell.guide_by_hand(make_transform(base_R_tcp, base_p_ball - base_R_tcp.apply(self.cell.truth.tcp_p_tip_m)))
 
     def table_point(self, label: str) -> None:
         """Bring the ball a few mm above table point ``label`` (A, B the corner, or C), away from the fixture."""

@@ -64,14 +64,11 @@ class PivotScreen(CalibrationStepScreen):
         self.run_robot(self.workflow.capture_pivot_pose, lambda _: self._show_fit())
 
     def action_simulated_hands(self) -> None:
-        robot, hands = self.context.robot, self.context.hands
+        hands = self.context.hands
         pose_index = len(self.workflow.poses("pivot"))
 
         def move_and_capture() -> None:
-            # The simulated hands move the arm through the cell's own motion, which freedrive would refuse.
-            robot.freedrive(False)
             hands.pivot(pose_index)
-            robot.freedrive(True)
             self.workflow.capture_pivot_pose()
 
         self.run_robot(move_and_capture, lambda _: self._show_fit())
