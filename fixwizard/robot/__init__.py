@@ -13,5 +13,5 @@ from fixwizard.robot.base import (
                                   TapResult,
 )
 
-__all__ = ["ConnectionLost", "EmergencyStop", "MotionStopped", "NoContact", "NotInRemoteControl", "ProtectiveStop", "Robot",
-           "RobotError", "RobotStatus", "TapResult"]
+__all__ = ["ConnectionLost", "EmergencyStop", "MotionStopped", "NoContact", "NotInRemoteControl", "ProtectiveStop",
+           "Robot", "RobotError", "RobotStatus", "TapResult"]
