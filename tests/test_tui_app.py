@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 from textual.pilot import Pilot
-from textual.widgets import Button, Select, Static
+from textual.widgets import Button, Input, Select, Static
 
 from pilot_wait import until
 from fixwizard.calibration.store import load_calibration, save_calibration
@@ -354,4 +354,26 @@ def test_an_unreachable_ur_arm_is_explained_and_nothing_says_simulated(tmp_path)
             await until(pilot, lambda: isinstance(app.screen, PivotScreen))
             assert "SIMULATED" not in screen_text(app) + str(app.screen.query_one(StatusBar).render())
             assert app.screen.check_action("simulated_hands", ()) is False
+    asyncio.run(run())
+
+
+def test_the_start_screen_switches_to_a_ur_arm_and_back_to_the_simulated_cell(tmp_path):
+    async def run():
+        context = wizard(tmp_path)
+        app = FixwizardApp(context)
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            app.screen.query_one("#robot-host", Input).focus()
+            await pilot.press(*"127.0.0.3", "enter")  # nothing listens there
+            await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+            assert text_of(app, "#error-message").startswith("The connection to the robot is lost to 127.0.0.3:29999")
+            await press_button(pilot, "#ok")
+            await until(pilot, lambda: isinstance(app.screen, StartScreen))
+            assert context.robot_name == "UR arm at 127.0.0.3" and not context.simulated and context.hands is None
+            assert "SIMULATED" not in screen_text(app) + str(app.screen.query_one(StatusBar).render())
+            await press_button(pilot, "#use-simulated")
+            await until(pilot, lambda: context.simulated and app.robot_status is not None
+                        and app.robot_status.connected)
+            assert "SIMULATED" in str(app.screen.query_one(StatusBar).render())
+            assert context.hands is not None
     asyncio.run(run())

@@ -3,6 +3,7 @@
 from pathlib import Path
 
 from fixwizard.demo import demo_cell
+from fixwizard.robot.sim import SimulatedCell
 from fixwizard.robot.sim_hands import SimulatedHands
 from fixwizard.tui.context import WizardContext
 from fixwizard.tui.sessions import newest_unfinished
@@ -14,10 +15,8 @@ SIMULATED_PACE_S = 0.05
 def simulated_context(seed: int = 0, pace_s: float = SIMULATED_PACE_S, folder: Path = Path(".")) -> WizardContext:
     """The bundled demo cell (fixture at a hidden pose drawn from ``seed``) with simulated hands; the
     fixtures, calibrations, sessions and reports folders under ``folder``."""
-    cell = demo_cell(seed)
-    cell.pace_s = pace_s
-    return WizardContext(robot=cell, robot_name=f"SIMULATED demo cell (seed {seed})", simulated=True,
-                         hands=SimulatedHands(cell, seed=seed), **_folders(folder))
+    cell, name, hands = _simulated_cell(seed, pace_s)
+    return WizardContext(robot=cell, robot_name=name, simulated=True, hands=hands, **_folders(folder))
 
 
 def ur_context(host: str, folder: Path = Path(".")) -> WizardContext:
@@ -27,11 +26,35 @@ def ur_context(host: str, folder: Path = Path(".")) -> WizardContext:
     return WizardContext(robot=URRobot(host), robot_name=f"UR arm at {host}", simulated=False, **_folders(folder))
 
 
+def use_simulated_cell(context: WizardContext, seed: int = 0, pace_s: float = SIMULATED_PACE_S) -> None:
+    """Make the demo cell of ``seed`` the context's robot, with simulated hands (the old robot is closed)."""
+    context.robot.close()
+    context.robot, context.robot_name, context.hands = _simulated_cell(seed, pace_s)
+    context.simulated = True
+
+
+def use_ur_arm(context: WizardContext, host: str) -> None:
+    """Make the UR arm at ``host`` the context's robot (the old robot is closed); connecting comes next."""
+    from fixwizard.robot.ur import URRobot
+
+    context.robot.close()
+    context.robot, context.robot_name = URRobot(host), f"UR arm at {host}"
+    context.simulated, context.hands = False, None
+
+
 def session_to_resume(context: WizardContext, requested: str | None) -> Path | None:
     """The session ``--resume`` asks for: none, the newest unfinished one (empty string) or the given path."""
     if requested is None:
         return None
     return newest_unfinished(context.sessions_dir) if requested == "" else Path(requested)
+
+
+def _simulated_cell(seed: int, pace_s: float) -> tuple[SimulatedCell, str, SimulatedHands]:
+    """The demo cell of ``seed`` moving at ``pace_s`` per motion, its name, and the hands that stand in for
+    the operator's."""
+    cell = demo_cell(seed)
+    cell.pace_s = pace_s
+    return cell, f"SIMULATED demo cell (seed {seed})", SimulatedHands(cell, seed=seed)
 
 
 def _folders(folder: Path) -> dict[str, Path]:

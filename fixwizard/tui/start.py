@@ -2,6 +2,7 @@
 (stored or new) and, when there are any, an unfinished session to resume. It fills the context and
 dismisses with True; the app decides what comes next."""
 
+from collections.abc import Callable
 from pathlib import Path
 
 from textual.app import ComposeResult
@@ -22,6 +23,7 @@ from fixwizard.tui.choices import (
     session_choices,
 )
 from fixwizard.tui.context import WizardContext
+from fixwizard.tui.launch import use_simulated_cell, use_ur_arm
 from fixwizard.tui.sessions import resume_session
 
 NEW = "new"
@@ -44,6 +46,9 @@ class StartScreen(Screen[bool]):
     StartScreen #fixture-path { margin-left: 12; width: 60; }
     StartScreen #calibration, StartScreen #session { width: 60; }
     StartScreen #continue { margin: 1 0 0 12; }
+    StartScreen #robot-host { margin-left: 12; width: 60; }
+    StartScreen #use-simulated { margin-left: 12; }
+    StartScreen .-hidden { display: none; }
     """
 
     def __init__(self, context: WizardContext) -> None:
@@ -63,6 +68,10 @@ class StartScreen(Screen[bool]):
             with Horizontal(classes="row"):
                 yield Static("Robot", classes="label")
                 yield Static(f"{self.context.robot_name}{robot_note}", id="robot", markup=False)
+            yield Input(placeholder="or type a UR arm's IP address and press Enter", id="robot-host",
+                        compact=True)
+            yield Button("Use the simulated demo cell", id="use-simulated", compact=True,
+                         classes="" if not self.context.simulated else "-hidden")
             with Horizontal(classes="row"):
                 yield Static("Fixture", classes="label")
                 yield Select([(choice.label, str(choice.path)) for choice in self._fixtures], id="fixture",
@@ -131,6 +140,9 @@ class StartScreen(Screen[bool]):
         text = event.value.strip()
         if not text:
             return
+        if event.input.id == "robot-host":
+            self._switch_robot(lambda: use_ur_arm(self.context, text))
+            return
         path = Path(text).expanduser()
         fixture_select = self.query_one("#fixture", Select)
         if all(choice.path != path for choice in self._fixtures):
@@ -193,6 +205,26 @@ class StartScreen(Screen[bool]):
     def on_button_pressed(self, event: Button.Pressed) -> None:
         if event.button.id == "continue":
             self._continue()
+        elif event.button.id == "use-simulated":
+            self._switch_robot(lambda: use_simulated_cell(self.context))
+
+    def _switch_robot(self, switch: Callable[[], None]) -> None:
+        """Close the robot, switch the context to another one and connect it (worker thread); a failed
+        connection shows its message and leaves the new robot chosen, disconnected, for a reconnect."""
+
+        def switch_and_connect() -> None:
+            switch()
+            self.app.call_from_thread(self._show_robot)
+            self.context.robot.connect()
+
+        run_in_thread(self, switch_and_connect, lambda _: self.notify(f"Connected to {self.context.robot_name}."),
+                      group="robot")
+
+    def _show_robot(self) -> None:
+        note = " (no real arm moves)" if self.context.simulated else ""
+        self.query_one("#robot", Static).update(f"{self.context.robot_name}{note}")
+        self.query_one("#use-simulated", Button).set_class(self.context.simulated, "-hidden")
+        self.app.refresh_robot_status()
 
     def _continue(self) -> None:
         session_value = str(self.query_one("#session", Select).value) if self._sessions else NEW
