@@ -1,8 +1,10 @@
-"""Starting the wizard: the context for the simulated demo cell or a UR arm, and the session to resume."""
+"""Starting the wizard: the context for the simulated demo cell or a UR arm, switching between them, and the
+session to resume."""
 
 from pathlib import Path
 
 from fixwizard.demo import demo_cell
+from fixwizard.robot.base import Robot
 from fixwizard.robot.sim import SimulatedCell
 from fixwizard.robot.sim_hands import SimulatedHands
 from fixwizard.tui.context import WizardContext
@@ -21,9 +23,8 @@ def simulated_context(seed: int = 0, pace_s: float = SIMULATED_PACE_S, folder: P
 
 def ur_context(host: str, folder: Path = Path(".")) -> WizardContext:
     """A Universal Robots arm at ``host``; the app connects to it when it starts."""
-    from fixwizard.robot.ur import URRobot
-
-    return WizardContext(robot=URRobot(host), robot_name=f"UR arm at {host}", simulated=False, **_folders(folder))
+    robot, name = _ur_arm(host)
+    return WizardContext(robot=robot, robot_name=name, simulated=False, **_folders(folder))
 
 
 def use_simulated_cell(context: WizardContext, seed: int = 0, pace_s: float = SIMULATED_PACE_S) -> None:
@@ -35,10 +36,8 @@ def use_simulated_cell(context: WizardContext, seed: int = 0, pace_s: float = SI
 
 def use_ur_arm(context: WizardContext, host: str) -> None:
     """Make the UR arm at ``host`` the context's robot (the old robot is closed); connecting comes next."""
-    from fixwizard.robot.ur import URRobot
-
     context.robot.close()
-    context.robot, context.robot_name = URRobot(host), f"UR arm at {host}"
+    context.robot, context.robot_name = _ur_arm(host)
     context.simulated, context.hands = False, None
 
 
@@ -55,6 +54,13 @@ def _simulated_cell(seed: int, pace_s: float) -> tuple[SimulatedCell, str, Simul
     cell = demo_cell(seed)
     cell.pace_s = pace_s
     return cell, f"SIMULATED demo cell (seed {seed})", SimulatedHands(cell, seed=seed)
+
+
+def _ur_arm(host: str) -> tuple[Robot, str]:
+    """The (not yet connected) UR arm at ``host`` and its name; ur_rtde is imported only when one is used."""
+    from fixwizard.robot.ur import URRobot
+
+    return URRobot(host), f"UR arm at {host}"
 
 
 def _folders(folder: Path) -> dict[str, Path]:
