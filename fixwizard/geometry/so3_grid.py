@@ -75,7 +75,7 @@ class RotationGrid:
     def __init__(self) -> None:
         self._base_centers = np.stack(healpy.pix2vec(1, np.arange(BASE_PIXELS), nest=True), axis=1)
         self._base_sections = _shortest_rotations(np.tile(_EZ, (BASE_PIXELS, 1)), self._base_centers)
-        self._pixel_gamma: dict[int, np.ndarray] = {}
+        self._pixel_gamma: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     @staticmethod
     def n_tilts(level: int) -> int:
@@ -135,16 +135,20 @@ class RotationGrid:
         return pixels * self.n_tilts(level) + tilts
 
     def gamma(self, level: int, cells: np.ndarray) -> np.ndarray:
-        """Largest angle (rad) between each cell's centre and any rotation in the cell; cached per pixel."""
+        """Largest angle (rad) between each cell's centre and any rotation in the cell; cached per pixel
+        (sorted pixels and their values: a deep level has far more pixels than a search ever touches)."""
         pixels = np.asarray(cells, np.int64) // self.n_tilts(level)
-        if level not in self._pixel_gamma:
-            self._pixel_gamma[level] = np.full(12 * 4**level, np.nan)
-        cache = self._pixel_gamma[level]
-        missing = np.unique(pixels[np.isnan(cache[pixels])])
-        for chunk in np.array_split(missing, max(1, len(missing) // 20000)):
-            if len(chunk):
-                cache[chunk] = self._compute_gamma(level, chunk)
-        return cache[pixels]
+        known, values = self._pixel_gamma.get(level, (np.zeros(0, np.int64), np.zeros(0)))
+        wanted = np.unique(pixels)
+        missing = wanted[~np.isin(wanted, known, assume_unique=True)]
+        if len(missing):
+            computed = np.concatenate([self._compute_gamma(level, chunk)
+                                       for chunk in np.array_split(missing, max(1, len(missing) // 20000))])
+            known, values = np.concatenate([known, missing]), np.concatenate([values, computed])
+            order = np.argsort(known, kind="stable")
+            known, values = known[order], values[order]
+            self._pixel_gamma[level] = known, values
+        return values[np.searchsorted(known, pixels)]
 
     def _compute_gamma(self, level: int, pixels: np.ndarray) -> np.ndarray:
         nside = 2**level
