@@ -40,10 +40,10 @@ def find_suspect_tap(problem: SearchProblem, max_cells: float,
     best: SuspectTap | None = None
     for index in range(len(taps)):
         others = replace(problem, base_p_taps=np.delete(taps, index, axis=0))
-        cells = search(others, max_cells, cancel=cancel)
-        if cells is None or len(cells) == 0:
+        survivors = search(others, max_cells, cancel=cancel)
+        if survivors is None or len(survivors) == 0:
             continue
-        residual = _smallest_residual_m(problem, index, cells)
+        residual = _smallest_residual_m(problem, index, survivors.cells)
         if best is None or residual > best.distance_m:
             best = SuspectTap(index, residual)
     return best

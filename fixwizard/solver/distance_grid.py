@@ -12,6 +12,7 @@ import weakref
 import numpy as np
 
 from fixwizard.fixture import DistanceOracle
+from fixwizard.solver.interval_kernel import lattice_intervals_m
 
 MAX_VERTICES = 400_000
 MIN_SPACING_M = 0.0015
@@ -33,16 +34,16 @@ class DistanceGrid:
         self._values = oracle.signed_distance_m(vertices)
         self._value_error_m = float(np.max(oracle.error_bound_m(vertices)))
 
+    @property
+    def kernel_arguments(self) -> tuple:
+        """The lattice as ``interval_kernel`` takes it: low corner (m), spacing (m), shape, flat values (m), their
+        error (m), and the mesh's bounding box (m)."""
+        return (self._low, self._spacing, self._shape, self._values, self._value_error_m, self._mesh_low,
+                self._mesh_high)
+
     def interval_m(self, points_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Interval (m) holding the signed distance at each point."""
-        index = np.clip(np.rint((points_m - self._low) / self._spacing).astype(np.int64), 0, self._shape - 1)
-        value = self._values[np.ravel_multi_index(tuple(index.T), tuple(self._shape))]
-        offset = points_m - (self._low + index * self._spacing)
-        reach = np.sqrt(np.einsum("ij,ij->i", offset, offset)) + self._value_error_m
-        low, high = value - reach, value + reach
-        gap = np.maximum(np.maximum(self._mesh_low - points_m, points_m - self._mesh_high), 0.0)
-        gap_m = np.sqrt(np.einsum("ij,ij->i", gap, gap))
-        return np.where(gap_m > 0.0, np.maximum(low, gap_m), low), high
+        """Interval (m) holding the signed distance at each (N, 3) point."""
+        return lattice_intervals_m(np.ascontiguousarray(points_m, np.float64), *self.kernel_arguments)
 
 
 _GRIDS: "weakref.WeakKeyDictionary[DistanceOracle, DistanceGrid]" = weakref.WeakKeyDictionary()

@@ -1,26 +1,26 @@
 """Tighter bounds for the same cell budget: refine only the cells that decide the bounds.
 
 The bounds are maxima over cells, so only the outermost cells matter. Those within
-``OUTER_FRACTION`` of a maximum (the outermost ones only, if the budget cannot take them
-all) are split once more and their children filtered against every tap; the bounds are then the maxima over the untouched cells and the surviving
-children. Every pose of the consistent set lies in one of those, so the bounds stay
-guaranteed. Repeated for a few rounds within the unused part of the cell budget.
+``OUTER_FRACTION`` of a maximum (the outermost ones only, if the budget cannot take them all) are
+split once more and their children filtered against every tap; the bounds are then the maxima over
+the untouched cells and the surviving children. Every pose of the consistent set lies in one of
+those, so the bounds stay guaranteed. Repeated for a few rounds within the unused part of the cell
+budget.
 """
 
 import numpy as np
 
-from fixwizard.solver.cells import CellSet
 from fixwizard.solver.estimates import BoundCentre, cell_bound_figures
-from fixwizard.solver.search import SearchProblem, filter_cells, rotation_splits_first
+from fixwizard.solver.search import SearchProblem, Survivors, filter_cells, split
 
 OUTER_FRACTION = 0.9
 ROUNDS = 3
 
 
-def refined_largest_figures(problem: SearchProblem, cells: CellSet, centre: BoundCentre, fix_p_origin: np.ndarray,
+def refined_largest_figures(problem: SearchProblem, survivors: Survivors, centre: BoundCentre, fix_p_origin: np.ndarray,
                             budget: float) -> np.ndarray:
     """Largest (CAD-origin distance, rotation angle, point displacement) over the set, refined; see module doc."""
-    figures = cell_bound_figures(cells, centre, fix_p_origin, problem.fixture_radius_m)
+    figures = cell_bound_figures(survivors.cells, centre, fix_p_origin, problem.fixture_radius_m)
     settled = np.zeros(3)
     for _ in range(ROUNDS):
         largest = np.maximum(settled, figures.max(axis=1))
@@ -32,11 +32,11 @@ def refined_largest_figures(problem: SearchProblem, cells: CellSet, centre: Boun
             break
         if np.any(~outer):
             settled = np.maximum(settled, figures[:, ~outer].max(axis=1))
-        parents = cells.subset(outer)
-        children = parents.split_rotations() if rotation_splits_first(parents, problem) else parents.split_positions()
+        parents = survivors.subset(outer)
+        children = split(parents, problem)
         budget -= len(children)
-        cells = filter_cells(problem, children).cells
-        if len(cells) == 0:
+        survivors = filter_cells(problem, children, parents)
+        if len(survivors) == 0:
             return settled
-        figures = cell_bound_figures(cells, centre, fix_p_origin, problem.fixture_radius_m)
+        figures = cell_bound_figures(survivors.cells, centre, fix_p_origin, problem.fixture_radius_m)
     return np.maximum(settled, figures.max(axis=1))

@@ -52,10 +52,11 @@ def _verdict(base_p_taps: np.ndarray, mesh: Path, mesh_units: str, ball_diameter
     except FixwizardError as error:
         return MeshVerdict(mesh, "unreadable", 0, str(error))
     problem = SearchProblem(fixture.oracle, fixture.radius_m, base_p_taps, ball_diameter_m / 2.0, sample_bound_m)
-    cells = search(problem, max_cells, cancel=cancel)
-    if cells is None or len(cells) == 0:
+    survivors = search(problem, max_cells, cancel=cancel)
+    if survivors is None or len(survivors) == 0:
         return MeshVerdict(mesh, "ruled out", 0, "no pose of this mesh explains the taps")
-    return MeshVerdict(mesh, "fits", len(cells), f"{len(cells):,} cells of poses explain the taps at this budget")
+    count = len(survivors)
+    return MeshVerdict(mesh, "fits", count, f"{count:,} cells of poses explain the taps at this budget")
 
 
 def summary_lines(verdicts: list[MeshVerdict]) -> list[str]:
