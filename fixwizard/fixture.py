@@ -101,16 +101,17 @@ class DistanceOracle:
             self._corner_normals = vertex_normals[self._faces]
 
     @property
+    def mesh_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """The mesh as float64 vertices (V, 3) in m and triangles (F, 3) of vertex indices."""
+        return self._vertices, self._faces
+
+    @property
     def bounds_m(self) -> tuple[np.ndarray, np.ndarray]:
         """Corners (m) of the mesh's axis-aligned bounding box in its frame."""
         return self._vertices.min(axis=0), self._vertices.max(axis=0)
 
     def _query(self, points_m: np.ndarray) -> o3d.core.Tensor:
         return o3d.core.Tensor(np.asarray(points_m, np.float32).reshape(-1, 3))
-
-    def unsigned_distance_m(self, points_m: np.ndarray) -> np.ndarray:
-        """Distance (m) from each (N, 3) point to the surface."""
-        return self._scene.compute_distance(self._query(points_m)).numpy().astype(np.float64)
 
     def _pseudonormal_inside(self, points_m: np.ndarray, closest: np.ndarray, faces: np.ndarray) -> np.ndarray:
         corners = self._vertices[self._faces[faces]]
@@ -132,32 +133,44 @@ class DistanceOracle:
         normals[at_vertex] = self._corner_normals[faces[at_vertex], corner]
         return np.sum((points_m - closest) * normals, axis=1) < 0.0
 
-    def distance_and_inside(self, points_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Unsigned distance (m) and whether each point is inside the closed surface (False for open meshes)."""
-        points_m = np.asarray(points_m, np.float64).reshape(-1, 3)
-        if not self.signed:
-            return self.unsigned_distance_m(points_m), np.zeros(len(points_m), bool)
-        query = self._query(points_m)
-        result = self._scene.compute_closest_points(query)
-        closest = result["points"].numpy().astype(np.float64)
-        offsets = points_m - closest
-        distance = np.sqrt(np.einsum("ij,ij->i", offsets, offsets))
-        inside = np.einsum("ij,ij->i", offsets, result["primitive_normals"].numpy()) < 0.0
-        uv = result["primitive_uvs"].numpy()
-        near_feature = np.flatnonzero((uv.min(axis=1) <= self.FEATURE_MARGIN)
-                                      | (uv.sum(axis=1) >= 1.0 - self.FEATURE_MARGIN))
-        faces = result["primitive_ids"].numpy()[near_feature].astype(np.int64)
-        inside[near_feature] = self._pseudonormal_inside(points_m[near_feature], closest[near_feature], faces)
-        disagree = inside != (self._scene.compute_occupancy(query).numpy() > 0.5)
+    def _inside(self, points_m: np.ndarray, closest: np.ndarray, normals: np.ndarray, uvs: np.ndarray,
+                faces: np.ndarray) -> np.ndarray:
+        """Whether each point lies inside the closed surface, from its closest point, that face's normal and
+        barycentrics; cross-checked against ray parity, with the winding number settling disagreements."""
+        inside = np.einsum("ij,ij->i", points_m - closest, normals) < 0.0
+        near_feature = np.flatnonzero((uvs.min(axis=1) <= self.FEATURE_MARGIN)
+                                      | (uvs.sum(axis=1) >= 1.0 - self.FEATURE_MARGIN))
+        inside[near_feature] = self._pseudonormal_inside(points_m[near_feature], closest[near_feature],
+                                                         faces[near_feature])
+        disagree = inside != (self._scene.compute_occupancy(self._query(points_m)).numpy() > 0.5)
         if np.any(disagree):
             winding = igl.winding_number(self._vertices, self._faces, points_m[disagree])
             inside[disagree] = winding > 0.5
-        return distance, inside
+        return inside
+
+    def distance_and_face(self, points_m: np.ndarray,
+                          signed: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Distance (m) from each (N, 3) point to the surface, and the face holding its closest point.
+
+        The distance is negative inside the closed surface, for the points where ``signed`` is true (all by
+        default); it is unsigned for the others and everywhere on an open mesh.
+        """
+        points_m = np.asarray(points_m, np.float64).reshape(-1, 3)
+        result = self._scene.compute_closest_points(self._query(points_m))
+        closest = result["points"].numpy().astype(np.float64)
+        offsets = points_m - closest
+        distance = np.sqrt(np.einsum("ij,ij->i", offsets, offsets))
+        faces = result["primitive_ids"].numpy().astype(np.int64)
+        if self.signed:
+            rows = np.arange(len(points_m)) if signed is None else np.flatnonzero(signed)
+            inside = self._inside(points_m[rows], closest[rows], result["primitive_normals"].numpy()[rows],
+                                  result["primitive_uvs"].numpy()[rows], faces[rows])
+            distance[rows[inside]] *= -1.0
+        return distance, faces
 
     def signed_distance_m(self, points_m: np.ndarray) -> np.ndarray:
         """Signed distance (m, negative inside) where the mesh is closed; unsigned otherwise."""
-        distance, inside = self.distance_and_inside(points_m)
-        return np.where(inside, -distance, distance)
+        return self.distance_and_face(points_m)[0]
 
     def error_bound_m(self, points_m: np.ndarray) -> np.ndarray:
         """Bound ``b_eps`` (m) on the float32 error of each point's distance, from coordinate magnitudes."""

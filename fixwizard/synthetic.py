@@ -13,7 +13,7 @@ import trimesh
 CONTACT_TOLERANCE_M = 1e-9
 
 
-def _closest_on_triangles(points: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+def closest_on_triangles(points: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     """Closest points on triangles (a, b, c) to points, all (..., 3), by Voronoi regions (Ericson 5.1.5)."""
     ab, ac, ap = b - a, c - a, points - a
     d1, d2 = np.sum(ab * ap, -1), np.sum(ac * ap, -1)
@@ -44,7 +44,7 @@ def exact_distances_m(mesh: trimesh.Trimesh, points_m: np.ndarray, batch: int = 
     distances = np.empty(len(points_m))
     for first in range(0, len(points_m), batch):
         block = points_m[first:first + batch, None, :]
-        closest = _closest_on_triangles(block, triangles[None, :, 0], triangles[None, :, 1], triangles[None, :, 2])
+        closest = closest_on_triangles(block, triangles[None, :, 0], triangles[None, :, 1], triangles[None, :, 2])
         distances[first:first + batch] = np.sqrt(np.min(np.sum((closest - block) ** 2, axis=-1), axis=1))
     return distances
 
@@ -70,7 +70,8 @@ def touching_ball_contacts(mesh: trimesh.Trimesh, count: int, ball_radius_m: flo
         u, v = rng.random((2, len(faces)))
         flip = u + v > 1
         u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
-        contacts = corners[:, 0] + u[:, None] * (corners[:, 1] - corners[:, 0]) + v[:, None] * (corners[:, 2] - corners[:, 0])
+        contacts = (corners[:, 0] + u[:, None] * (corners[:, 1] - corners[:, 0])
+                    + v[:, None] * (corners[:, 2] - corners[:, 0]))
         candidates = contacts + ball_radius_m * mesh.face_normals[faces]
         distance = exact_distances_m(mesh, candidates)
         good = np.abs(distance - ball_radius_m) <= CONTACT_TOLERANCE_M

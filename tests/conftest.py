@@ -1,5 +1,9 @@
 """Shared test helpers: where the paper's real data lives, and how to skip without it."""
 
+import atexit
+import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -7,6 +11,10 @@ import pytest
 
 from fixwizard.geometry.se3 import read_pose_dir, read_pose_file
 from fixwizard.workflow.import_poses import ball_centres_m
+
+# Distance lattices are cached on disk; tests (and the programs they start) keep theirs in a fresh folder.
+os.environ["FIXWIZARD_CACHE"] = tempfile.mkdtemp(prefix="fixwizard-cache-")
+atexit.register(shutil.rmtree, os.environ["FIXWIZARD_CACHE"], ignore_errors=True)
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data" / "matlab-logo"

@@ -95,7 +95,7 @@ def test_a_tap_5cm_off_the_fixture_is_inconsistent_and_named(bracket, capsys):
     off = taps.copy()
     off[6] += np.array([0.0, 0.0, 0.05])
     write_points(folder / "off.yaml", off)
-    args = replaced(solve_args(folder, "off.yaml"), "1e5", "1e6")
+    args = replaced(solve_args(folder, "off.yaml"), "1e5", "8e6")
     assert main(args) == 2
     out = capsys.readouterr().out
     assert "status: inconsistent" in out and "Tap 7" in out

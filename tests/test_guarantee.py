@@ -8,6 +8,8 @@ queries, and check that the true cell survives every level and that bounds compu
 the final cells hold the true pose.
 """
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -15,7 +17,8 @@ from scipy.spatial.transform import Rotation
 from fixwizard.geometry.se3 import invert, make_transform, transform_points
 from fixwizard.solver.cells import root_cells
 from fixwizard.solver.estimates import bound_centre, cell_bound_figures
-from fixwizard.solver.search import SearchProblem, filter_cells, rotation_splits_first, start_position_grid
+from fixwizard.solver.search import (SearchProblem, add_taps, filter_cells, rotation_splits_first, search,
+                                     start_position_grid)
 from fixwizard.solver.solve import solve
 from fixwizard.synthetic import bounded_noise, touching_ball_centres, touching_ball_contacts
 from shapes import SHAPES, as_fixture
@@ -111,7 +114,7 @@ def symmetric_case(name: str, seed: int):
     return fixture, base_T_cad, transform_points(base_T_cad, centres) + bounded_noise(len(centres), 0.0005, rng)
 
 
-@pytest.mark.parametrize("name, symmetries, max_cells", [("brick", 4, 1e6), ("triangular_prism", 6, 1e6)])
+@pytest.mark.parametrize("name, symmetries, max_cells", [("brick", 4, 8e6), ("triangular_prism", 6, 8e6)])
 def test_discrete_symmetry_gives_one_mode_per_symmetric_pose(name, symmetries, max_cells):
     fixture, base_T_cad, taps = symmetric_case(name, seed=3)
     solution = solve(fixture, taps, 0.003, 0.0005, max_cells=max_cells, max_samples=5000)
@@ -128,7 +131,37 @@ def test_an_asymmetric_fixture_tapped_all_over_is_unique():
     rng = np.random.default_rng(5)
     base_T_cad = make_transform(Rotation.random(random_state=5), [0.4, 0.1, 0.2])
     taps = transform_points(base_T_cad, touching_ball_centres(fixture.mesh, 15, 0.0015, rng))
-    solution = solve(fixture, taps + bounded_noise(15, 0.0005, rng), 0.003, 0.0005, max_cells=3e5)
+    solution = solve(fixture, taps + bounded_noise(15, 0.0005, rng), 0.003, 0.0005, max_cells=2.4e6)
     assert solution.status == "unique"
     assert solution.bounds.position_m < 0.005
     assert np.linalg.norm(solution.base_T_cad[:3, 3] - base_T_cad[:3, 3]) < 0.002
+
+
+def ancestors_in(cells, coarse) -> np.ndarray:
+    """Whether each cell of ``cells`` lies inside some cell of ``coarse`` (at the same or coarser levels)."""
+    rotation_steps = cells.rotation_level - coarse.rotation_level
+    position_steps = cells.position_level - coarse.position_level
+    rotations = cells.rotation_grid.ancestors(cells.rotation_level, cells.rotation_cells, coarse.rotation_level)
+    positions = cells.position_cells >> position_steps
+    assert rotation_steps >= 0 and position_steps >= 0
+    known = {(int(r), *map(int, p)) for r, p in zip(coarse.rotation_cells, coarse.position_cells)}
+    return np.array([(int(r), *map(int, p)) in known for r, p in zip(rotations, positions)])
+
+
+@pytest.mark.parametrize("seed", range(12))
+@pytest.mark.parametrize("name", sorted(SHAPES))
+def test_adding_taps_only_removes_poses_and_keeps_the_true_one(name, seed):
+    fixture, base_T_cad, taps, ball_diameter, sample_bound, max_cells = random_case(name, seed)
+    base_T_fix = base_T_cad @ invert(fixture.fix_T_cad)
+    problem = SearchProblem(fixture.oracle, fixture.radius_m, taps, ball_diameter / 2, sample_bound)
+    earlier = search(replace(problem, base_p_taps=taps[:-2]), max_cells)
+    later = add_taps(problem, earlier, max_cells)
+    assert np.count_nonzero(true_cell_mask(later.final.cells, base_T_fix)) == 1
+    assert np.all(ancestors_in(later.final.cells, earlier.final.cells))
+    solution = solve(fixture, taps, ball_diameter, sample_bound, max_cells=max_cells, max_samples=500,
+                     previous=solve(fixture, taps[:-2], ball_diameter, sample_bound, max_cells=max_cells,
+                                    max_samples=500))
+    assert solution.contains(base_T_cad)
+    centre = solution.bounds.base_T_cad_center
+    assert np.linalg.norm(base_T_cad[:3, 3] - centre[:3, 3]) <= solution.bounds.position_m
+    assert Rotation.from_matrix(centre[:3, :3].T @ base_T_cad[:3, :3]).magnitude() <= solution.bounds.rotation_rad

@@ -369,7 +369,7 @@ def test_text_replaces_dots_and_labels_keep_apart():
 
 @pytest.fixture(scope="module")
 def demo_solution():
-    return solve(demo_fixture(), load_points(DEMO_TAPS), 0.003, 0.001, max_cells=2e5)
+    return solve(demo_fixture(), load_points(DEMO_TAPS), 0.003, 0.001, max_cells=1.6e6)
 
 
 def test_the_demo_solution_draws_both_pictures(demo_solution):
@@ -396,6 +396,6 @@ def test_orientations_join_the_mode_whose_pose_is_nearest(demo_solution):
 
 
 def test_an_inconsistent_solution_has_no_rotation_map(demo_solution):
-    inconsistent = dataclasses.replace(demo_solution, status="inconsistent", base_T_cad=None, cells=None, modes=[])
+    inconsistent = dataclasses.replace(demo_solution, status="inconsistent", base_T_cad=None, tree=None, modes=[])
     with pytest.raises(ValueError, match="inconsistent"):
         rotation_map_for_solution(inconsistent, 78, 14)

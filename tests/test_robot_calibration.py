@@ -103,7 +103,7 @@ def test_the_calibrated_tip_locates_the_fixture(calibrated, fixture, tmp_path):
         base_p_taps = session.base_p_taps
     assert len(base_p_taps) == 12
     solution = solve(fixture, base_p_taps, calibration.ball_diameter_m, sample_bound_m=calibration.sample_bound_m,
-                     max_cells=1e6, max_samples=2000)
+                     max_cells=8e6, max_samples=2000)
     assert solution.status == "unique"
     assert solution.contains(cell.truth.base_T_cad)
     assert solution.bounds.max_point_displacement_m < 0.01  # no fixture point moves more than 1 cm in the set

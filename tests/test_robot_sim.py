@@ -85,7 +85,7 @@ def test_twelve_spread_taps_calibrate_the_bundled_fixture_to_a_few_millimetres()
         poses.append(cell.tap().base_T_tcp_contact)
     centres = ball_centres_m(np.array(poses), cell.truth.tcp_p_tip_m)
     solution = solve(fixture, centres, cell.truth.ball_diameter_m, sample_bound_m=FK_BOUND_M + 2e-5,
-                     max_cells=1e6, max_samples=2000)
+                     max_cells=8e6, max_samples=2000)
     assert solution.status == "unique"
     assert solution.contains(cell.truth.base_T_cad)
     assert solution.bounds.position_m < 0.006

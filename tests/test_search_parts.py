@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+import trimesh
 from scipy.spatial.transform import Rotation
 
 from fixwizard.geometry.octree import PositionGrid
@@ -21,6 +22,21 @@ def test_distance_lattice_interval_holds_the_exact_signed_distance(name):
     error = fixture.oracle.error_bound_m(points)
     low, high = grid.interval_m(points)
     assert np.all(exact + error >= low) and np.all(exact - error <= high)
+
+
+def test_a_cached_lattice_is_the_computed_one_and_a_damaged_cache_file_is_rebuilt(tmp_path, monkeypatch):
+    monkeypatch.setenv("FIXWIZARD_CACHE", str(tmp_path))
+    fixture = as_fixture("l_prism")
+    built = DistanceGrid(fixture.oracle)
+    [cached] = tmp_path.glob("lattice-*.npz")
+    loaded = DistanceGrid(fixture.oracle)
+    for mine, theirs in zip(built.kernel_arguments, loaded.kernel_arguments):
+        assert np.array_equal(mine, theirs)
+    cached.write_bytes(b"not a lattice")
+    rebuilt = DistanceGrid(fixture.oracle)
+    assert np.array_equal(rebuilt.kernel_arguments[3], built.kernel_arguments[3])
+    with np.load(cached) as stored:
+        assert np.array_equal(stored["values"], built.kernel_arguments[3])
 
 
 def test_cell_set_split_and_subset_keep_each_pose_in_exactly_one_cell():
@@ -77,3 +93,21 @@ def test_float32_interval_ends_are_rounded_outward():
     values = np.random.default_rng(3).normal(size=100_000) * np.logspace(-6, 0, 100_000)
     assert np.all(_round_down_f32(values).astype(np.float64) <= values)
     assert np.all(_round_up_f32(values).astype(np.float64) >= values)
+
+
+@pytest.mark.parametrize("name", sorted(SHAPES))
+def test_the_distance_to_any_one_face_bounds_the_distance_from_above_and_is_exact_for_its_face(name):
+    from fixwizard.solver.interval_kernel import FACE_MARGIN_M, face_distances_m
+    from fixwizard.synthetic import closest_on_triangles, exact_distances_m
+
+    fixture = as_fixture(name)
+    rng = np.random.default_rng(4)
+    points = rng.uniform(-1.5, 1.5, (2000, 3)) * fixture.radius_m
+    vertices, triangles = fixture.oracle.mesh_arrays
+    faces = rng.integers(0, len(triangles), len(points))
+    corners = vertices[triangles[faces]]
+    on_face = np.linalg.norm(points - closest_on_triangles(points, corners[:, 0], corners[:, 1], corners[:, 2]), axis=1)
+    bound = face_distances_m(points, faces, fixture.oracle.mesh_arrays)
+    assert np.all(bound >= on_face) and np.all(bound - on_face <= 2 * FACE_MARGIN_M)
+    surface = exact_distances_m(trimesh.Trimesh(vertices, triangles, process=False), points)
+    assert np.all(bound >= surface)

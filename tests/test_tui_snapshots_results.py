@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from pilot_wait import until
-from tui_cell import ScreenHost, point_above_fixture_m, record_spread_taps, wizard_context
+from tui_cell import ScreenHost, point_above_fixture_m, record_spread_taps, symmetric_cell, wizard_context
 
 from fixwizard.solver.search import SearchCancelled, SearchProgress
 from fixwizard.solver.solve import solve
@@ -28,10 +28,12 @@ def pinned_clocks(monkeypatch):
     monkeypatch.setattr(SolveScreen, "clock", staticmethod(lambda: 100.0))
 
 
-def demo_context(folder: Path, taps: int, max_cells: float, in_the_air: bool = False, solved: bool = True):
-    """A demo-cell context with ``taps`` spread taps (and one 5 cm above the fixture), solved at ``max_cells``
-    with the solve time pinned; reports go to ./reports (shown, never written here)."""
-    context = wizard_context(folder, max_cells=max_cells)
+def demo_context(folder: Path, taps: int, max_cells: float, in_the_air: bool = False, solved: bool = True,
+                 symmetric: bool = False):
+    """A demo-cell context (or a brick's, ``symmetric``) with ``taps`` spread taps (and one 5 cm above the
+    fixture), solved at ``max_cells`` with the solve time pinned; reports go to ./reports (shown, never written
+    here)."""
+    context = wizard_context(folder, max_cells=max_cells, cell=symmetric_cell() if symmetric else None)
     context.reports_dir = Path("reports")
     record_spread_taps(context, taps)
     if in_the_air:
@@ -46,13 +48,13 @@ def demo_context(folder: Path, taps: int, max_cells: float, in_the_air: bool = F
 
 @pytest.fixture(scope="module")
 def unique(tmp_path_factory):
-    context = demo_context(tmp_path_factory.mktemp("unique"), 12, 1e6)
+    context = demo_context(tmp_path_factory.mktemp("unique"), 12, 8e6)
     yield context
     context.session.release()
 
 
 def test_sampling_screen_after_eight_taps(snap_compare, tmp_path):
-    context = demo_context(tmp_path, 8, 1e6, solved=False)
+    context = demo_context(tmp_path, 8, 8e6, solved=False)
 
     async def live_check_done(pilot) -> None:
         screen = pilot.app.screen
@@ -91,14 +93,14 @@ def test_results_screen_of_a_unique_pose(snap_compare, unique, view):
 
 
 def test_results_screen_of_an_inconsistent_result(snap_compare, tmp_path):
-    context = demo_context(tmp_path, 12, 3e5, in_the_air=True)
+    context = demo_context(tmp_path, 12, 2.4e6, in_the_air=True)
     assert context.solution.status == "inconsistent"
     assert snap_compare(ScreenHost(lambda: ResultsScreen(context)), terminal_size=SIZE)
     context.session.release()
 
 
 def test_results_screen_of_an_ambiguous_result(snap_compare, tmp_path):
-    context = demo_context(tmp_path, 6, 1e6)
+    context = demo_context(tmp_path, 8, 8e6, symmetric=True)
     assert context.solution.status == "ambiguous"
     assert snap_compare(ScreenHost(lambda: ResultsScreen(context)), terminal_size=SIZE)
     context.session.release()

@@ -24,7 +24,7 @@ CELL_SEED = 0
 HANDS_SEED = 1
 # The cell's forward-kinematics error bound (0.3 mm) with a margin, as a tip calibration would propose.
 SAMPLE_BOUND_M = 0.00035
-TEST_MAX_CELLS = 1e6
+TEST_MAX_CELLS = 8e6
 
 
 def truth_calibration(cell: SimulatedCell) -> TipCalibration:
@@ -39,10 +39,11 @@ def truth_calibration(cell: SimulatedCell) -> TipCalibration:
         tip_standard_error_m=np.zeros(3), steps={})
 
 
-def wizard_context(folder: Path, cell_seed: int = CELL_SEED, max_cells: float = TEST_MAX_CELLS) -> WizardContext:
-    """A simulated demo cell (connected), the operator's hands, a truth calibration and a new session in
-    ``folder``."""
-    cell = demo_cell(cell_seed)
+def wizard_context(folder: Path, cell_seed: int = CELL_SEED, max_cells: float = TEST_MAX_CELLS,
+                   cell: SimulatedCell | None = None) -> WizardContext:
+    """A simulated demo cell (connected; or ``cell``), the operator's hands, a truth calibration and a new
+    session in ``folder``."""
+    cell = demo_cell(cell_seed) if cell is None else cell
     cell.connect()
     calibration = truth_calibration(cell)
     session = SamplingSession.create(folder / "sessions" / "demo.jsonl",
@@ -53,6 +54,13 @@ def wizard_context(folder: Path, cell_seed: int = CELL_SEED, max_cells: float = 
     return WizardContext(robot=cell, robot_name="simulated cell", simulated=True,
                          hands=SimulatedHands(cell, seed=HANDS_SEED), reports_dir=folder / "reports",
                          fixture=cell.fixture, calibration=calibration, session=session, max_cells=max_cells)
+
+
+def symmetric_cell() -> SimulatedCell:
+    """A cell holding a plain brick: spread taps cannot tell its 180-degree turns apart."""
+    from shapes import as_fixture
+
+    return SimulatedCell.with_fixture(as_fixture("brick"), seed=CELL_SEED)
 
 
 def cell_of(context: WizardContext) -> SimulatedCell:

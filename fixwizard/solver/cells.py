@@ -69,6 +69,17 @@ class CellSet:
         return CellSet(self.rotation_grid, self.position_grid, self.rotation_level, self.position_level,
                        self.rotation_ids[used], remap[index], self.position_cells[mask])
 
+    @staticmethod
+    def concatenate(parts: list["CellSet"]) -> "CellSet":
+        """One set holding the cells of sets at the same levels of the same grids (a rotation cell used by several
+        parts is listed once per part)."""
+        first = parts[0]
+        offsets = np.cumsum([0] + [len(part.rotation_ids) for part in parts[:-1]])
+        return CellSet(first.rotation_grid, first.position_grid, first.rotation_level, first.position_level,
+                       np.concatenate([part.rotation_ids for part in parts]),
+                       np.concatenate([part.rotation_index + offset for part, offset in zip(parts, offsets)]),
+                       np.concatenate([part.position_cells for part in parts]))
+
     def split_rotations(self) -> "CellSet":
         """Every cell's 8 children in rotation (next rotation level), grouped per parent."""
         children = self.rotation_grid.children(self.rotation_level, self.rotation_ids)

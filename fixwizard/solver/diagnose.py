@@ -40,7 +40,8 @@ def find_suspect_tap(problem: SearchProblem, max_cells: float,
     best: SuspectTap | None = None
     for index in range(len(taps)):
         others = replace(problem, base_p_taps=np.delete(taps, index, axis=0))
-        survivors = search(others, max_cells, cancel=cancel)
+        tree = search(others, max_cells, cancel=cancel)
+        survivors = None if tree is None else tree.final
         if survivors is None or len(survivors) == 0:
             continue
         residual = _smallest_residual_m(problem, index, survivors.cells)

@@ -5,18 +5,38 @@ value at any lattice vertex ``v``; the lookup takes the nearest vertex (clamped 
 lattice box) and adds the lattice values' own float32 error. Outside the lattice box the
 point also lies outside the solid, at least as far from the surface as from the mesh's
 bounding box.
+
+Building a lattice takes a second of Open3D queries, so lattices are kept on disk between runs
+(``cache_folder()``), named by a hash of everything they depend on: the mesh's vertices and
+triangles, the lattice's geometry, the float32 error model and the file format. A file that does
+not match its name or cannot be read is rebuilt.
 """
 
+import hashlib
+import io
+import os
 import weakref
+import zipfile
+from pathlib import Path
 
 import numpy as np
 
-from fixwizard.fixture import DistanceOracle
+from fixwizard.atomic import write_bytes_atomic
+from fixwizard.fixture import FLOAT32_ULPS, DistanceOracle
 from fixwizard.solver.interval_kernel import lattice_intervals_m
 
 MAX_VERTICES = 400_000
 MIN_SPACING_M = 0.0015
 MARGIN_M = 0.01
+CACHE_FORMAT = 1
+
+
+def cache_folder() -> Path:
+    """Where lattices are kept: ``$FIXWIZARD_CACHE``, else ``$XDG_CACHE_HOME/fixwizard``, else
+    ``~/.cache/fixwizard``."""
+    if os.environ.get("FIXWIZARD_CACHE"):
+        return Path(os.environ["FIXWIZARD_CACHE"])
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "fixwizard"
 
 
 class DistanceGrid:
@@ -31,19 +51,54 @@ class DistanceGrid:
         self._low, self._spacing = low, spacing
         axes = [low[axis] + spacing * np.arange(self._shape[axis]) for axis in range(3)]
         vertices = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-        self._values = oracle.signed_distance_m(vertices)
-        self._value_error_m = float(np.max(oracle.error_bound_m(vertices)))
+        key = self._key(oracle)
+        path = cache_folder() / f"lattice-{key}.npz"
+        if not self._load(path, key, len(vertices)):
+            self._values, self._faces = oracle.distance_and_face(vertices)
+            self._value_error_m = float(np.max(oracle.error_bound_m(vertices)))
+            self._store(path, key)
+
+    def _key(self, oracle: DistanceOracle) -> str:
+        mesh_vertices, triangles = oracle.mesh_arrays
+        digest = hashlib.sha256()
+        for part in (mesh_vertices, triangles, self._low, np.array([self._spacing]), self._shape):
+            digest.update(np.ascontiguousarray(part).tobytes())
+        digest.update(repr((oracle.signed, FLOAT32_ULPS, CACHE_FORMAT)).encode())
+        return digest.hexdigest()
+
+    def _load(self, path: Path, key: str, count: int) -> bool:
+        """Take values, faces and error from a cached lattice; False when there is none fit to use."""
+        try:
+            with np.load(path) as stored:
+                values, faces, error = stored["values"], stored["faces"], float(stored["value_error_m"])
+                stored_key = str(stored["key"])
+        except (OSError, EOFError, KeyError, ValueError, zipfile.BadZipFile):
+            return False
+        if stored_key != key or values.shape != (count,) or faces.shape != (count,) or not np.all(np.isfinite(values)):
+            return False
+        self._values, self._faces, self._value_error_m = values.astype(np.float64), faces.astype(np.int64), error
+        return True
+
+    def _store(self, path: Path, key: str) -> None:
+        """Keep the lattice for the next run; a cache that cannot be written only costs time."""
+        buffer = io.BytesIO()
+        np.savez(buffer, values=self._values, faces=self._faces.astype(np.int32), value_error_m=self._value_error_m,
+                 key=key)
+        try:
+            write_bytes_atomic(path, buffer.getvalue())
+        except OSError:
+            pass
 
     @property
     def kernel_arguments(self) -> tuple:
         """The lattice as ``interval_kernel`` takes it: low corner (m), spacing (m), shape, flat values (m), their
-        error (m), and the mesh's bounding box (m)."""
+        error (m), the mesh's bounding box (m), and the face closest to each vertex."""
         return (self._low, self._spacing, self._shape, self._values, self._value_error_m, self._mesh_low,
-                self._mesh_high)
+                self._mesh_high, self._faces)
 
     def interval_m(self, points_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Interval (m) holding the signed distance at each (N, 3) point."""
-        return lattice_intervals_m(np.ascontiguousarray(points_m, np.float64), *self.kernel_arguments)
+        return lattice_intervals_m(np.ascontiguousarray(points_m, np.float64), self.kernel_arguments)
 
 
 _GRIDS: "weakref.WeakKeyDictionary[DistanceOracle, DistanceGrid]" = weakref.WeakKeyDictionary()

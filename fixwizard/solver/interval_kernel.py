@@ -16,7 +16,16 @@ import math
 import numba
 import numpy as np
 
+# OpenMP where the system has it, else Numba's own work queue, which never fails: TBB, whose version
+# check warns on the terminal the wizard draws on, is never tried. Callers run one parallel kernel at
+# a time (the work queue is not thread-safe).
+numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
+
 NOT_REJECTED = -1
+# Added to a distance computed in float64 from float64 vertices: far above its rounding error (about
+# 1e-15 m for sub-metre coordinates), far below anything that matters to a bound.
+FACE_MARGIN_M = 1e-9
+BLOCK_CELLS = 4096  # cells per parallel work item
 
 
 @numba.njit(nogil=True, cache=True, inline="always")
@@ -42,10 +51,49 @@ def _straddles(low: float, high: float, band_low: float, band_high: float) -> bo
 
 
 @numba.njit(nogil=True, cache=True)
-def _lattice_interval_m(x0: float, x1: float, x2: float, lattice_low_m: np.ndarray, spacing_m: float,
-                        shape: np.ndarray, values_m: np.ndarray, value_error_m: float, mesh_low_m: np.ndarray,
-                        mesh_high_m: np.ndarray) -> tuple[float, float]:
-    """``DistanceGrid.interval_m`` for one point (m, fixture frame)."""
+def _face_distance_m(x0: float, x1: float, x2: float, face: int, mesh: tuple) -> float:
+    """Distance (m) from a point to one triangle of ``mesh = (vertices (V, 3) m, triangles (F, 3))``, plus
+    ``FACE_MARGIN_M``: an upper bound on the point's distance to the whole surface. Closest point by Voronoi
+    regions (Ericson 5.1.5); every branch returns a point of the triangle, so rounding cannot break the bound."""
+    vertices, triangles = mesh
+    a, b, c = vertices[triangles[face, 0]], vertices[triangles[face, 1]], vertices[triangles[face, 2]]
+    ab0, ab1, ab2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    ac0, ac1, ac2 = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+    d1 = ab0 * (x0 - a[0]) + ab1 * (x1 - a[1]) + ab2 * (x2 - a[2])
+    d2 = ac0 * (x0 - a[0]) + ac1 * (x1 - a[1]) + ac2 * (x2 - a[2])
+    d3 = ab0 * (x0 - b[0]) + ab1 * (x1 - b[1]) + ab2 * (x2 - b[2])
+    d4 = ac0 * (x0 - b[0]) + ac1 * (x1 - b[1]) + ac2 * (x2 - b[2])
+    d5 = ab0 * (x0 - c[0]) + ab1 * (x1 - c[1]) + ab2 * (x2 - c[2])
+    d6 = ac0 * (x0 - c[0]) + ac1 * (x1 - c[1]) + ac2 * (x2 - c[2])
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    v = w = 0.0
+    if d1 <= 0.0 and d2 <= 0.0:
+        pass
+    elif d3 >= 0.0 and d4 <= d3:
+        v = 1.0
+    elif d6 >= 0.0 and d5 <= d6:
+        w = 1.0
+    elif vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        v = min(max(d1 / (d1 - d3), 0.0), 1.0)
+    elif vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        w = min(max(d2 / (d2 - d6), 0.0), 1.0)
+    elif va <= 0.0 and d4 - d3 >= 0.0 and d5 - d6 >= 0.0:
+        w = min(max((d4 - d3) / ((d4 - d3) + (d5 - d6)), 0.0), 1.0)
+        v = 1.0 - w
+    else:
+        v, w = vb / (va + vb + vc), vc / (va + vb + vc)
+        if not (v >= 0.0 and w >= 0.0 and v + w <= 1.0):
+            v = w = 0.0
+    e0 = x0 - (a[0] + v * ab0 + w * ac0)
+    e1 = x1 - (a[1] + v * ab1 + w * ac1)
+    e2 = x2 - (a[2] + v * ab2 + w * ac2)
+    return math.sqrt(e0 * e0 + e1 * e1 + e2 * e2) + FACE_MARGIN_M
+
+
+@numba.njit(nogil=True, cache=True)
+def _lattice_interval_m(x0: float, x1: float, x2: float, lattice: tuple) -> tuple[float, float, int]:
+    """``DistanceGrid.interval_m`` for one point (m, fixture frame), and the face closest to its lattice vertex."""
+    lattice_low_m, spacing_m, shape, values_m, value_error_m, mesh_low_m, mesh_high_m, faces = lattice
     point = (x0, x1, x2)
     flat = 0
     reach_sq = 0.0
@@ -62,41 +110,61 @@ def _lattice_interval_m(x0: float, x1: float, x2: float, lattice_low_m: np.ndarr
     low = values_m[flat] - reach
     if gap_sq > 0.0:
         low = max(low, math.sqrt(gap_sq))
-    return low, values_m[flat] + reach
+    return low, values_m[flat] + reach, faces[flat]
 
 
 @numba.njit(nogil=True, cache=True)
-def lattice_intervals_m(points_m: np.ndarray, lattice_low_m: np.ndarray, spacing_m: float, shape: np.ndarray,
-                        values_m: np.ndarray, value_error_m: float, mesh_low_m: np.ndarray,
-                        mesh_high_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def lattice_intervals_m(points_m: np.ndarray, lattice: tuple) -> tuple[np.ndarray, np.ndarray]:
     """``_lattice_interval_m`` of each (N, 3) point: the intervals' low and high ends (m)."""
     low = np.empty(len(points_m))
     high = np.empty(len(points_m))
     for row in range(len(points_m)):
-        low[row], high[row] = _lattice_interval_m(points_m[row, 0], points_m[row, 1], points_m[row, 2], lattice_low_m,
-                                                  spacing_m, shape, values_m, value_error_m, mesh_low_m, mesh_high_m)
+        low[row], high[row], _ = _lattice_interval_m(points_m[row, 0], points_m[row, 1], points_m[row, 2], lattice)
     return low, high
 
 
 @numba.njit(nogil=True, cache=True)
-def cheap_pass(fix_R_base: np.ndarray, rotation_index: np.ndarray, base_p_centres: np.ndarray, chords: np.ndarray,
-               base_p_taps: np.ndarray, tap_order: np.ndarray, ball_radius_m: float, sample_bound_m: float,
-               position_bound_m: float, lever_cap_m: float, first: int, parent_fix_R_base: np.ndarray,
-               parent_rotation_index: np.ndarray, parent_rotated_positions: np.ndarray, parent_low_m: np.ndarray,
-               parent_high_m: np.ndarray, lattice_low_m: np.ndarray, lattice_spacing_m: float, lattice_shape:
-               np.ndarray, lattice_values_m: np.ndarray, lattice_error_m: float, mesh_low_m: np.ndarray, mesh_high_m:
-               np.ndarray, rotated_positions: np.ndarray, low_m: np.ndarray, high_m: np.ndarray, straddling: np.ndarray,
-               rejected_by: np.ndarray) -> None:
-    """Cheap test of cells ``first .. first + n`` of a level against every tap, in ``tap_order``.
+def face_distances_m(points_m: np.ndarray, faces: np.ndarray, mesh: tuple) -> np.ndarray:
+    """``_face_distance_m`` of each (N, 3) point to its face."""
+    distances = np.empty(len(points_m))
+    for row in range(len(points_m)):
+        distances[row] = _face_distance_m(points_m[row, 0], points_m[row, 1], points_m[row, 2], faces[row], mesh)
+    return distances
 
-    Cells: ``fix_R_base[rotation_index]`` (R_c^T), ``base_p_centres`` (n, 3, m), ``chords[rotation_index]``.
-    Parents (cell ``k``'s parent is ``k // 8``; empty ``parent_low_m`` at the root level): frames,
-    ``R^T t`` and float32 intervals (parents, taps). Writes ``rotated_positions`` (n, 3), the cells'
-    intervals ``low_m``/``high_m`` (n, taps) and ``straddling`` flags for the taps tested, and
-    ``rejected_by``: the tap that rejected each cell or ``NOT_REJECTED``.
+
+@numba.njit(nogil=True, cache=True, parallel=True)
+def cheap_pass(cells: tuple, taps: tuple, band: tuple, parent_index: np.ndarray, parents: tuple, lattice: tuple,
+               mesh: tuple, out: tuple) -> None:
+    """``_cheap_pass_range`` over all cells, in blocks spread over the cores."""
+    count = len(cells[1])
+    blocks = (count + BLOCK_CELLS - 1) // BLOCK_CELLS
+    for block in numba.prange(blocks):
+        _cheap_pass_range(block * BLOCK_CELLS, min(count, (block + 1) * BLOCK_CELLS), cells, taps, band,
+                          parent_index, parents, lattice, mesh, out)
+
+
+@numba.njit(nogil=True, cache=True)
+def _cheap_pass_range(start: int, stop: int, cells: tuple, taps: tuple, band: tuple, parent_index: np.ndarray,
+                      parents: tuple, lattice: tuple, mesh: tuple, out: tuple) -> None:
+    """Cheap test of cells ``start .. stop`` of a chunk of ``n`` cells against every tap, in order.
+
+    ``cells = (fix_R_base (U, 3, 3), rotation_index (n,), base_p_centres (n, 3) m, chords (U,))``;
+    ``taps = (base_p_taps (T, 3) m, tap_order)``; ``band = (ball_radius, sample_bound, position_bound,
+    lever_cap)`` in m. ``parents = (fix_R_base, rotation_index, rotated_positions, low, high, faces)``
+    (cell ``k``'s parent is row ``parent_index[k]``; no rows at the root level); intervals are float32
+    (parents, T).
+    ``lattice``: ``DistanceGrid.kernel_arguments``; ``mesh``: float64 vertices and triangles.
+    ``out = (rotated_positions (n, 3), low (n, T), high, faces, straddling, rejected_by (n,))``: per
+    tap tested, the interval, the face whose distance bounds it from above, and whether it straddles a
+    band edge; the tap that rejected each cell or ``NOT_REJECTED``.
     """
-    has_parents = parent_low_m.shape[0] > 0
-    for cell in range(len(rotation_index)):
+    fix_R_base, rotation_index, base_p_centres, chords = cells
+    base_p_taps, tap_order = taps
+    ball_radius_m, sample_bound_m, position_bound_m, lever_cap_m = band
+    parent_fix_R_base, parent_rotation_index, parent_rotated_positions, parent_low, parent_high, parent_faces = parents
+    rotated_positions, low_m, high_m, faces_out, straddling, rejected_by = out
+    has_parents = parent_low.shape[0] > 0
+    for cell in range(start, stop):
         rotation = fix_R_base[rotation_index[cell]]
         centre = base_p_centres[cell]
         t0 = rotation[0, 0] * centre[0] + rotation[0, 1] * centre[1] + rotation[0, 2] * centre[2]
@@ -104,7 +172,7 @@ def cheap_pass(fix_R_base: np.ndarray, rotation_index: np.ndarray, base_p_centre
         t2 = rotation[2, 0] * centre[0] + rotation[2, 1] * centre[1] + rotation[2, 2] * centre[2]
         rotated_positions[cell, 0], rotated_positions[cell, 1], rotated_positions[cell, 2] = t0, t1, t2
         chord = chords[rotation_index[cell]]
-        parent = (first + cell) // 8
+        parent = parent_index[cell]
         rejected_by[cell] = NOT_REJECTED
         for tap in tap_order:
             p = base_p_taps[tap]
@@ -113,7 +181,7 @@ def cheap_pass(fix_R_base: np.ndarray, rotation_index: np.ndarray, base_p_centre
             x2 = rotation[2, 0] * p[0] + rotation[2, 1] * p[1] + rotation[2, 2] * p[2] - t2
             tolerance = _tolerance_m(x0, x1, x2, chord, sample_bound_m, position_bound_m, lever_cap_m)
             band_low, band_high = ball_radius_m - tolerance, ball_radius_m + tolerance
-            low, high = -np.inf, np.inf
+            low, high, face = -np.inf, np.inf, -1
             if has_parents:
                 parent_rotation = parent_fix_R_base[parent_rotation_index[parent]]
                 shift_sq = 0.0
@@ -123,39 +191,50 @@ def cheap_pass(fix_R_base: np.ndarray, rotation_index: np.ndarray, base_p_centre
                     delta = (x0, x1, x2)[axis] - parent_x
                     shift_sq += delta * delta
                 shift = math.sqrt(shift_sq)
-                low = parent_low_m[parent, tap] - shift
-                high = parent_high_m[parent, tap] + shift
+                low = parent_low[parent, tap] - shift
+                high = parent_high[parent, tap] + shift
+                face = parent_faces[parent, tap]
+                if face >= 0 and high > band_high and _straddles(low, high, band_low, band_high):
+                    high = min(high, _face_distance_m(x0, x1, x2, face, mesh))
             undecided = _straddles(low, high, band_low, band_high)
             if undecided:
-                lattice_low, lattice_high = _lattice_interval_m(x0, x1, x2, lattice_low_m, lattice_spacing_m,
-                                                                lattice_shape, lattice_values_m, lattice_error_m,
-                                                                mesh_low_m, mesh_high_m)
+                lattice_low, lattice_high, lattice_face = _lattice_interval_m(x0, x1, x2, lattice)
                 low, high = max(low, lattice_low), min(high, lattice_high)
+                if face < 0:
+                    face = lattice_face
+                if lattice_face != face and high > band_high and _straddles(low, high, band_low, band_high):
+                    lattice_face_distance = _face_distance_m(x0, x1, x2, lattice_face, mesh)
+                    if lattice_face_distance < high:
+                        high, face = lattice_face_distance, lattice_face
                 undecided = _straddles(low, high, band_low, band_high)
             if high < band_low or low > band_high:
                 rejected_by[cell] = tap
                 break
             low_m[cell, tap] = _round_down_f32(low)
             high_m[cell, tap] = _round_up_f32(high)
+            faces_out[cell, tap] = face
             straddling[cell, tap] = undecided
 
 
 @numba.njit(nogil=True, cache=True)
-def query_band(fix_R_base: np.ndarray, rotation_index: np.ndarray, rotated_positions: np.ndarray, chords: np.ndarray,
-               cells: np.ndarray, base_p_tap: np.ndarray, ball_radius_m: float, sample_bound_m: float,
-               position_bound_m: float, lever_cap_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Query points (m, fixture frame) of one tap for the given cells, and their bands' low and high ends (m)."""
-    queries = np.empty((len(cells), 3))
-    band_low = np.empty(len(cells))
-    band_high = np.empty(len(cells))
-    for row in range(len(cells)):
-        cell = cells[row]
+def query_band(cells: tuple, rotated_positions: np.ndarray, rows: np.ndarray, taps: np.ndarray, base_p_taps: np.ndarray,
+               band: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Query points (m, fixture frame) of cell-tap pairs ``(rows[k], taps[k])``, and their bands' low and high
+    ends (m); ``cells`` and ``band`` as for ``cheap_pass``."""
+    fix_R_base, rotation_index, _, chords = cells
+    ball_radius_m, sample_bound_m, position_bound_m, lever_cap_m = band
+    queries = np.empty((len(rows), 3))
+    band_low = np.empty(len(rows))
+    band_high = np.empty(len(rows))
+    for pair in range(len(rows)):
+        cell = rows[pair]
         rotation = fix_R_base[rotation_index[cell]]
+        tap = base_p_taps[taps[pair]]
         for axis in range(3):
-            queries[row, axis] = (rotation[axis, 0] * base_p_tap[0] + rotation[axis, 1] * base_p_tap[1]
-                                  + rotation[axis, 2] * base_p_tap[2] - rotated_positions[cell, axis])
-        tolerance = _tolerance_m(queries[row, 0], queries[row, 1], queries[row, 2], chords[rotation_index[cell]],
+            queries[pair, axis] = (rotation[axis, 0] * tap[0] + rotation[axis, 1] * tap[1]
+                                   + rotation[axis, 2] * tap[2] - rotated_positions[cell, axis])
+        tolerance = _tolerance_m(queries[pair, 0], queries[pair, 1], queries[pair, 2], chords[rotation_index[cell]],
                                  sample_bound_m, position_bound_m, lever_cap_m)
-        band_low[row] = ball_radius_m - tolerance
-        band_high[row] = ball_radius_m + tolerance
+        band_low[pair] = ball_radius_m - tolerance
+        band_high[pair] = ball_radius_m + tolerance
     return queries, band_low, band_high

@@ -1,11 +1,13 @@
 """Tighter bounds for the same cell budget: refine only the cells that decide the bounds.
 
-The bounds are maxima over cells, so only the outermost cells matter. Those within
-``OUTER_FRACTION`` of a maximum (the outermost ones only, if the budget cannot take them all) are
-split once more and their children filtered against every tap; the bounds are then the maxima over
-the untouched cells and the surviving children. Every pose of the consistent set lies in one of
-those, so the bounds stay guaranteed. Repeated for a few rounds within the unused part of the cell
-budget.
+The bounds are maxima over cells of per-cell figures (CAD-origin distance, rotation angle, point
+displacement; see ``cell_bound_figures``), so only the outermost cells matter. Each round splits
+the cells whose figures lie within ``OUTER_FRACTION`` of a current maximum and filters their
+children against every tap (inheriting the parents' intervals); the children replace their
+parents. Every pose of the consistent set stays in some kept cell, so the maxima stay guaranteed
+while they shrink. Rounds go on, deeper and deeper on the hull only, until the cell budget is
+spent, ``MAX_ROUNDS`` have run, or a round no longer tightens any maximum by ``MIN_GAIN``. A refined
+cell whose children all fail keeps figures of zero: when no cell is left, the set holds no pose.
 """
 
 import numpy as np
@@ -13,30 +15,42 @@ import numpy as np
 from fixwizard.solver.estimates import BoundCentre, cell_bound_figures
 from fixwizard.solver.search import SearchProblem, Survivors, filter_cells, split
 
-OUTER_FRACTION = 0.9
-ROUNDS = 3
+OUTER_FRACTION = 0.97
+MAX_ROUNDS = 40
+MIN_GAIN = 0.003
 
 
 def refined_largest_figures(problem: SearchProblem, survivors: Survivors, centre: BoundCentre, fix_p_origin: np.ndarray,
-                            budget: float) -> np.ndarray:
-    """Largest (CAD-origin distance, rotation angle, point displacement) over the set, refined; see module doc."""
-    figures = cell_bound_figures(survivors.cells, centre, fix_p_origin, problem.fixture_radius_m)
-    settled = np.zeros(3)
-    for _ in range(ROUNDS):
-        largest = np.maximum(settled, figures.max(axis=1))
-        score = np.max(figures / np.maximum(largest[:, None], 1e-300), axis=0)
-        outer = score > OUTER_FRACTION
-        if 8 * np.count_nonzero(outer) > budget:
-            outer = score >= np.sort(score)[-int(budget // 8)] if budget >= 8 else np.zeros(len(score), bool)
-        if not np.any(outer):
+                            budget: float) -> np.ndarray | None:
+    """Largest (CAD-origin distance, rotation angle, point displacement) over the set, refined (see module doc);
+    None when refinement rejects every pose of the set."""
+    def pool_of(cells: Survivors) -> tuple[Survivors, np.ndarray]:
+        """Cells and their figures (3, N); a refined cell's figures are set to zero (its children hold it)."""
+        return cells, cell_bound_figures(cells.cells, centre, fix_p_origin, problem.fixture_radius_m)
+
+    pools = [pool_of(survivors)]
+    largest = pools[0][1].max(axis=1)
+    for _ in range(MAX_ROUNDS):
+        outer = [np.max(figures / np.maximum(largest[:, None], 1e-300), axis=0) > OUTER_FRACTION
+                 for _, figures in pools]
+        wanted = 8 * sum(int(np.count_nonzero(mask)) for mask in outer)
+        if wanted == 0 or wanted > budget:
             break
-        if np.any(~outer):
-            settled = np.maximum(settled, figures[:, ~outer].max(axis=1))
-        parents = survivors.subset(outer)
-        children = split(parents, problem)
-        budget -= len(children)
-        survivors = filter_cells(problem, children, parents)
-        if len(survivors) == 0:
-            return settled
-        figures = cell_bound_figures(survivors.cells, centre, fix_p_origin, problem.fixture_radius_m)
-    return np.maximum(settled, figures.max(axis=1))
+        budget -= wanted
+        by_level: dict[tuple[int, int], list[Survivors]] = {}
+        for (cells, figures), mask in zip(pools, outer):
+            if np.any(mask):
+                level = (cells.cells.rotation_level, cells.cells.position_level)
+                by_level.setdefault(level, []).append(cells.subset(mask))
+                figures[:, mask] = 0.0
+        for parts in by_level.values():
+            parents = Survivors.concatenate(parts)
+            children = filter_cells(problem, split(parents, problem), parents)
+            if len(children):
+                pools.append(pool_of(children))
+        tightened = np.max([figures.max(axis=1) for _, figures in pools], axis=0)
+        gain = np.max(1.0 - tightened / np.maximum(largest, 1e-300))
+        largest = tightened
+        if gain < MIN_GAIN:
+            break
+    return largest if np.all(largest > 0.0) else None

@@ -7,7 +7,7 @@ the sample error bound in metres; it returns a ``Solution`` with the pose of the
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -21,9 +21,12 @@ from fixwizard.solver.estimates import (Bounds, Interval, Samples, bound_centre,
 from fixwizard.solver.refine import refined_largest_figures
 from fixwizard.solver.modes import rotation_modes
 from fixwizard.solver.cells import CellSet
-from fixwizard.solver.search import SearchProblem, SearchProgress, Survivors, add_taps, search
+from fixwizard.solver.search import (SearchProblem, SearchProgress, SearchTree, Survivors, add_taps, search,
+                                     worth_extending)
 
 DEFAULT_MAX_CELLS = 1e7
+# Refining the hull of the set (the cells that decide the bounds) may evaluate HULL_SHARE of the cell budget.
+HULL_SHARE = 1 / 10
 MIN_MAX_CELLS = 72 * 8
 DEFAULT_MAX_SAMPLES = 40_000
 MIN_TAPS = 3
@@ -70,19 +73,19 @@ class Solution:
     warnings: list[SolveWarning]
     suspect_tap: SuspectTap | None
     stats: SearchStats
-    survivors: Survivors | None = field(repr=False)
+    tree: SearchTree | None = field(repr=False)
     problem: SearchProblem = field(repr=False)
     fix_T_cad: np.ndarray = field(repr=False)
 
     @property
     def cells(self) -> CellSet | None:
         """The surviving cells (None when the set is empty)."""
-        return None if self.survivors is None else self.survivors.cells
+        return None if self.tree is None else self.tree.final.cells
 
     def extends_to(self, problem: SearchProblem) -> bool:
         """Whether ``problem`` is this solution's with taps added: same mesh, ball and bound, earlier taps kept."""
         known = self.problem.base_p_taps
-        return (self.survivors is not None and problem.oracle is self.problem.oracle
+        return (self.tree is not None and problem.oracle is self.problem.oracle
                 and problem.ball_radius_m == self.problem.ball_radius_m
                 and problem.sample_bound_m == self.problem.sample_bound_m
                 and len(problem.base_p_taps) > len(known)
@@ -146,66 +149,84 @@ def _inconsistent_warnings(suspect: SuspectTap | None) -> list[SolveWarning]:
 
 
 def _modes(problem: SearchProblem, survivors: Survivors, samples: Samples, fix_p_origin: np.ndarray,
-           fix_T_cad: np.ndarray, refine_budget: float) -> list[Mode]:
-    """The modes of a non-empty set, most probable first, each with refined bounds."""
+           fix_T_cad: np.ndarray, refine_budget: float) -> tuple[list[Mode], np.ndarray]:
+    """The modes of a non-empty set that refinement does not prove empty, most probable first, each with refined
+    bounds, and which cells belong to them."""
     cells = survivors.cells
     labels = rotation_modes(cells)
     sample_labels = labels[samples.cell_index]
     mode_labels = np.unique(labels)
-    modes = []
+    modes, kept = [], np.zeros(len(cells), bool)
     for label in mode_labels:
         mode_survivors = survivors.subset(labels == label)
         mode_cells = mode_survivors.cells
+        centre = bound_centre(mode_cells, fix_p_origin, rotation_center(mode_cells.distinct_rotations()[0]))
+        largest = refined_largest_figures(problem, mode_survivors, centre, fix_p_origin,
+                                          refine_budget / len(mode_labels))
+        if largest is None:
+            continue
+        bounds = bounds_from_figures(centre, largest)
         mode_samples = sample_labels == label
         probability = float(samples.weights[mode_samples].sum())
-        centre = bound_centre(mode_cells, fix_p_origin, rotation_center(mode_cells.distinct_rotations()[0]))
-        bounds = bounds_from_figures(centre, refined_largest_figures(problem, mode_survivors, centre, fix_p_origin,
-                                                                     refine_budget / len(mode_labels)))
         base_T_cad = expected_pose(samples, mode_samples, fix_T_cad) if probability > 0 else bounds.base_T_cad_center
         modes.append(Mode(probability, base_T_cad, bounds, len(mode_cells)))
-    return sorted(modes, key=lambda mode: -mode.probability)
+        kept |= labels == label
+    total = sum(mode.probability for mode in modes)
+    if total > 0:
+        modes = [replace(mode, probability=mode.probability / total) for mode in modes]
+    return sorted(modes, key=lambda mode: -mode.probability), kept
 
 
 def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sample_bound_m: float,
           sigma_m: float | None = None, max_cells: float = DEFAULT_MAX_CELLS,
           progress: Callable[[SearchProgress], None] | None = None, cancel: threading.Event | None = None,
-          max_samples: int = DEFAULT_MAX_SAMPLES, seed: int = 0, previous: Solution | None = None) -> Solution:
+          max_samples: int = DEFAULT_MAX_SAMPLES, seed: int = 0, previous: Solution | None = None,
+          hull_cells: float | None = None) -> Solution:
     """All poses of ``fixture`` that explain the taps, with estimates; raises InputError for bad input.
 
     ``base_p_taps`` (N, 3): measured ball centres in the robot base frame (m). ``sigma_m``
     defaults to ``sample_bound_m / 3``. Raises ``SearchCancelled`` if ``cancel`` is set.
     ``previous``: a solution of the same fixture and bounds with fewer taps; when the taps extend its
-    taps, the search goes on from its surviving set instead of starting over.
+    taps, the search goes on from its surviving set instead of starting over. ``hull_cells``: the cells hull
+    refinement may evaluate (default ``HULL_SHARE`` of ``max_cells``).
     """
     base_p_taps = np.asarray(base_p_taps, dtype=float)
     sigma_m = sample_bound_m / 3.0 if sigma_m is None else sigma_m
     validate_inputs(base_p_taps, ball_diameter_m, sample_bound_m, sigma_m, max_cells)
     started = time.perf_counter()
     problem = SearchProblem(fixture.oracle, fixture.radius_m, base_p_taps, ball_diameter_m / 2.0, sample_bound_m)
-    if previous is not None and previous.extends_to(problem):
-        survivors = add_taps(problem, previous.survivors, max_cells, progress, cancel)
+    if previous is not None and previous.extends_to(problem) and worth_extending(problem, previous.tree):
+        tree = add_taps(problem, previous.tree, max_cells, progress, cancel)
     else:
-        survivors = search(problem, max_cells, progress, cancel)
+        tree = search(problem, max_cells, progress, cancel)
+    survivors = None if tree is None else tree.final
     cells = None if survivors is None else survivors.cells
     warnings = [SolveWarning(code, message) for code, message in fixture.warnings]
     fix_T_cad = fixture.fix_T_cad
-    if cells is None or len(cells) == 0:
+    def inconsistent() -> Solution:
         suspect = find_suspect_tap(problem, max_cells, cancel)
         stats = SearchStats(0, cells.rotation_level if cells else 0, cells.position_level if cells else 0,
                             time.perf_counter() - started, max_cells)
         return Solution("inconsistent", None, None, [], [], warnings + _inconsistent_warnings(suspect), suspect,
                         stats, None, problem, fix_T_cad)
 
+    if cells is None or len(cells) == 0:
+        return inconsistent()
     fix_p_origin = -fixture.cad_p_center
     samples = sample_cells(cells, fixture.oracle, base_p_taps, ball_diameter_m / 2.0, sigma_m, max_samples,
                            np.random.default_rng(seed))
-    modes = _modes(problem, survivors, samples, fix_p_origin, fix_T_cad, max_cells - len(cells))
+    hull_cells = max_cells * HULL_SHARE if hull_cells is None else hull_cells
+    modes, in_modes = _modes(problem, survivors, samples, fix_p_origin, fix_T_cad, hull_cells)
+    if not modes:
+        return inconsistent()
     top = modes[0]
     if len(modes) == 1:
         bounds = top.bounds
     else:
-        centre = bound_centre(cells, fix_p_origin, Rotation.from_matrix(top.bounds.base_T_cad_center[:3, :3]))
-        bounds = bounds_from_figures(centre, cell_bound_figures(cells, centre, fix_p_origin, fixture.radius_m).max(1))
+        mode_cells = cells.subset(in_modes)
+        centre = bound_centre(mode_cells, fix_p_origin, Rotation.from_matrix(top.bounds.base_T_cad_center[:3, :3]))
+        bounds = bounds_from_figures(centre, cell_bound_figures(mode_cells, centre, fix_p_origin,
+                                                                fixture.radius_m).max(1))
     status = "unique" if len(modes) == 1 else "ambiguous"
     if status == "ambiguous":
         distance, angle = _mode_separation(modes)
@@ -217,4 +238,4 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
     stats = SearchStats(len(cells), cells.rotation_level, cells.position_level, time.perf_counter() - started,
                         max_cells)
     return Solution(status, top.base_T_cad, bounds, intervals(samples, top.base_T_cad, fix_p_origin), modes,
-                    warnings, None, stats, survivors, problem, fix_T_cad)
+                    warnings, None, stats, tree, problem, fix_T_cad)

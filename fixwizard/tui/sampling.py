@@ -199,6 +199,7 @@ class SamplingScreen(Screen[bool]):
         cancel = self._live_cancel = threading.Event()
         calibration, fixture = self.context.calibration, self.context.fixture
         base_p_taps = self.context.session.base_p_taps
+        previous = self.live
         self._show_live(running=len(base_p_taps) >= MIN_TAPS)
         if len(base_p_taps) < MIN_TAPS:
             return
@@ -206,7 +207,7 @@ class SamplingScreen(Screen[bool]):
         def work() -> None:
             try:
                 check = quick_check(fixture, base_p_taps, calibration.ball_diameter_m, calibration.sample_bound_m,
-                                    cancel)
+                                    cancel, previous=previous)
             except SearchCancelled:
                 return
             except FixwizardError as error:

@@ -14,7 +14,7 @@ from textual.widgets import Footer, ProgressBar, Static
 from textual.worker import Worker, WorkerState
 
 from fixwizard.errors import FixwizardError
-from fixwizard.solver.search import SearchCancelled, SearchProgress
+from fixwizard.solver.search import SearchCancelled, SearchProgress, search_budget
 from fixwizard.solver.solve import Solution, solve
 from fixwizard.tui.context import WizardContext
 from fixwizard.tui.errors import error_message
@@ -24,15 +24,13 @@ Solver = Callable[..., Solution]
 
 
 def budget_used(progress: SearchProgress, max_cells: float) -> float:
-    """How far (0-1, log scale) the surviving cells are towards ending the search: it stops once the next
-    level would pass the budget (8 children per cell) or nothing survives."""
+    """How far (0-1, log scale) the surviving cells are towards ending the search: it usually stops once the
+    next level would pass the search's part of the budget (8 children per cell) or nothing survives."""
     if progress.survivors == 0:
         return 1.0
-    return float(np.clip(np.log(8.0 * progress.survivors) / np.log(max_cells), 0.0, 1.0))
-
-
-def search_finished(progress: SearchProgress, max_cells: float) -> bool:
-    return progress.survivors == 0 or 8 * progress.survivors > max_cells
+    if progress.final:
+        return 1.0
+    return float(np.clip(np.log(8.0 * progress.survivors) / np.log(search_budget(max_cells)), 0.0, 1.0))
 
 
 class SolveScreen(Screen[Solution | None]):
@@ -122,7 +120,7 @@ class SolveScreen(Screen[Solution | None]):
             self._budget_shown = max(self._budget_shown, budget_used(progress, max_cells))
             lines = [f"Level: rotation {progress.rotation_level}, position {progress.position_level}",
                      f"Surviving cells: {progress.survivors:,} of {progress.evaluated:,} tested"]
-            if search_finished(progress, max_cells):
+            if progress.final:
                 lines.append("No pose fits all taps: looking for the tap that does not fit..."
                              if progress.survivors == 0 else "Search done: computing bounds and estimates...")
         lines.insert(0, f"Elapsed: {elapsed_s:.0f} s")

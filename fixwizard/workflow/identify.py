@@ -52,7 +52,8 @@ def _verdict(base_p_taps: np.ndarray, mesh: Path, mesh_units: str, ball_diameter
     except FixwizardError as error:
         return MeshVerdict(mesh, "unreadable", 0, str(error))
     problem = SearchProblem(fixture.oracle, fixture.radius_m, base_p_taps, ball_diameter_m / 2.0, sample_bound_m)
-    survivors = search(problem, max_cells, cancel=cancel)
+    tree = search(problem, max_cells, cancel=cancel)
+    survivors = None if tree is None else tree.final
     if survivors is None or len(survivors) == 0:
         return MeshVerdict(mesh, "ruled out", 0, "no pose of this mesh explains the taps")
     count = len(survivors)

@@ -1,10 +1,10 @@
 """What the sampling screen shows after each tap: a quick solve at a small cell budget and each tap's distance
 from the fixture surface under the pose it estimates.
 
-The quick solve is the real solver with a small budget, so what it says is still guaranteed: an empty set
-means the taps are inconsistent. A non-empty set at a small budget is coarse; while the most probable mode
-still spans more than ``OPEN_ROTATION_RAD`` of rotation the pose is called "open" (not pinned down yet)
-and no estimate is offered.
+The quick solve is the real solver with fewer likelihood samples, so what it says is guaranteed: an empty
+set means the taps are inconsistent. After each new tap it goes on from the previous check's set. While the
+most probable mode still spans more than ``OPEN_ROTATION_RAD`` of rotation the pose is called "open" (not
+pinned down yet) and no estimate is offered.
 """
 
 import threading
@@ -17,7 +17,8 @@ from fixwizard.fixture import Fixture
 from fixwizard.geometry.se3 import invert, transform_points
 from fixwizard.solver.solve import MIN_TAPS, Solution, solve
 
-LIVE_MAX_CELLS = 3e5  # about two seconds for a dozen taps on two cores
+LIVE_MAX_CELLS = 1e7  # the full solve's budget: the live bounds are as guaranteed and nearly as tight
+LIVE_HULL_CELLS = 2e5  # less hull refinement than the full solve, for an update in about two seconds
 LIVE_MAX_SAMPLES = 1000
 OPEN_ROTATION_RAD = np.radians(45.0)
 
@@ -58,12 +59,15 @@ def verdict_of(solution: Solution) -> Verdict:
 
 
 def quick_check(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sample_bound_m: float,
-                cancel: threading.Event | None = None, max_cells: float = LIVE_MAX_CELLS) -> LiveCheck | None:
+                cancel: threading.Event | None = None, max_cells: float = LIVE_MAX_CELLS,
+                previous: LiveCheck | None = None) -> LiveCheck | None:
     """A quick solve of the taps (None with fewer than the solver's minimum); raises ``SearchCancelled``
-    when ``cancel`` is set meanwhile."""
+    when ``cancel`` is set meanwhile. With the ``previous`` check of fewer of the same taps, the solve goes
+    on from its set (a new tap can only remove poses) instead of starting over."""
     base_p_taps = np.asarray(base_p_taps, float).reshape(-1, 3)
     if len(base_p_taps) < MIN_TAPS:
         return None
     solution = solve(fixture, base_p_taps, ball_diameter_m, sample_bound_m, max_cells=max_cells, cancel=cancel,
-                     max_samples=LIVE_MAX_SAMPLES)
+                     max_samples=LIVE_MAX_SAMPLES, previous=None if previous is None else previous.solution,
+                     hull_cells=LIVE_HULL_CELLS)
     return LiveCheck(verdict_of(solution), solution, len(base_p_taps))

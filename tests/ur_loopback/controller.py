@@ -326,7 +326,8 @@ class LoopbackController:
             if command == "close safety popup":
                 return "closing safety popup"
             if command == "unlock protective stop":
-                if self._safety == "PROTECTIVE_STOP" and time.monotonic() - self._protective_stop_at < self._unlock_delay_s:
+                stopped_for_s = time.monotonic() - self._protective_stop_at
+                if self._safety == "PROTECTIVE_STOP" and stopped_for_s < self._unlock_delay_s:
                     return UNLOCK_REFUSED
                 if self._safety == "PROTECTIVE_STOP":
                     self._safety = "NORMAL"
