@@ -1,7 +1,7 @@
 """Which tap makes a set of taps inconsistent: leave each out and see whether the rest fit.
 
-Each leave-one-out search runs at the full cell budget: while the suspect tap is still in,
-the search empties early and costs little; only the removal that restores consistency runs
+Each leave-one-out search runs at the cell budget it is given: while the suspect tap is still
+in, the search empties early and costs little; only the removal that restores consistency runs
 to the end.
 """
 

@@ -28,6 +28,9 @@ DEFAULT_MAX_CELLS = 1e7
 # Refining the hull of the set (the cells that decide the bounds) may evaluate HULL_SHARE of the cell budget.
 HULL_SHARE = 1 / 10
 MIN_MAX_CELLS = 72 * 8
+# The leave-one-out searches that look for a tap to blame only tell an empty set from a non-empty one
+# (the farthest-off tap wins among several); a smaller budget keeps the diagnosis within seconds.
+DIAGNOSIS_MAX_CELLS = 2e6
 DEFAULT_MAX_SAMPLES = 40_000
 MIN_TAPS = 3
 MAX_SAMPLE_BOUND_M = 0.02  # larger bounds are a unit mistake (1 for 1 mm), not a robot
@@ -204,7 +207,7 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
     warnings = [SolveWarning(code, message) for code, message in fixture.warnings]
     fix_T_cad = fixture.fix_T_cad
     def inconsistent() -> Solution:
-        suspect = find_suspect_tap(problem, max_cells, cancel)
+        suspect = find_suspect_tap(problem, min(max_cells, DIAGNOSIS_MAX_CELLS), cancel)
         stats = SearchStats(0, cells.rotation_level if cells else 0, cells.position_level if cells else 0,
                             time.perf_counter() - started, max_cells)
         return Solution("inconsistent", None, None, [], [], warnings + _inconsistent_warnings(suspect), suspect,
