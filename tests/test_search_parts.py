@@ -24,6 +24,21 @@ def test_distance_lattice_interval_holds_the_exact_signed_distance(name):
     assert np.all(exact + error >= low) and np.all(exact - error <= high)
 
 
+def test_a_degenerate_face_still_bounds_the_distance_from_above():
+    from fixwizard.solver.interval_kernel import face_distances_m
+
+    vertices = np.array([[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.02, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    triangles = np.array([[0, 1, 2], [0, 3, 1], [0, 3, 3], [0, 0, 0]])  # collinear, two corners equal, a point
+    points = np.random.default_rng(5).uniform(-0.03, 0.03, (300, 3))
+    for face in range(len(triangles)):
+        bound = face_distances_m(points, np.full(len(points), face), (vertices, triangles))
+        corners = vertices[triangles[face]]
+        farthest = np.max([np.linalg.norm(points - corner, axis=1) for corner in corners], axis=0)
+        assert np.all(np.isfinite(bound)) and np.all(bound <= farthest + 1e-8)  # a point of the face, not beyond
+        along_x = np.clip(points[:, 0], corners[:, 0].min(), corners[:, 0].max())
+        assert np.all(bound >= np.linalg.norm(points - np.column_stack([along_x, 0 * along_x, 0 * along_x]), axis=1))
+
+
 def test_a_cached_lattice_is_the_computed_one_and_a_damaged_cache_file_is_rebuilt(tmp_path, monkeypatch):
     monkeypatch.setenv("FIXWIZARD_CACHE", str(tmp_path))
     fixture = as_fixture("l_prism")

@@ -28,7 +28,7 @@ from fixwizard.solver.interval_kernel import lattice_intervals_m
 MAX_VERTICES = 400_000
 MIN_SPACING_M = 0.0015
 MARGIN_M = 0.01
-CACHE_FORMAT = 1
+CACHE_FORMAT = 1  # raise whenever what a lattice holds or how the oracle computes it changes
 
 
 def cache_folder() -> Path:
@@ -51,11 +51,11 @@ class DistanceGrid:
         self._low, self._spacing = low, spacing
         axes = [low[axis] + spacing * np.arange(self._shape[axis]) for axis in range(3)]
         vertices = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        self._value_error_m = float(np.max(oracle.error_bound_m(vertices)))
         key = self._key(oracle)
         path = cache_folder() / f"lattice-{key}.npz"
-        if not self._load(path, key, len(vertices)):
+        if not self._load(path, key, len(vertices), len(oracle.mesh_arrays[1])):
             self._values, self._faces = oracle.distance_and_face(vertices)
-            self._value_error_m = float(np.max(oracle.error_bound_m(vertices)))
             self._store(path, key)
 
     def _key(self, oracle: DistanceOracle) -> str:
@@ -66,24 +66,25 @@ class DistanceGrid:
         digest.update(repr((oracle.signed, FLOAT32_ULPS, CACHE_FORMAT)).encode())
         return digest.hexdigest()
 
-    def _load(self, path: Path, key: str, count: int) -> bool:
-        """Take values, faces and error from a cached lattice; False when there is none fit to use."""
+    def _load(self, path: Path, key: str, count: int, triangle_count: int) -> bool:
+        """Take values and faces from a cached lattice; False when there is none fit to use (the compiled search
+        reads faces without bounds checks, so an index out of range must never get through). Their error bound
+        is always computed afresh."""
         try:
             with np.load(path) as stored:
-                values, faces, error = stored["values"], stored["faces"], float(stored["value_error_m"])
-                stored_key = str(stored["key"])
+                values, faces, stored_key = stored["values"], stored["faces"], str(stored["key"])
         except (OSError, EOFError, KeyError, ValueError, zipfile.BadZipFile):
             return False
-        if stored_key != key or values.shape != (count,) or faces.shape != (count,) or not np.all(np.isfinite(values)):
+        if (stored_key != key or values.shape != (count,) or faces.shape != (count,) or not np.all(np.isfinite(values))
+                or faces.min() < 0 or faces.max() >= triangle_count):
             return False
-        self._values, self._faces, self._value_error_m = values.astype(np.float64), faces.astype(np.int64), error
+        self._values, self._faces = values.astype(np.float64), faces.astype(np.int64)
         return True
 
     def _store(self, path: Path, key: str) -> None:
         """Keep the lattice for the next run; a cache that cannot be written only costs time."""
         buffer = io.BytesIO()
-        np.savez(buffer, values=self._values, faces=self._faces.astype(np.int32), value_error_m=self._value_error_m,
-                 key=key)
+        np.savez(buffer, values=self._values, faces=self._faces.astype(np.int32), key=key)
         try:
             write_bytes_atomic(path, buffer.getvalue())
         except OSError:

@@ -50,6 +50,13 @@ def _straddles(low: float, high: float, band_low: float, band_high: float) -> bo
     return high >= band_low and low <= band_high and (low < band_low or high > band_high)
 
 
+@numba.njit(nogil=True, cache=True, inline="always")
+def _fraction(numerator: float, denominator: float) -> float:
+    """``numerator / denominator`` clamped to [0, 1]; 0 where the denominator is not positive (a degenerate
+    triangle), so the point stays on the triangle."""
+    return min(max(numerator / denominator, 0.0), 1.0) if denominator > 0.0 else 0.0
+
+
 @numba.njit(nogil=True, cache=True)
 def _face_distance_m(x0: float, x1: float, x2: float, face: int, mesh: tuple) -> float:
     """Distance (m) from a point to one triangle of ``mesh = (vertices (V, 3) m, triangles (F, 3))``, plus
@@ -66,24 +73,23 @@ def _face_distance_m(x0: float, x1: float, x2: float, face: int, mesh: tuple) ->
     d5 = ab0 * (x0 - c[0]) + ab1 * (x1 - c[1]) + ab2 * (x2 - c[2])
     d6 = ac0 * (x0 - c[0]) + ac1 * (x1 - c[1]) + ac2 * (x2 - c[2])
     va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
-    v = w = 0.0
-    if d1 <= 0.0 and d2 <= 0.0:
-        pass
-    elif d3 >= 0.0 and d4 <= d3:
-        v = 1.0
-    elif d6 >= 0.0 and d5 <= d6:
-        w = 1.0
-    elif vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
-        v = min(max(d1 / (d1 - d3), 0.0), 1.0)
-    elif vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
-        w = min(max(d2 / (d2 - d6), 0.0), 1.0)
-    elif va <= 0.0 and d4 - d3 >= 0.0 and d5 - d6 >= 0.0:
-        w = min(max((d4 - d3) / ((d4 - d3) + (d5 - d6)), 0.0), 1.0)
+    if d1 <= 0.0 and d2 <= 0.0:  # vertex a
+        v, w = 0.0, 0.0
+    elif d3 >= 0.0 and d4 <= d3:  # vertex b
+        v, w = 1.0, 0.0
+    elif d6 >= 0.0 and d5 <= d6:  # vertex c
+        v, w = 0.0, 1.0
+    elif vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:  # edge ab
+        v, w = _fraction(d1, d1 - d3), 0.0
+    elif vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:  # edge ac
+        v, w = 0.0, _fraction(d2, d2 - d6)
+    elif va <= 0.0 and d4 - d3 >= 0.0 and d5 - d6 >= 0.0:  # edge bc
+        w = _fraction(d4 - d3, (d4 - d3) + (d5 - d6))
         v = 1.0 - w
-    else:
-        v, w = vb / (va + vb + vc), vc / (va + vb + vc)
-        if not (v >= 0.0 and w >= 0.0 and v + w <= 1.0):
-            v = w = 0.0
+    else:  # inside the face
+        v, w = _fraction(vb, va + vb + vc), _fraction(vc, va + vb + vc)
+        if v + w > 1.0:
+            v, w = 0.0, 0.0
     e0 = x0 - (a[0] + v * ab0 + w * ac0)
     e1 = x1 - (a[1] + v * ab1 + w * ac1)
     e2 = x2 - (a[2] + v * ab2 + w * ac2)

@@ -10,6 +10,8 @@ spent, ``MAX_ROUNDS`` have run, or a round no longer tightens any maximum by ``M
 cell whose children all fail keeps figures of zero: when no cell is left, the set holds no pose.
 """
 
+import threading
+
 import numpy as np
 
 from fixwizard.solver.estimates import BoundCentre, cell_bound_figures
@@ -21,7 +23,7 @@ MIN_GAIN = 0.003
 
 
 def refined_largest_figures(problem: SearchProblem, survivors: Survivors, centre: BoundCentre, fix_p_origin: np.ndarray,
-                            budget: float) -> np.ndarray | None:
+                            budget: float, cancel: threading.Event | None = None) -> np.ndarray | None:
     """Largest (CAD-origin distance, rotation angle, point displacement) over the set, refined (see module doc);
     None when refinement rejects every pose of the set."""
     def pool_of(cells: Survivors) -> tuple[Survivors, np.ndarray]:
@@ -45,7 +47,7 @@ def refined_largest_figures(problem: SearchProblem, survivors: Survivors, centre
                 figures[:, mask] = 0.0
         for parts in by_level.values():
             parents = Survivors.concatenate(parts)
-            children = filter_cells(problem, split(parents, problem), parents)
+            children = filter_cells(problem, split(parents, problem), parents, cancel)
             if len(children):
                 pools.append(pool_of(children))
         tightened = np.max([figures.max(axis=1) for _, figures in pools], axis=0)

@@ -152,7 +152,8 @@ def _inconsistent_warnings(suspect: SuspectTap | None) -> list[SolveWarning]:
 
 
 def _modes(problem: SearchProblem, survivors: Survivors, samples: Samples, fix_p_origin: np.ndarray,
-           fix_T_cad: np.ndarray, refine_budget: float) -> tuple[list[Mode], np.ndarray]:
+           fix_T_cad: np.ndarray, refine_budget: float,
+           cancel: threading.Event | None) -> tuple[list[Mode], np.ndarray]:
     """The modes of a non-empty set that refinement does not prove empty, most probable first, each with refined
     bounds, and which cells belong to them."""
     cells = survivors.cells
@@ -165,7 +166,7 @@ def _modes(problem: SearchProblem, survivors: Survivors, samples: Samples, fix_p
         mode_cells = mode_survivors.cells
         centre = bound_centre(mode_cells, fix_p_origin, rotation_center(mode_cells.distinct_rotations()[0]))
         largest = refined_largest_figures(problem, mode_survivors, centre, fix_p_origin,
-                                          refine_budget / len(mode_labels))
+                                          refine_budget / len(mode_labels), cancel)
         if largest is None:
             continue
         bounds = bounds_from_figures(centre, largest)
@@ -219,7 +220,7 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
     samples = sample_cells(cells, fixture.oracle, base_p_taps, ball_diameter_m / 2.0, sigma_m, max_samples,
                            np.random.default_rng(seed))
     hull_cells = max_cells * HULL_SHARE if hull_cells is None else hull_cells
-    modes, in_modes = _modes(problem, survivors, samples, fix_p_origin, fix_T_cad, hull_cells)
+    modes, in_modes = _modes(problem, survivors, samples, fix_p_origin, fix_T_cad, hull_cells, cancel)
     if not modes:
         return inconsistent()
     top = modes[0]
