@@ -1,5 +1,6 @@
 """Pieces of the search that carry the guarantee: the distance lattice and the cell sets."""
 
+import numba
 import numpy as np
 import pytest
 import trimesh
@@ -9,6 +10,7 @@ from fixwizard.geometry.octree import PositionGrid
 from fixwizard.geometry.se3 import make_transform
 from fixwizard.solver.cells import root_cells
 from fixwizard.solver.distance_grid import DistanceGrid
+from fixwizard.solver.interval_kernel import _nearest_vertex_interval_m
 from shapes import SHAPES, as_fixture
 
 
@@ -22,6 +24,29 @@ def test_distance_lattice_interval_holds_the_exact_signed_distance(name):
     error = fixture.oracle.error_bound_m(points)
     low, high = grid.interval_m(points)
     assert np.all(exact + error >= low) and np.all(exact - error <= high)
+
+
+@numba.njit
+def _nearest_vertex_intervals_m(points_m, lattice):
+    bounds = np.empty((len(points_m), 2))
+    for row in range(len(points_m)):
+        bounds[row, 0], bounds[row, 1], _ = _nearest_vertex_interval_m(points_m[row, 0], points_m[row, 1],
+                                                                       points_m[row, 2], lattice)
+    return bounds
+
+
+@pytest.mark.parametrize("name", ["l_prism", "cylinder"])
+def test_the_nearest_vertex_bound_of_the_cheap_pass_holds_and_the_voxel_interval_lies_within_it(name):
+    fixture = as_fixture(name)
+    grid = DistanceGrid(fixture.oracle)
+    points = np.random.default_rng(2).uniform(-2.0, 2.0, (50_000, 3)) * fixture.radius_m
+    exact = fixture.oracle.signed_distance_m(points)
+    error = fixture.oracle.error_bound_m(points)
+    nearest = _nearest_vertex_intervals_m(points, grid.kernel_arguments)
+    assert np.all(exact + error >= nearest[:, 0]) and np.all(exact - error <= nearest[:, 1])
+    low, high = grid.interval_m(points)
+    assert np.all(low >= nearest[:, 0]) and np.all(high <= nearest[:, 1])
+    assert np.mean(high - low) < np.mean(nearest[:, 1] - nearest[:, 0])
 
 
 def test_a_degenerate_face_still_bounds_the_distance_from_above():

@@ -41,14 +41,31 @@ def chord(angle_rad: np.ndarray | float) -> np.ndarray | float:
     return 2.0 * np.sin(np.minimum(angle_rad, np.pi) / 2.0)
 
 
-def _shortest_rotations(from_dirs: np.ndarray, to_dirs: np.ndarray) -> Rotation:
-    """Shortest rotations taking unit vectors ``from_dirs`` to ``to_dirs`` (both (N, 3), none antipodal)."""
-    cross = np.cross(from_dirs, to_dirs)
-    sine = np.linalg.norm(cross, axis=-1)
-    cosine = np.sum(from_dirs * to_dirs, axis=-1)
-    angle = np.arctan2(sine, cosine)
-    axis = np.divide(cross, sine[:, None], out=np.zeros_like(cross), where=sine[:, None] > 0)
-    return Rotation.from_rotvec(axis * angle[:, None])
+def _shortest_rotations(from_dirs: np.ndarray, to_dirs: np.ndarray) -> np.ndarray:
+    """Matrices (N, 3, 3) of the shortest rotations taking unit vectors ``from_dirs`` to ``to_dirs`` (both (N, 3),
+    none antipodal): ``c I + [v]x + v v^T / (1 + c)`` with ``v = a x b``, ``c = a . b``."""
+    v = np.cross(from_dirs, to_dirs)
+    c = np.sum(from_dirs * to_dirs, axis=-1)
+    matrices = v[:, :, None] * (v / (1.0 + c)[:, None])[:, None, :]
+    matrices[:, 0, 0] += c
+    matrices[:, 1, 1] += c
+    matrices[:, 2, 2] += c
+    matrices[:, 0, 1] -= v[:, 2]
+    matrices[:, 1, 0] += v[:, 2]
+    matrices[:, 0, 2] += v[:, 1]
+    matrices[:, 2, 0] -= v[:, 1]
+    matrices[:, 1, 2] -= v[:, 0]
+    matrices[:, 2, 1] += v[:, 0]
+    return matrices
+
+
+def _tilted(sections: np.ndarray, psi_rad: np.ndarray) -> np.ndarray:
+    """``sections @ Rz(psi)`` for matrices (N, 3, 3) and angles (N,): the first two columns turned by ``psi``."""
+    cos, sin = np.cos(psi_rad)[:, None], np.sin(psi_rad)[:, None]
+    tilted = sections.copy()
+    tilted[:, :, 0] = sections[:, :, 0] * cos + sections[:, :, 1] * sin
+    tilted[:, :, 1] = sections[:, :, 1] * cos - sections[:, :, 0] * sin
+    return tilted
 
 
 def _angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -102,18 +119,21 @@ class RotationGrid:
         steps = level - coarse_level
         return (pixels >> (2 * steps)) * self.n_tilts(coarse_level) + (tilts >> steps)
 
-    def _sections(self, level: int, pixels: np.ndarray, directions: np.ndarray) -> Rotation:
-        """``S(d)`` for directions ``d`` lying in the given pixels."""
+    def _sections(self, level: int, pixels: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """``S(d)`` (N, 3, 3) for directions ``d`` lying in the given pixels."""
         base = pixels >> (2 * level)
-        swing = _shortest_rotations(self._base_centers[base], directions)
-        return swing * self._base_sections[base]
+        return _shortest_rotations(self._base_centers[base], directions) @ self._base_sections[base]
 
-    def centers(self, level: int, cells: np.ndarray) -> Rotation:
-        """Centre rotations of cells (the rotation part of ``base_T_fix``)."""
+    def center_matrices(self, level: int, cells: np.ndarray) -> np.ndarray:
+        """Centre rotations (N, 3, 3) of cells (the rotation part of ``base_T_fix``)."""
         pixels, tilts = np.divmod(np.asarray(cells, np.int64), self.n_tilts(level))
         directions = np.stack(healpy.pix2vec(2**level, pixels, nest=True), axis=1)
         psi = (tilts + 0.5) * self.tilt_step_rad(level)
-        return self._sections(level, pixels, directions) * Rotation.from_rotvec(np.outer(psi, _EZ))
+        return _tilted(self._sections(level, pixels, directions), psi)
+
+    def centers(self, level: int, cells: np.ndarray) -> Rotation:
+        """``center_matrices`` as rotations."""
+        return Rotation.from_matrix(self.center_matrices(level, cells))
 
     def sample(self, level: int, cells: np.ndarray, rng: np.random.Generator) -> Rotation:
         """One random rotation inside each cell (direction from a random pixel 10 levels finer)."""
@@ -122,14 +142,14 @@ class RotationGrid:
         fine = (pixels << (2 * depth)) + rng.integers(0, 4**depth, size=len(pixels))
         directions = np.stack(healpy.pix2vec(2 ** (level + depth), fine, nest=True), axis=1)
         psi = (tilts + rng.random(len(tilts))) * self.tilt_step_rad(level)
-        return self._sections(level, pixels, directions) * Rotation.from_rotvec(np.outer(psi, _EZ))
+        return Rotation.from_matrix(_tilted(self._sections(level, pixels, directions), psi))
 
     def cell_of(self, level: int, rotations: Rotation) -> np.ndarray:
         """Cells holding the given rotations."""
         matrices = rotations.as_matrix().reshape(-1, 3, 3)
         directions = matrices[:, :, 2]
         pixels = healpy.vec2pix(2**level, directions[:, 0], directions[:, 1], directions[:, 2], nest=True)
-        twist = (self._sections(level, pixels, directions).inv() * Rotation.from_matrix(matrices)).as_matrix()
+        twist = np.swapaxes(self._sections(level, pixels, directions), 1, 2) @ matrices
         psi = np.mod(np.arctan2(twist[:, 1, 0], twist[:, 0, 0]), 2.0 * np.pi)
         tilts = np.minimum((psi / self.tilt_step_rad(level)).astype(np.int64), self.n_tilts(level) - 1)
         return pixels * self.n_tilts(level) + tilts

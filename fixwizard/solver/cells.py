@@ -48,6 +48,11 @@ class CellSet:
         return (self.rotation_grid.centers(self.rotation_level, self.rotation_ids),
                 self.rotation_grid.gamma(self.rotation_level, self.rotation_ids), self.rotation_index)
 
+    def distinct_rotation_matrices(self) -> tuple[np.ndarray, np.ndarray]:
+        """``distinct_rotations`` as matrices (U, 3, 3), and ``gamma`` (rad)."""
+        return (self.rotation_grid.center_matrices(self.rotation_level, self.rotation_ids),
+                self.rotation_grid.gamma(self.rotation_level, self.rotation_ids))
+
     def positions_m(self, indices: np.ndarray | slice = slice(None)) -> np.ndarray:
         """Centres (m, base frame) of the position cells of the given cells."""
         return self.position_grid.centers_m(self.position_level, self.position_cells[indices])

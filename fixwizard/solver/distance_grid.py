@@ -1,10 +1,11 @@
 """A precomputed lattice of signed distances: a cheap interval for the coarse search levels.
 
 The signed distance is 1-Lipschitz, so at a point ``x`` it lies within ``|x - v|`` of its
-value at any lattice vertex ``v``; the lookup takes the nearest vertex (clamped to the
-lattice box) and adds the lattice values' own float32 error. Outside the lattice box the
-point also lies outside the solid, at least as far from the surface as from the mesh's
-bounding box.
+value at any lattice vertex ``v``, give or take the lattice values' own float32 error. The
+search first takes the nearest vertex, then, where that does not decide, the tightest bounds of
+the eight corners of the voxel holding the point (the nearest voxel outside the lattice box).
+Outside the mesh's bounding box the point also lies outside the solid, at least as far from the
+surface as from the box.
 
 Building a lattice takes a second of Open3D queries, so lattices are kept on disk between runs
 (``cache_folder()``), named by a hash of everything they depend on: the mesh's vertices and

@@ -4,8 +4,9 @@ For cell ``c`` with centre frame ``(R_c, t_c)`` and tap ``p`` (base frame, m) th
 ``x = R_c^T p - R_c^T t_c`` (fixture frame, m). The band its signed distance must meet is
 ``r_ball -/+ (b_s + b_p + min(|x| + b_p, lever_cap) * chord)`` (see ``search``). The cheap test
 bounds the distance at ``x`` by the parent's interval widened by ``|x - x_parent|`` and by the
-distance lattice (nearest vertex plus the offset to it); cells whose interval misses the band are
-rejected, intervals that still straddle a band edge are flagged for an exact query.
+distance lattice (nearest vertex plus the offset to it, then the eight corners of the voxel);
+cells whose interval misses the band are rejected, intervals that still straddle a band edge are
+flagged for an exact query.
 
 Arithmetic is float64 without fast-math, so every value equals numpy's; the stored float32
 interval ends are rounded outward.
@@ -96,36 +97,73 @@ def _face_distance_m(x0: float, x1: float, x2: float, face: int, mesh: tuple) ->
     return math.sqrt(e0 * e0 + e1 * e1 + e2 * e2) + FACE_MARGIN_M
 
 
+@numba.njit(nogil=True, cache=True, inline="always")
+def _box_gap_m(x0: float, x1: float, x2: float, lattice: tuple) -> float:
+    """Distance (m) from a point to the mesh's bounding box (zero inside it): where positive, the point lies outside
+    the solid, at least that far from the surface."""
+    mesh_low_m, mesh_high_m = lattice[5], lattice[6]
+    g0 = max(mesh_low_m[0] - x0, x0 - mesh_high_m[0], 0.0)
+    g1 = max(mesh_low_m[1] - x1, x1 - mesh_high_m[1], 0.0)
+    g2 = max(mesh_low_m[2] - x2, x2 - mesh_high_m[2], 0.0)
+    return math.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+
+
+@numba.njit(nogil=True, cache=True, inline="always")
+def _vertex_bounds_m(x0: float, x1: float, x2: float, j0: int, j1: int, j2: int,
+                     lattice: tuple) -> tuple[float, float, int]:
+    """Bounds (m) on the signed distance at a point from lattice vertex ``(j0, j1, j2)``: its value minus and plus
+    the point's distance to it and the values' error (the signed distance is 1-Lipschitz); the vertex's face."""
+    lattice_low_m, spacing_m, shape, values_m, value_error_m = lattice[:5]
+    o0 = x0 - (lattice_low_m[0] + j0 * spacing_m)
+    o1 = x1 - (lattice_low_m[1] + j1 * spacing_m)
+    o2 = x2 - (lattice_low_m[2] + j2 * spacing_m)
+    reach = math.sqrt(o0 * o0 + o1 * o1 + o2 * o2) + value_error_m
+    flat = (j0 * shape[1] + j1) * shape[2] + j2
+    return values_m[flat] - reach, values_m[flat] + reach, lattice[7][flat]
+
+
+@numba.njit(nogil=True, cache=True, inline="always")
+def _nearest_index(coordinate: float, low_m: float, spacing_m: float, size: int) -> int:
+    return min(max(math.floor((coordinate - low_m) / spacing_m + 0.5), 0), size - 1)
+
+
 @numba.njit(nogil=True, cache=True)
-def _lattice_interval_m(x0: float, x1: float, x2: float, lattice: tuple) -> tuple[float, float, int]:
-    """``DistanceGrid.interval_m`` for one point (m, fixture frame), and the face closest to its lattice vertex."""
-    lattice_low_m, spacing_m, shape, values_m, value_error_m, mesh_low_m, mesh_high_m, faces = lattice
-    point = (x0, x1, x2)
-    flat = 0
-    reach_sq = 0.0
-    gap_sq = 0.0
-    for axis in range(3):
-        index = math.floor((point[axis] - lattice_low_m[axis]) / spacing_m + 0.5)
-        index = min(max(index, 0), shape[axis] - 1)
-        flat = flat * shape[axis] + index
-        offset = point[axis] - (lattice_low_m[axis] + index * spacing_m)
-        reach_sq += offset * offset
-        gap = max(mesh_low_m[axis] - point[axis], point[axis] - mesh_high_m[axis], 0.0)
-        gap_sq += gap * gap
-    reach = math.sqrt(reach_sq) + value_error_m
-    low = values_m[flat] - reach
-    if gap_sq > 0.0:
-        low = max(low, math.sqrt(gap_sq))
-    return low, values_m[flat] + reach, faces[flat]
+def _nearest_vertex_interval_m(x0: float, x1: float, x2: float, lattice: tuple) -> tuple[float, float, int]:
+    """Interval (m) holding the signed distance at a point (m, fixture frame) from the nearest lattice vertex
+    (clamped to the lattice) and the bounding box, and the face closest to that vertex."""
+    lattice_low_m, spacing_m, shape = lattice[:3]
+    low, high, face = _vertex_bounds_m(x0, x1, x2, _nearest_index(x0, lattice_low_m[0], spacing_m, shape[0]),
+                                       _nearest_index(x1, lattice_low_m[1], spacing_m, shape[1]),
+                                       _nearest_index(x2, lattice_low_m[2], spacing_m, shape[2]), lattice)
+    gap = _box_gap_m(x0, x1, x2, lattice)
+    return (max(low, gap) if gap > 0.0 else low), high, face
+
+
+@numba.njit(nogil=True, cache=True)
+def _voxel_interval_m(x0: float, x1: float, x2: float, lattice: tuple) -> tuple[float, float]:
+    """``DistanceGrid.interval_m`` for one point (m, fixture frame): the tightest of the bounds from the eight
+    corners of the lattice voxel holding it (the nearest voxel outside the lattice), and the bounding box. The
+    nearest vertex is one of the corners, so this interval lies within ``_nearest_vertex_interval_m``'s."""
+    lattice_low_m, spacing_m, shape = lattice[:3]
+    i0 = min(max(math.floor((x0 - lattice_low_m[0]) / spacing_m), 0), shape[0] - 2)
+    i1 = min(max(math.floor((x1 - lattice_low_m[1]) / spacing_m), 0), shape[1] - 2)
+    i2 = min(max(math.floor((x2 - lattice_low_m[2]) / spacing_m), 0), shape[2] - 2)
+    low, high = -np.inf, np.inf
+    for corner in range(8):
+        corner_low, corner_high, _ = _vertex_bounds_m(x0, x1, x2, i0 + (corner & 1), i1 + ((corner >> 1) & 1),
+                                                      i2 + (corner >> 2), lattice)
+        low, high = max(low, corner_low), min(high, corner_high)
+    gap = _box_gap_m(x0, x1, x2, lattice)
+    return (max(low, gap) if gap > 0.0 else low), high
 
 
 @numba.njit(nogil=True, cache=True)
 def lattice_intervals_m(points_m: np.ndarray, lattice: tuple) -> tuple[np.ndarray, np.ndarray]:
-    """``_lattice_interval_m`` of each (N, 3) point: the intervals' low and high ends (m)."""
+    """``_voxel_interval_m`` of each (N, 3) point: the intervals' low and high ends (m)."""
     low = np.empty(len(points_m))
     high = np.empty(len(points_m))
     for row in range(len(points_m)):
-        low[row], high[row], _ = _lattice_interval_m(points_m[row, 0], points_m[row, 1], points_m[row, 2], lattice)
+        low[row], high[row] = _voxel_interval_m(points_m[row, 0], points_m[row, 1], points_m[row, 2], lattice)
     return low, high
 
 
@@ -204,7 +242,7 @@ def _cheap_pass_range(start: int, stop: int, cells: tuple, taps: tuple, band: tu
                     high = min(high, _face_distance_m(x0, x1, x2, face, mesh))
             undecided = _straddles(low, high, band_low, band_high)
             if undecided:
-                lattice_low, lattice_high, lattice_face = _lattice_interval_m(x0, x1, x2, lattice)
+                lattice_low, lattice_high, lattice_face = _nearest_vertex_interval_m(x0, x1, x2, lattice)
                 low, high = max(low, lattice_low), min(high, lattice_high)
                 if face < 0:
                     face = lattice_face
@@ -213,6 +251,10 @@ def _cheap_pass_range(start: int, stop: int, cells: tuple, taps: tuple, band: tu
                     if lattice_face_distance < high:
                         high, face = lattice_face_distance, lattice_face
                 undecided = _straddles(low, high, band_low, band_high)
+                if undecided:
+                    voxel_low, voxel_high = _voxel_interval_m(x0, x1, x2, lattice)
+                    low, high = max(low, voxel_low), min(high, voxel_high)
+                    undecided = _straddles(low, high, band_low, band_high)
             if high < band_low or low > band_high:
                 rejected_by[cell] = tap
                 break

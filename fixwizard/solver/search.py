@@ -115,8 +115,8 @@ class _Frames:
 
     def __init__(self, cells: CellSet, fix_R_base: np.ndarray | None = None, chords: np.ndarray | None = None):
         if fix_R_base is None:
-            rotations, gammas_rad, _ = cells.distinct_rotations()
-            fix_R_base = np.ascontiguousarray(rotations.inv().as_matrix().reshape(-1, 3, 3))
+            base_R_fix, gammas_rad = cells.distinct_rotation_matrices()
+            fix_R_base = np.ascontiguousarray(np.swapaxes(base_R_fix, 1, 2))
             chords = chord(gammas_rad)
         self.fix_R_base = fix_R_base
         self.chords = chords
