@@ -15,6 +15,7 @@ from fixwizard.geometry.meb import minimum_enclosing_ball
 from fixwizard.geometry.se3 import make_transform
 from fixwizard.geometry.so3_grid import chord
 from fixwizard.solver.cells import CellSet
+from fixwizard.solver.distance_grid import distance_grid_for
 
 CENTER_ITERATIONS = 200
 # Below this many effective samples, sample_cells draws a second, importance-weighted round.
@@ -141,10 +142,10 @@ def _weighted_draws(cells: CellSet, oracle: DistanceOracle, base_p_taps: np.ndar
     side = cells.position_grid.cell_side_m(cells.position_level)
     positions = cells.positions_m(cell_index) + (rng.random((len(cell_index), 3)) - 0.5) * side
     fix_R_base = rotations.inv()
-    log_weight = log_weight_offset.astype(float)
-    for tap in base_p_taps:
-        residual = oracle.signed_distance_m(fix_R_base.apply(tap - positions)) - ball_radius_m
-        log_weight -= 0.5 * (residual / sigma_m) ** 2
+    fix_p_taps = np.concatenate([fix_R_base.apply(tap - positions) for tap in base_p_taps])
+    outside = distance_grid_for(oracle).interval_m(fix_p_taps)[0] > 0.0  # no inside test needed there
+    residual = oracle.distance_and_face(fix_p_taps, ~outside)[0] - ball_radius_m
+    log_weight = log_weight_offset - 0.5 * np.sum((residual.reshape(len(base_p_taps), -1) / sigma_m) ** 2, axis=0)
     weights = np.exp(log_weight - logsumexp(log_weight))
     return Samples(rotations, positions, cell_index, weights / weights.sum())
 

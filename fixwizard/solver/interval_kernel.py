@@ -192,7 +192,9 @@ def _cheap_pass_range(start: int, stop: int, cells: tuple, taps: tuple, band: tu
                       parents: tuple, lattice: tuple, mesh: tuple, out: tuple) -> None:
     """Cheap test of cells ``start .. stop`` of a chunk of ``n`` cells against every tap, in order.
 
-    ``cells = (fix_R_base (U, 3, 3), rotation_index (n,), base_p_centres (n, 3) m, chords (U,))``;
+    ``cells = (fix_R_base (U, 3, 3), rotation_index (n,), position_cells (n, 3), chords (U,), octree)`` with
+    ``octree = [corner (3 values, m), cell side (m)]`` of the position level: cell ``k``'s centre (base frame, m)
+    is ``corner + (position_cells[k] + 0.5) * side`` (``PositionGrid.centers_m``);
     ``taps = (base_p_taps (T, 3) m, tap_order)``; ``band = (ball_radius, sample_bound, position_bound,
     lever_cap)`` in m. ``parents = (fix_R_base, rotation_index, rotated_positions, low, high, faces)``
     (cell ``k``'s parent is row ``parent_index[k]``; no rows at the root level); intervals are float32
@@ -202,7 +204,7 @@ def _cheap_pass_range(start: int, stop: int, cells: tuple, taps: tuple, band: tu
     tap tested, the interval, the face whose distance bounds it from above, and whether it straddles a
     band edge; the tap that rejected each cell or ``NOT_REJECTED``.
     """
-    fix_R_base, rotation_index, base_p_centres, chords = cells
+    fix_R_base, rotation_index, position_cells, chords, octree = cells
     base_p_taps, tap_order = taps
     ball_radius_m, sample_bound_m, position_bound_m, lever_cap_m = band
     parent_fix_R_base, parent_rotation_index, parent_rotated_positions, parent_low, parent_high, parent_faces = parents
@@ -210,7 +212,9 @@ def _cheap_pass_range(start: int, stop: int, cells: tuple, taps: tuple, band: tu
     has_parents = parent_low.shape[0] > 0
     for cell in range(start, stop):
         rotation = fix_R_base[rotation_index[cell]]
-        centre = base_p_centres[cell]
+        centre = (octree[0] + (position_cells[cell, 0] + 0.5) * octree[3],
+                  octree[1] + (position_cells[cell, 1] + 0.5) * octree[3],
+                  octree[2] + (position_cells[cell, 2] + 0.5) * octree[3])
         t0 = rotation[0, 0] * centre[0] + rotation[0, 1] * centre[1] + rotation[0, 2] * centre[2]
         t1 = rotation[1, 0] * centre[0] + rotation[1, 1] * centre[1] + rotation[1, 2] * centre[2]
         t2 = rotation[2, 0] * centre[0] + rotation[2, 1] * centre[1] + rotation[2, 2] * centre[2]
@@ -269,7 +273,7 @@ def query_band(cells: tuple, rotated_positions: np.ndarray, rows: np.ndarray, ta
                band: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Query points (m, fixture frame) of cell-tap pairs ``(rows[k], taps[k])``, and their bands' low and high
     ends (m); ``cells`` and ``band`` as for ``cheap_pass``."""
-    fix_R_base, rotation_index, _, chords = cells
+    fix_R_base, rotation_index, _, chords, _ = cells
     ball_radius_m, sample_bound_m, position_bound_m, lever_cap_m = band
     queries = np.empty((len(rows), 3))
     band_low = np.empty(len(rows))

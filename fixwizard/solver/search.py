@@ -196,9 +196,9 @@ def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: in
     taps = len(problem.base_p_taps)
     rotation_index = frames.rotation_index[chunk]
     rotated_positions = np.empty((count, 3))
-    low = np.zeros((count, taps), np.float32)
-    high = np.zeros_like(low)
-    faces = np.full((count, taps), -1, np.int32)
+    low = np.empty((count, taps), np.float32)  # the kernel sets every tap of the cells no tap rejects
+    high = np.empty_like(low)
+    faces = np.empty((count, taps), np.int32)
     straddling = np.zeros((count, taps), bool)
     rejected_by = np.empty(count, np.int64)
     if parents is None:
@@ -208,7 +208,9 @@ def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: in
         parent_arrays = (parents.frames.fix_R_base, parents.frames.rotation_index, parents.rotated_positions,
                          parents.low_m, parents.high_m, parents.faces)
     band_figures = (problem.ball_radius_m, problem.sample_bound_m, frames.cells.position_bound_m, problem.lever_cap_m)
-    cells = (frames.fix_R_base, rotation_index, frames.cells.positions_m(chunk), frames.chords)
+    position_grid, position_level = frames.cells.position_grid, frames.cells.position_level
+    cells = (frames.fix_R_base, rotation_index, frames.cells.position_cells[chunk], frames.chords,
+             np.append(position_grid.corner_m, position_grid.cell_side_m(position_level)))
     with _KERNEL_LOCK:
         cheap_pass(cells, (problem.base_p_taps, np.asarray(tap_order, np.int64)), band_figures,
                    parent_index[chunk], parent_arrays, grid.kernel_arguments, problem.oracle.mesh_arrays,
