@@ -18,7 +18,7 @@ SIGMA_M = 0.001 / 3
 def coarse():
     fixture = demo_fixture()
     taps = load_points(DEMO_TAPS)
-    return fixture, taps, solve(fixture, taps, 2 * BALL_RADIUS_M, 0.001, max_cells=1.6e6, max_samples=500).cells
+    return fixture, taps, solve(fixture, taps, 2 * BALL_RADIUS_M, 0.001, max_cells=2.4e6, max_samples=500).cells
 
 
 def draw(coarse, max_samples: int = 2000):

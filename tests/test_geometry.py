@@ -8,7 +8,7 @@ from scipy.spatial.transform import Rotation
 
 from fixwizard.geometry.meb import minimum_enclosing_ball
 from fixwizard.geometry.octree import PositionGrid
-from fixwizard.geometry.so3_grid import RotationGrid
+from fixwizard.geometry.so3_grid import RotationGrid, rotation_angles
 from fixwizard.geometry.socp_box import ball_intersection_box
 
 
@@ -94,6 +94,24 @@ def test_rotation_cell_centres_lie_in_their_cells():
     grid = RotationGrid()
     cells = np.arange(grid.n_cells(2))
     assert np.all(grid.cell_of(2, grid.centers(2, cells)) == cells)
+
+
+def test_rotation_cell_centre_matrices_are_proper_rotations_and_match_the_centres():
+    grid = RotationGrid()
+    cells = np.random.default_rng(6).integers(0, grid.n_cells(5), 2000)
+    matrices = grid.center_matrices(5, cells)
+    assert np.allclose(np.swapaxes(matrices, 1, 2) @ matrices, np.eye(3), atol=1e-14)
+    assert np.allclose(np.linalg.det(matrices), 1.0, atol=1e-14)
+    assert np.allclose(grid.centers(5, cells).as_matrix(), matrices, atol=1e-14)
+
+
+@pytest.mark.parametrize("scale", [1.0, 1e-7])
+def test_rotation_angles_match_the_relative_rotation_magnitude_at_large_and_tiny_angles(scale):
+    reference = Rotation.random(random_state=8)
+    offsets = Rotation.from_rotvec(np.random.default_rng(8).normal(size=(5000, 3)) * scale)
+    others = reference * offsets
+    angles = rotation_angles(reference.as_matrix(), others.as_matrix())
+    assert np.allclose(angles, offsets.magnitude(), rtol=1e-7, atol=1e-15)
 
 
 def test_position_cell_bound_holds_for_points_in_the_cell():

@@ -369,7 +369,7 @@ def test_text_replaces_dots_and_labels_keep_apart():
 
 @pytest.fixture(scope="module")
 def demo_solution():
-    return solve(demo_fixture(), load_points(DEMO_TAPS), 0.003, 0.001, max_cells=1.6e6)
+    return solve(demo_fixture(), load_points(DEMO_TAPS), 0.003, 0.001, max_cells=2.4e6)
 
 
 def test_the_demo_solution_draws_both_pictures(demo_solution):

@@ -68,6 +68,16 @@ def _tilted(sections: np.ndarray, psi_rad: np.ndarray) -> np.ndarray:
     return tilted
 
 
+def rotation_angles(base_R_a: np.ndarray, base_R_b: np.ndarray) -> np.ndarray:
+    """Angles (rad) of the rotations taking a rotation (3, 3) to each of (N, 3, 3): ``atan2`` of the sine (half
+    the norm of the skew part of ``R_a^T R_b``) and the cosine (from its trace), accurate at every angle."""
+    relative = np.einsum("ji,njk->nik", base_R_a, base_R_b)
+    skew = np.stack([relative[:, 2, 1] - relative[:, 1, 2], relative[:, 0, 2] - relative[:, 2, 0],
+                     relative[:, 1, 0] - relative[:, 0, 1]], axis=1)
+    trace = relative[:, 0, 0] + relative[:, 1, 1] + relative[:, 2, 2]
+    return np.arctan2(0.5 * np.linalg.norm(skew, axis=1), 0.5 * (trace - 1.0))
+
+
 def _angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Angle (rad) between unit vectors along the last axis, accurate at small angles."""
     return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))

@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 from fixwizard.fixture import DistanceOracle
 from fixwizard.geometry.meb import minimum_enclosing_ball
 from fixwizard.geometry.se3 import make_transform
-from fixwizard.geometry.so3_grid import chord
+from fixwizard.geometry.so3_grid import chord, rotation_angles
 from fixwizard.solver.cells import CellSet
 from fixwizard.solver.distance_grid import distance_grid_for
 
@@ -86,14 +86,15 @@ def cell_bound_figures(cells: CellSet, centre: BoundCentre, fix_p_origin: np.nda
                        fixture_radius_m: float) -> np.ndarray:
     """(3, N): for each cell, the largest CAD-origin distance (m), rotation angle (rad) and fixture-point
     displacement (m) between the centre and any pose in the cell."""
-    rotations, gammas, rotation_index = cells.distinct_rotations()
+    base_R_fix, gammas = cells.distinct_rotation_matrices()
+    rotation_index = cells.rotation_index
     positions = cells.positions_m()
     position_bound = cells.position_bound_m
-    cad_origins = rotations.apply(fix_p_origin).reshape(-1, 3)[rotation_index] + positions
+    cad_origins = (base_R_fix @ fix_p_origin)[rotation_index] + positions
     origin_lever = float(np.linalg.norm(fix_p_origin))
     position = (np.linalg.norm(cad_origins - centre.cad_origin_m, axis=1) + position_bound
                 + origin_lever * chord(gammas[rotation_index]))
-    angles = np.minimum((centre.rotation.inv() * rotations).magnitude() + gammas, np.pi)
+    angles = np.minimum(rotation_angles(centre.rotation.as_matrix(), base_R_fix) + gammas, np.pi)
     center_fix = centre.cad_origin_m - centre.rotation.apply(fix_p_origin)
     displacement = (np.linalg.norm(positions - center_fix, axis=1) + position_bound
                     + fixture_radius_m * chord(angles[rotation_index]))

@@ -43,7 +43,7 @@ RESTART_ROOT_SHRINK = 0.95
 # COARSE_FRACTION of the fixture radius) while the taps still prune hard (under PRUNING_RATIO of the
 # level's cells survived): such a bottleneck level may use the whole budget, since stopping there would
 # leave bounds of centimetres that the next few levels shrink to millimetres.
-UNIFORM_SHARE = 1 / 8
+UNIFORM_SHARE = 1 / 12
 COARSE_FRACTION = 0.05
 PRUNING_RATIO = 0.25
 _KERNEL_LOCK = threading.Lock()  # one parallel kernel at a time, whichever thread searches
