@@ -11,11 +11,17 @@ DATA_DIR = Path(__file__).resolve().parent / "data"
 DEMO_MESH = DATA_DIR / "demo_bracket.stl"
 DEMO_MESH_UNITS = "mm"
 DEMO_TAPS = DATA_DIR / "demo_bracket_taps.yaml"
+DISC_MESH = DATA_DIR / "demo_disc.stl"  # a second bundled fixture (mm), made by tools/make_demo_disc.py
 
 
 def demo_fixture() -> Fixture:
     """The bundled bracket (160 x 90 x 60 mm, no symmetry) in metres."""
     return load_fixture(DEMO_MESH, DEMO_MESH_UNITS)
+
+
+def disc_fixture() -> Fixture:
+    """The bundled round plate with a flat and a notch (90 x 78 x 25 mm, no symmetry) in metres."""
+    return load_fixture(DISC_MESH, DEMO_MESH_UNITS)
 
 
 def demo_cell(seed: int = 0) -> SimulatedCell:

@@ -168,6 +168,12 @@ class DistanceOracle:
             distance[rows[inside]] *= -1.0
         return distance, faces
 
+    def ray_hit_distance_m(self, origins_m: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """Distance (m) along each ray (origins (N, 3) m, unit directions (N, 3)) to the first surface it hits;
+        inf where it hits none."""
+        rays = np.hstack([np.asarray(origins_m, np.float32).reshape(-1, 3), np.asarray(directions, np.float32)])
+        return self._scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy().astype(np.float64)
+
     def signed_distance_m(self, points_m: np.ndarray) -> np.ndarray:
         """Signed distance (m, negative inside) where the mesh is closed; unsigned otherwise."""
         return self.distance_and_face(points_m)[0]

@@ -10,6 +10,7 @@ from textual.widgets import DataTable, Static
 from pilot_wait import until
 from tui_cell import ScreenHost, cell_of, wizard_context
 
+from fixwizard.tui.confirm import ConfirmMove
 from fixwizard.tui.sampling import SamplingScreen
 
 pytestmark = pytest.mark.asyncio
@@ -148,3 +149,36 @@ async def test_leaving_turns_freedrive_off_and_keeps_the_session_open(context):
         await until(pilot, lambda: app.results == [False])
         assert cell_of(context).status().mode == "idle"
         assert not context.session.closed and len(context.session.taps) == 1
+
+
+async def test_once_the_pose_is_pinned_down_the_screen_suggests_a_tap_and_moves_above_it_after_confirmation(context):
+    app = ScreenHost(lambda: SamplingScreen(context))
+    cell = cell_of(context)
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        await tap(pilot, screen, "g")
+        assert "No suggestion yet" in text_of(screen, "#note")
+        for _ in range(10):
+            await tap(pilot, screen)
+        await until(pilot, lambda: screen.advice is not None and screen.live.tap_count == 10)
+        assert screen.live.verdict == "unique"
+        guide = text_of(screen, "#guide")
+        assert guide.startswith("Next (* in the view): Tap the ") and "Press g to go above it" in guide
+        assert not screen.query_one("#top-view").has_class("-empty")
+        before = cell.base_T_tcp()
+        await pilot.press("g")
+        await until(pilot, lambda: isinstance(app.screen, ConfirmMove))
+        await pilot.press("n")
+        await until(pilot, lambda: app.screen is screen)
+        np.testing.assert_allclose(cell.base_T_tcp()[:3, 3], before[:3, 3], atol=1e-3)  # cancelled: no motion
+        target = screen.advice.base_p_point_m
+        await pilot.press("g")
+        await until(pilot, lambda: isinstance(app.screen, ConfirmMove))
+        await pilot.press("y")
+        await until(pilot, lambda: app.screen is screen and not screen.busy)
+        assert "hovers above the suggested point" in text_of(screen, "#note")
+        assert cell.status().mode == "freedrive"
+        await tap(pilot, screen, "t")
+        assert len(context.session.taps) == 11
+        contact = context.session.base_p_taps[-1]
+        assert np.linalg.norm(contact - target) < 0.006  # the ball touched the fixture at the suggested point

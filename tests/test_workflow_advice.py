@@ -1,13 +1,19 @@
-"""Advice for an ambiguous result: the reachable surface point where two candidate poses differ most."""
+"""Where to tap next: for a unique set the reachable point where a tap rules out most possible poses, for an
+ambiguous one the point where the two candidate poses differ most; and the robot's way to hover above it."""
 
 import numpy as np
+import pytest
 import trimesh
 from scipy.spatial.transform import Rotation
 from shapes import as_fixture
 
-from fixwizard.demo import demo_fixture
-from fixwizard.geometry.se3 import make_transform
-from fixwizard.workflow.advice import distinguishing_tap
+from fixwizard.demo import DEMO_TAPS, demo_fixture
+from fixwizard.geometry.se3 import make_transform, transform_points
+from fixwizard.points import load_points
+from fixwizard.solver.solve import solve
+from fixwizard.workflow.advice import (REACHABLE_MIN_NORMAL_Z, TABLE_CLEARANCE_M, TapAdvice, distinguishing_tap,
+                                       next_tap)
+from fixwizard.workflow.hover import CLEARANCE_M, HOVER_M, hover_path
 from fixwizard.workflow.live import tap_surface_distances_m
 
 
@@ -40,3 +46,51 @@ def test_no_advice_when_no_face_is_reachable_from_above():
     assert fixture.mesh.face_normals[0][2] == -1.0
     pose = make_transform(np.eye(3), [0.4, 0.0, 0.3])
     assert distinguishing_tap(fixture, pose, make_transform(np.eye(3), [0.41, 0.0, 0.3])) is None
+
+
+@pytest.fixture(scope="module")
+def demo_set():
+    fixture = demo_fixture()
+    return fixture, solve(fixture, load_points(DEMO_TAPS)[:12], 0.003, 0.001, max_cells=2e6)
+
+
+def test_the_next_tap_lies_on_the_estimated_surface_where_a_tap_rules_out_most_poses(demo_set):
+    fixture, solution = demo_set
+    assert solution.status == "unique"
+    advice = next_tap(fixture, solution, 0.001)
+    distance = tap_surface_distances_m(fixture, advice.base_p_point_m[None], 0.0, solution.base_T_cad)[0]
+    assert abs(distance) < 1e-6 and advice.base_n_face[2] >= REACHABLE_MIN_NORMAL_Z
+    assert 0.5 < advice.ruled_out <= 1.0 and advice.separation_m > 0.001
+    assert "rules out about" in advice.sentence() and advice.face in advice.sentence()
+    table_z = transform_points(solution.base_T_cad, fixture.mesh.vertices)[:, 2].min()
+    assert advice.base_p_point_m[2] >= table_z + TABLE_CLEARANCE_M
+
+
+def test_an_ambiguous_set_is_told_apart_and_a_set_without_an_estimate_gets_no_advice():
+    from tui_cell import symmetric_cell, spread_taps
+
+    cell = symmetric_cell()
+    cell.connect()
+    taps = spread_taps(cell, 8)
+    ambiguous = solve(cell.fixture, taps, 0.003, 0.00035, max_cells=8e6)
+    assert ambiguous.status == "ambiguous"
+    advice = next_tap(cell.fixture, ambiguous, 0.00035)
+    assert advice.ruled_out is None and "two most likely poses" in advice.sentence()
+    inconsistent = solve(cell.fixture, np.vstack([taps, taps[-1] + [0.0, 0.0, 0.2]]), 0.003, 0.00035,
+                         max_cells=2e5)
+    assert inconsistent.status == "inconsistent" and next_tap(cell.fixture, inconsistent, 0.00035) is None
+
+
+def test_the_hover_path_rises_clear_of_the_fixture_then_stops_above_the_point_facing_it():
+    advice = TapAdvice(np.array([0.5, 0.1, 0.04]), np.zeros(3), np.array([1.0, 0.0, 0.0]), 0.002, 0.7)
+    tcp_p_tip = np.array([0.0, 0.0, 0.1])
+    now = make_transform(Rotation.from_euler("x", 180, degrees=True), [0.3, 0.0, 0.12])
+    lifted, across, hover = hover_path(advice, tcp_p_tip, 0.0015, now, fixture_top_z_m=0.06)
+    np.testing.assert_allclose(transform_points(hover, tcp_p_tip[None])[0],
+                               advice.base_p_point_m + (0.0015 + HOVER_M) * advice.base_n_face, atol=1e-12)
+    np.testing.assert_allclose(hover[:3, 2], -advice.base_n_face, atol=1e-12)
+    for pose in (lifted, across):
+        assert transform_points(pose, tcp_p_tip[None])[0][2] >= 0.06 + CLEARANCE_M - 1e-12
+    np.testing.assert_allclose(lifted[:2, 3], now[:2, 3])  # straight up first
+    np.testing.assert_allclose(across[:2, 3], hover[:2, 3])  # then across, then straight down
+    assert np.isclose(np.linalg.det(hover[:3, :3]), 1.0)

@@ -84,7 +84,10 @@ def tap_label(index: int, suspect_index: int | None) -> str:
     return f"{index + 1}!" if index == suspect_index else str(index + 1)
 
 
-def _legend(width: int, metres_per_dot: float, suspect_index: int | None) -> Picture:
+TARGET_LABEL = "*"
+
+
+def _legend(width: int, metres_per_dot: float, suspect_index: int | None, has_target: bool) -> Picture:
     canvas = BrailleCanvas(width, 1)
     longest_m = SCALE_BAR_SHARE * canvas.dot_width * metres_per_dot
     length_m = round_length(longest_m)
@@ -92,6 +95,8 @@ def _legend(width: int, metres_per_dot: float, suspect_index: int | None) -> Pic
     notes = ["+x right, +y up"]
     if suspect_index is not None:
         notes.append(f"{tap_label(suspect_index, suspect_index)} suspect")
+    if has_target:
+        notes.append(f"{TARGET_LABEL} tap next")
     for note in notes:
         if column + 2 + len(note) <= width:
             canvas.write(0, column + 2, note, "label")
@@ -100,29 +105,34 @@ def _legend(width: int, metres_per_dot: float, suspect_index: int | None) -> Pic
 
 
 def taps_view(base_p_taps: np.ndarray, width: int, height: int, mesh: trimesh.Trimesh | None = None,
-              base_T_cad: np.ndarray | None = None, suspect_index: int | None = None) -> Picture:
+              base_T_cad: np.ndarray | None = None, suspect_index: int | None = None,
+              base_p_target: np.ndarray | None = None) -> Picture:
     """Top view, exactly ``width`` x ``height`` characters, of taps (N, 3, base frame, m).
 
     With ``mesh`` (CAD frame, m) and ``base_T_cad`` the fixture is drawn at that pose;
-    ``suspect_index`` (0-based) marks one tap as suspect.
+    ``suspect_index`` (0-based) marks one tap as suspect; ``base_p_target`` (3,) (base frame, m) is where to
+    tap next, marked ``*``.
     """
     if width < MIN_WIDTH or height < MIN_HEIGHT:
         raise ValueError(f"the taps view needs at least {MIN_WIDTH}x{MIN_HEIGHT} characters, not {width}x{height}")
     base_p_taps = np.asarray(base_p_taps, float).reshape(-1, 3)
     canvas = BrailleCanvas(width, height - 1)
-    shown = [base_p_taps]
+    shown = [base_p_taps] if base_p_target is None else [base_p_taps, np.reshape(base_p_target, (1, 3))]
     if mesh is not None and base_T_cad is not None:
         shown.append(transform_points(base_T_cad, mesh.vertices))
     points = np.vstack(shown)
     frame = TopViewFrame(points[:, :2].min(axis=0), points[:, :2].max(axis=0), canvas.dot_width, canvas.dot_height)
-    if len(shown) == 2:
+    if mesh is not None and base_T_cad is not None:
         _draw_fixture(canvas, frame, mesh, base_T_cad)
+    if base_p_target is not None:
+        dot_x, dot_y = np.rint(frame.to_dots(np.reshape(base_p_target, (1, 3)))[0]).astype(int)
+        canvas.place(TARGET_LABEL, spots_on(dot_y // DOTS_PER_CELL_Y, dot_x // DOTS_PER_CELL_X, 1), "target")
     taps_dots = np.rint(frame.to_dots(base_p_taps)).astype(int)
     for index, (dot_x, dot_y) in enumerate(taps_dots):
         style = "suspect" if index == suspect_index else "tap"
         label = tap_label(index, suspect_index)
         canvas.place(label, spots_on(dot_y // DOTS_PER_CELL_Y, dot_x // DOTS_PER_CELL_X, len(label)), style)
-    return vstack([canvas.picture(), _legend(width, frame.metres_per_dot, suspect_index)])
+    return vstack([canvas.picture(), _legend(width, frame.metres_per_dot, suspect_index, base_p_target is not None)])
 
 
 def taps_view_for_solution(solution: Solution, fixture: Fixture, base_p_taps: np.ndarray, width: int,

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from fixwizard.calibration.errors import CalibrationFileError
 from fixwizard.calibration.store import TipCalibration, load_calibration
-from fixwizard.demo import DEMO_MESH, DEMO_MESH_UNITS
+from fixwizard.demo import DEMO_MESH, DEMO_MESH_UNITS, DISC_MESH
 from fixwizard.fixture import MESH_SUFFIXES, Fixture
 from fixwizard.workflow.session import find_unfinished
 
@@ -33,10 +33,11 @@ class CalibrationChoice:
 
 
 def fixture_choices(fixtures_dir: Path) -> list[FixtureChoice]:
-    """The bundled demo bracket, then every mesh in ``fixtures_dir`` by name."""
+    """The bundled demo bracket and round plate, then every mesh in ``fixtures_dir`` by name."""
     meshes = sorted(path for path in fixtures_dir.glob("*") if path.suffix.lower() in MESH_SUFFIXES) \
         if fixtures_dir.is_dir() else []
     return [FixtureChoice("Demo bracket (bundled)", DEMO_MESH, DEMO_MESH_UNITS),
+            FixtureChoice("Round plate (bundled)", DISC_MESH, DEMO_MESH_UNITS),
             *(FixtureChoice(path.name, path, CAD_UNITS) for path in meshes)]
 
 

@@ -1,16 +1,15 @@
 """Errors as the operator sees them: a modal with what happened and the next step, and the recovery the
 wizard can do from there (reconnect; on a simulated cell, unlock the protective stop)."""
 
+from collections.abc import Iterable
 from typing import Literal
 
-from textual.app import ComposeResult
 from textual.binding import Binding
-from textual.containers import Horizontal, Vertical
-from textual.screen import ModalScreen
-from textual.widgets import Button, Static
+from textual.widgets import Button
 
 from fixwizard.errors import FixwizardError, InputError
 from fixwizard.robot.base import ConnectionLost, ProtectiveStop, RobotError
+from fixwizard.tui.dialog import Dialog
 
 Recovery = Literal["ok", "reconnect", "unlock"]
 
@@ -34,40 +33,23 @@ def error_message(error: FixwizardError | OSError) -> str:
     return text[:1].upper() + text[1:]
 
 
-class ErrorModal(ModalScreen[Recovery]):
+class ErrorModal(Dialog[Recovery]):
     """Shows one error; dismisses with "ok", "reconnect" or "unlock" (the caller does the recovery)."""
 
-    DEFAULT_CSS = """
-    ErrorModal { align: center middle; }
-    ErrorModal > Vertical {
-        width: 72; height: auto; max-height: 20;
-        border: thick $error; background: $surface; padding: 0 1;
-    }
-    ErrorModal #error-title { text-style: bold reverse; width: 100%; }
-    ErrorModal #error-message { margin: 1 0; }
-    ErrorModal Horizontal { height: auto; }
-    ErrorModal Button { margin-right: 1; }
-    """
+    DEFAULT_CSS = "ErrorModal > Vertical { border: thick $error; }"
     BINDINGS = [Binding("escape", "dismiss('ok')", "Close")]
 
     def __init__(self, error: FixwizardError | OSError, simulated: bool) -> None:
-        super().__init__()
+        super().__init__(error_title(error), error_message(error))
         self.error = error
         self.simulated = simulated
 
-    def compose(self) -> ComposeResult:
-        with Vertical():
-            yield Static(f" {error_title(self.error)} ", id="error-title")
-            yield Static(error_message(self.error), id="error-message", markup=False)
-            with Horizontal():
-                yield Button("OK", id="ok", variant="primary")
-                if isinstance(self.error, ConnectionLost):
-                    yield Button("Reconnect", id="reconnect")
-                if isinstance(self.error, ProtectiveStop) and self.simulated:
-                    yield Button("SIMULATED: unlock (teach pendant)", id="unlock")
-
-    def on_mount(self) -> None:
-        self.query_one("#ok", Button).focus()
+    def buttons(self) -> Iterable[Button]:
+        yield Button("OK", id="ok", variant="primary")
+        if isinstance(self.error, ConnectionLost):
+            yield Button("Reconnect", id="reconnect")
+        if isinstance(self.error, ProtectiveStop) and self.simulated:
+            yield Button("SIMULATED: unlock (teach pendant)", id="unlock")
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
         self.dismiss(event.button.id)

@@ -9,7 +9,8 @@ from textual.widget import Widget
 from fixwizard.plots import Picture
 
 STYLES = {"grid": "dim", "label": "bold", "scale": "bold", "expected": "bold", "outline": "blue",
-          "tap": "bold", "suspect": "bold reverse", "mode1": "cyan", "mode2": "magenta", "mode3": "yellow"}
+          "tap": "bold", "suspect": "bold reverse", "target": "bold reverse", "mode1": "cyan", "mode2": "magenta",
+          "mode3": "yellow"}
 OTHER_MODES = "green"
 
 
@@ -35,6 +36,11 @@ class PictureView(Widget):
         super().__init__(id=id)
         self.draw = draw
         self._drawn: tuple[tuple[int, int], Text] | None = None
+
+    def redraw(self) -> None:
+        """Draw again: what the picture shows has changed."""
+        self._drawn = None
+        self.refresh()
 
     def render(self) -> Text:
         size = (self.content_size.width, self.content_size.height)

@@ -1,5 +1,7 @@
 """The sampling screen: freedrive on, one key taps, the taps in a table with their distance from the surface
-under the current estimate, undo, and a live quick solve after each tap. Dismisses with True to solve.
+under the current estimate, undo, and a live quick solve after each tap. Once the pose is pinned down it
+suggests where to tap next (in words and in a top view) and, on request and after confirmation, moves the
+robot to hover above that point. Dismisses with True to solve.
 
 Robot calls and the quick solve run in thread workers; every tap is journaled (fsynced) by the session
 before the table shows it, so an error never loses a recorded tap.
@@ -13,21 +15,29 @@ import numpy as np
 from rich.text import Text
 from textual.app import ComposeResult
 from textual.binding import Binding
+from textual.containers import Horizontal
 from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Static
 
 from fixwizard.errors import FixwizardError
+from fixwizard.geometry.se3 import transform_points
+from fixwizard.plots.taps_view import taps_view
 from fixwizard.robot.base import ProtectiveStop, RobotError, TapResult
 from fixwizard.solver.search import SearchCancelled
 from fixwizard.solver.solve import MIN_TAPS
+from fixwizard.tui.confirm import ConfirmMove
 from fixwizard.tui.context import WizardContext
 from fixwizard.tui.errors import error_message
-from fixwizard.tui.sampling_text import live_text, robot_problem_text
+from fixwizard.tui.picture_view import PictureView
+from fixwizard.tui.sampling_text import guide_text, hover_question, live_text, robot_problem_text
+from fixwizard.workflow.advice import TapAdvice, next_tap
+from fixwizard.workflow.hover import hover_path
 from fixwizard.workflow.live import LiveCheck, quick_check, tap_surface_distances_m
 from fixwizard.workflow.session import Tap
 
 SIMULATED_ACTIONS = {"simulated_move", "simulated_unlock"}
-ROBOT_ACTIONS = {"tap", "undo", "solve", "leave", "simulated_move", "simulated_unlock"}
+ROBOT_ACTIONS = {"tap", "undo", "solve", "leave", "go_above", "simulated_move", "simulated_unlock"}
+HOVER_SPEED_M_S = 0.1
 COLUMNS = ("#", "x mm", "y mm", "z mm", "off surface mm")
 T = TypeVar("T")
 ShownError = FixwizardError | OSError
@@ -40,8 +50,13 @@ class SamplingScreen(Screen[bool]):
     SamplingScreen { layout: vertical; }
     SamplingScreen #title { text-style: bold; padding: 0 1; }
     SamplingScreen #help { padding: 0 1; color: $text-muted; }
-    SamplingScreen DataTable { height: 1fr; margin: 0 1; }
+    SamplingScreen #middle { height: 1fr; }
+    SamplingScreen DataTable { height: 1fr; width: 1fr; margin: 0 1; }
+    SamplingScreen #top-view { width: 34; height: 1fr; }
+    SamplingScreen #top-view.-empty { display: none; }
     SamplingScreen #live { height: auto; padding: 0 1; }
+    SamplingScreen #guide { height: auto; padding: 0 1; }
+    SamplingScreen #guide.-empty { display: none; }
     SamplingScreen #note { height: auto; padding: 0 1; text-style: italic; }
     SamplingScreen #note.-empty { display: none; }
     SamplingScreen #problem { height: auto; padding: 0 1; text-style: bold; border: heavy $error; }
@@ -50,6 +65,7 @@ class SamplingScreen(Screen[bool]):
     BINDINGS = [
         Binding("t", "tap", "Tap"),
         Binding("u", "undo", "Undo last"),
+        Binding("g", "go_above", "Go above next"),
         Binding("s", "solve", "Solve"),
         Binding("m", "simulated_move", "SIM: move arm"),
         Binding("k", "simulated_unlock", "SIM: unlock"),
@@ -61,6 +77,7 @@ class SamplingScreen(Screen[bool]):
         self.context = context
         self.busy = False
         self.live: LiveCheck | None = None
+        self.advice: TapAdvice | None = None
         self._live_cancel = threading.Event()
         self._spread_index = len(context.session.taps)
         self._stopped = False
@@ -69,13 +86,17 @@ class SamplingScreen(Screen[bool]):
         yield Static("", id="title", markup=False)
         yield Static("Freedrive is on: guide the ball 5-10 mm above the fixture, tool pointing at the surface, "
                      "then press t. Spread 10-20 taps over several faces.", id="help", markup=False)
-        yield DataTable(id="taps", cursor_type="row", zebra_stripes=True)
+        with Horizontal(id="middle"):
+            yield DataTable(id="taps", cursor_type="row", zebra_stripes=True)
+            yield PictureView(self._draw_top_view, id="top-view")
         yield Static("", id="live", markup=False)
+        yield Static("", id="guide", classes="-empty", markup=False)
         yield Static("", id="note", classes="-empty", markup=False)
         yield Static("", id="problem", classes="-empty", markup=False)
         yield Footer()
 
     def on_mount(self) -> None:
+        self.query_one("#top-view").add_class("-empty")
         table = self.query_one(DataTable)
         for column in COLUMNS:
             table.add_column(column, key=column)
@@ -125,6 +146,19 @@ class SamplingScreen(Screen[bool]):
         self._live_cancel.set()
         self._run_robot(lambda: self.context.robot.freedrive(False), lambda _: self.dismiss(False),
                         on_failed=lambda _: self.dismiss(False))
+
+    def action_go_above(self) -> None:
+        advice, estimate = self.advice, self.live.estimate_base_T_cad if self.live is not None else None
+        if advice is None or estimate is None:
+            self._say("No suggestion yet: once the live check pins the pose down, it suggests where to tap next.")
+            return
+
+        def answered(move: bool | None) -> None:
+            if move:
+                self._run_robot(lambda: self._move_above(advice, estimate), lambda _: self._say(
+                    "The ball hovers above the suggested point (freedrive is on again): press t to tap it."))
+
+        self.app.push_screen(ConfirmMove("Move the robot?", hover_question(advice, self.context.simulated)), answered)
 
     def action_simulated_move(self) -> None:
         index = self._spread_index
@@ -179,6 +213,21 @@ class SamplingScreen(Screen[bool]):
             except RobotError:
                 pass  # the tap's own error (or the next robot call) tells the operator
 
+    def _move_above(self, advice: TapAdvice, base_T_cad: np.ndarray) -> None:
+        """Freedrive off, the three moves of ``hover_path``, freedrive on again (also after a failed move)."""
+        robot, calibration = self.context.robot, self.context.calibration
+        top_z = float(transform_points(base_T_cad, self.context.fixture.mesh.vertices)[:, 2].max())
+        try:
+            robot.freedrive(False)
+            for base_T_tcp in hover_path(advice, calibration.tcp_p_tip_m, calibration.ball_diameter_m / 2.0,
+                                         robot.base_T_tcp(), top_z):
+                robot.move_linear(base_T_tcp, HOVER_SPEED_M_S)
+        finally:
+            try:
+                robot.freedrive(True)
+            except RobotError:
+                pass  # the move's own error (or the next robot call) tells the operator
+
     def _tap_recorded(self, tap: Tap) -> None:
         self._stopped = False
         count = len(self.context.session.taps)
@@ -200,6 +249,7 @@ class SamplingScreen(Screen[bool]):
         calibration, fixture = self.context.calibration, self.context.fixture
         base_p_taps = self.context.session.base_p_taps
         previous = self.live
+        self.advice = None  # it was for the taps before
         self._show_live(running=len(base_p_taps) >= MIN_TAPS)
         if len(base_p_taps) < MIN_TAPS:
             return
@@ -208,19 +258,21 @@ class SamplingScreen(Screen[bool]):
             try:
                 check = quick_check(fixture, base_p_taps, calibration.ball_diameter_m, calibration.sample_bound_m,
                                     cancel, previous=previous)
+                advice = (next_tap(fixture, check.solution, calibration.sample_bound_m)
+                          if check.estimate_base_T_cad is not None else None)
             except SearchCancelled:
                 return
             except FixwizardError as error:
                 self.app.call_from_thread(self._live_failed, cancel, error)
                 return
-            self.app.call_from_thread(self._live_done, cancel, check)
+            self.app.call_from_thread(self._live_done, cancel, check, advice)
 
         self.run_worker(work, thread=True, group="live", exclusive=True)
 
-    def _live_done(self, cancel: threading.Event, check: LiveCheck) -> None:
+    def _live_done(self, cancel: threading.Event, check: LiveCheck, advice: TapAdvice | None) -> None:
         if cancel.is_set() or not self.is_attached:
             return
-        self.live = check
+        self.live, self.advice = check, advice
         self._show_taps()
         self._show_live(running=False)
 
@@ -254,6 +306,20 @@ class SamplingScreen(Screen[bool]):
 
     def _show_live(self, running: bool) -> None:
         self.query_one("#live", Static).update(live_text(self.live, len(self.context.session.taps), running))
+        guide = self.query_one("#guide", Static)
+        text = guide_text(self.advice) if self.advice is not None and not running else ""
+        guide.update(text)
+        guide.set_class(not text, "-empty")
+        top_view = self.query_one("#top-view", PictureView)
+        top_view.set_class(self.live is None or self.live.estimate_base_T_cad is None, "-empty")
+        top_view.redraw()
+
+    def _draw_top_view(self, width: int, height: int):
+        """The taps over the fixture at the live estimate, and the suggested next tap."""
+        estimate = self.live.estimate_base_T_cad if self.live is not None else None
+        target = self.advice.base_p_point_m if self.advice is not None else None
+        return taps_view(self.context.session.base_p_taps, width, height, self.context.fixture.mesh, estimate,
+                         base_p_target=target)
 
     def _say(self, text: str) -> None:
         """What just happened, in the note line; clears any problem shown."""

@@ -5,6 +5,8 @@ from pathlib import Path
 import numpy as np
 
 from fixwizard.solver.solve import MIN_TAPS
+from fixwizard.workflow.advice import TapAdvice
+from fixwizard.workflow.hover import CLEARANCE_M, HOVER_M
 from fixwizard.workflow.live import LIVE_MAX_CELLS, LiveCheck
 
 
@@ -38,6 +40,20 @@ def live_text(check: LiveCheck | None, tap_count: int, running: bool) -> str:
         return (head + f"AMBIGUOUS so far, {len(solution.modes)} poses fit (most likely {top.probability:.0%}); tap "
                 f"features that tell them apart. Guaranteed now: {bounds_text(check)}.")
     return head + f"unique so far. Guaranteed now: {bounds_text(check)}; the full solve is tighter."
+
+
+def guide_text(advice: TapAdvice) -> str:
+    """The suggested next tap (marked * in the top view) and how to get there."""
+    return f"Next (* in the view): {advice.sentence()} Press g to go above it."
+
+
+def hover_question(advice: TapAdvice, simulated: bool) -> str:
+    """What the robot will do when the operator confirms the move to the suggested point."""
+    x, y, z = advice.base_p_point_m * 1e3
+    return (f"{'SIMULATED: ' if simulated else ''}The robot will rise to {CLEARANCE_M * 1e3:.0f} mm above the "
+            f"fixture, move across, turn the tool towards {advice.face} and stop {HOVER_M * 1e3:.0f} mm above the "
+            f"point near x {round(x)}, y {round(y)}, z {round(z)} mm. Keep hands and objects clear of the arm. "
+            "Press y to move, n to cancel.")
 
 
 def robot_problem_text(message: str, tap_count: int, session_path: Path) -> str:

@@ -1,0 +1,156 @@
+"""How many taps until the guaranteed bounds reach 2 mm and 1.5 deg (and a looser 3 mm and 3 deg): guided taps
+against farthest-point and random taps, on the simulated cell.
+
+Usage (from the repository root; the MATLAB logo needs ../shared beside the repository):
+    .venv/bin/python benchmarks/guidance.py                          # 20 seeds, all fixtures and strategies
+    .venv/bin/python benchmarks/guidance.py --seeds 3 --fixtures bracket
+
+Each run puts a fixture at a random resting pose (seeded) in the simulated cell (1 mm bounded tap error,
+3 mm ball, perfect tip calibration) and makes ``--max-taps`` tap attempts, running the live check (the
+sampling screen's) after each; a run reaches a target at the first attempt after which the check says
+"unique" within both of its bounds. Every tap is a real simulated one: the robot moves to the hover pose
+above the chosen point (``workflow.hover``) and taps along its tool axis. A tap that touches nothing or
+the table (the operator would see it and undo it) costs its attempt and adds no point.
+
+Strategies choose the next point among the surface points the tool can reach (``workflow.advice``):
+- random: a random one, on the true pose (the operator sees the fixture);
+- farthest: the one farthest from the points tapped so far (farthest-point sampling), on the true pose;
+- guided: farthest-point until the live check has an estimate, then ``next_tap``'s suggestion for the
+  estimated pose.
+"""
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from fixwizard.demo import demo_fixture, disc_fixture
+from fixwizard.fixture import Fixture, load_fixture
+from fixwizard.geometry.se3 import transform_points
+from fixwizard.robot.base import NoContact
+from fixwizard.robot.sim import SimulatedCell
+from fixwizard.workflow.advice import TapAdvice, _candidates, next_tap
+from fixwizard.workflow.hover import hover_path
+from fixwizard.workflow.live import quick_check
+
+LOGO = Path(__file__).resolve().parents[2] / "shared" / "data" / "matlab-logo" / "meshes" / "matlab_logo.ply"
+STRATEGIES = ("guided", "farthest", "random")
+BALL_DIAMETER_M = 0.003
+SAMPLE_BOUND_M = 0.001
+TARGET_POSITION_M = 0.002
+TARGET_ROTATION_RAD = np.radians(1.5)
+EASY_POSITION_M = 0.003  # a second, looser target: the paper's students reached about this with 15 taps
+EASY_ROTATION_RAD = np.radians(3.0)
+
+
+def fixtures() -> dict[str, callable]:
+    found = {"bracket": demo_fixture, "plate": disc_fixture}
+    if LOGO.is_file():
+        found["logo"] = lambda: load_fixture(LOGO)
+    return found
+
+
+def _farthest(candidates: np.ndarray, tapped: list[np.ndarray], rng: np.random.Generator) -> int:
+    if not tapped:
+        return int(rng.integers(len(candidates)))
+    distances = np.linalg.norm(candidates[:, None, :] - np.array(tapped)[None], axis=2).min(axis=1)
+    return int(np.argmax(distances))
+
+
+def _tap_at(cell: SimulatedCell, fixture: Fixture, advice: TapAdvice) -> np.ndarray | None:
+    """Move above the advised point and tap; the ball centre (base frame, m), or None if the tap touched nothing
+    or the table (the operator sees that and undoes the tap)."""
+    top_z = transform_points(cell.truth.base_T_cad, fixture.mesh.vertices)[:, 2].max()
+    for pose in hover_path(advice, cell.truth.tcp_p_tip_m, BALL_DIAMETER_M / 2, cell.base_T_tcp(), top_z):
+        cell.move_linear(pose)
+    try:
+        result = cell.tap()
+    except NoContact:
+        return None
+    ball = transform_points(result.base_T_tcp_contact, cell.truth.tcp_p_tip_m[None])[0]
+    on_table = ball[2] < BALL_DIAMETER_M / 2 + 2 * SAMPLE_BOUND_M
+    return None if on_table else ball
+
+
+def run(fixture: Fixture, seed: int, strategy: str, max_taps: int) -> list[tuple[float, float]]:
+    """The live check's guaranteed bounds (m, rad; inf while not unique) after each of ``max_taps`` tap attempts."""
+    cell = SimulatedCell.with_fixture(fixture, seed=seed, ball_diameter_m=BALL_DIAMETER_M,
+                                      fk_error_bound_m=SAMPLE_BOUND_M)
+    cell.connect()
+    rng = np.random.default_rng(seed)
+    cad_points, base_normals = _candidates(fixture, cell.truth.base_T_cad, seed)
+    base_points = transform_points(cell.truth.base_T_cad, cad_points)
+    taps: list[np.ndarray] = []
+    tapped_points: list[np.ndarray] = []
+    live = None
+    bounds = (np.inf, np.inf)
+    trajectory = []
+    for attempt in range(1, max_taps + 1):
+        advice = None
+        if strategy == "guided" and live is not None and live.estimate_base_T_cad is not None:
+            advice = next_tap(fixture, live.solution, SAMPLE_BOUND_M, seed=attempt)
+        if advice is None:
+            index = (int(rng.integers(len(base_points))) if strategy == "random"
+                     else _farthest(base_points, tapped_points, rng))
+            advice = TapAdvice(base_points[index], cad_points[index], base_normals[index], 0.0)
+        ball = _tap_at(cell, fixture, advice)
+        if ball is not None:
+            taps.append(ball)
+            tapped_points.append(advice.base_p_point_m)
+            live = quick_check(fixture, np.array(taps), BALL_DIAMETER_M, SAMPLE_BOUND_M, previous=live)
+            unique = live is not None and live.verdict == "unique"
+            bounds = ((live.solution.bounds.position_m, live.solution.bounds.rotation_rad) if unique
+                      else (np.inf, np.inf))
+        trajectory.append(bounds)
+    return trajectory
+
+
+def taps_to_reach(trajectory: list[tuple[float, float]], position_m: float, rotation_rad: float) -> int | None:
+    """The first tap attempt after which both bounds are within the targets (m, rad); None if none is."""
+    for attempt, (position, rotation) in enumerate(trajectory, start=1):
+        if position <= position_m and rotation <= rotation_rad:
+            return attempt
+    return None
+
+
+def _summary(counts: list[int | None], max_taps: int) -> str:
+    values = sorted(count if count is not None else max_taps + 1 for count in counts)
+    quartiles = statistics.quantiles(values, n=4) if len(values) > 1 else [values[0]] * 3
+    reached = sum(count is not None for count in counts)
+    return (f"median {statistics.median(values):4.1f}  quartiles {quartiles[0]:4.1f}-{quartiles[2]:4.1f}  "
+            f"range {values[0]}-{values[-1]}  reached {reached}/{len(counts)}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--seeds", type=int, default=20)
+    parser.add_argument("--fixtures", nargs="*", default=None, help="bracket, plate, logo (default: all found)")
+    parser.add_argument("--strategies", nargs="*", default=list(STRATEGIES))
+    parser.add_argument("--max-taps", type=int, default=30)
+    args = parser.parse_args()
+    available = fixtures()
+    names = args.fixtures or list(available)
+    if "logo" in names and "logo" not in available:
+        sys.exit(f"the MATLAB logo mesh is not at {LOGO}")
+    targets = [(TARGET_POSITION_M, TARGET_ROTATION_RAD), (EASY_POSITION_M, EASY_ROTATION_RAD)]
+    print(f"tap attempts until the live guaranteed bounds reach each target ({args.seeds} seeds; a run that does "
+          f"not reach it within {args.max_taps} counts as {args.max_taps + 1})")
+    for name in names:
+        fixture = available[name]()
+        for strategy in args.strategies:
+            started = time.perf_counter()
+            trajectories = [run(fixture, seed, strategy, args.max_taps) for seed in range(args.seeds)]
+            for position_m, rotation_rad in targets:
+                counts = [taps_to_reach(trajectory, position_m, rotation_rad) for trajectory in trajectories]
+                print(f"{name:8} {strategy:9} {position_m * 1e3:.0f} mm {np.degrees(rotation_rad):.1f} deg: "
+                      f"{_summary(counts, args.max_taps)}", flush=True)
+            final = np.array([trajectory[-1] for trajectory in trajectories])
+            print(f"{name:8} {strategy:9} after {args.max_taps}: median {np.median(final[:, 0]) * 1e3:.1f} mm "
+                  f"{np.degrees(np.median(final[:, 1])):.2f} deg ({time.perf_counter() - started:.0f} s)", flush=True)
+
+
+if __name__ == "__main__":
+    main()
