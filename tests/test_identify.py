@@ -26,7 +26,7 @@ def other_mesh(tmp_path):
 
 
 def test_the_right_mesh_fits_and_another_is_ruled_out(other_mesh):
-    verdicts = identify(load_points(DEMO_TAPS), [other_mesh, DEMO_MESH], "mm", 0.003, 0.001, BUDGET)
+    verdicts = identify(load_points(DEMO_TAPS), [(other_mesh, "mm"), (DEMO_MESH, "mm")], 0.003, 0.001, BUDGET)
     assert [(verdict.mesh, verdict.verdict) for verdict in verdicts] == [(other_mesh, "ruled out"),
                                                                         (DEMO_MESH, "fits")]
     assert verdicts[0].surviving_cells == 0 and verdicts[1].surviving_cells > 0

@@ -1,5 +1,6 @@
 """The sampling screen on the simulated cell: the simulated hands and the tap key fill the table and the
-journal, undo is journaled, the live check follows the taps, robot problems are explained and lose nothing."""
+journal, undo is journaled, the live check follows the taps, robot problems are explained and lose nothing,
+the next tap is suggested (and reached on confirmation), and the taps are checked against every fixture."""
 
 import asyncio
 import json
@@ -10,7 +11,9 @@ from textual.widgets import DataTable, Static
 from pilot_wait import until
 from tui_cell import ScreenHost, cell_of, wizard_context
 
+from fixwizard.demo import disc_fixture
 from fixwizard.tui.confirm import ConfirmMove
+from fixwizard.tui.dialog import Dialog
 from fixwizard.tui.sampling import SamplingScreen
 
 pytestmark = pytest.mark.asyncio
@@ -182,3 +185,30 @@ async def test_once_the_pose_is_pinned_down_the_screen_suggests_a_tap_and_moves_
         assert len(context.session.taps) == 11
         contact = context.session.base_p_taps[-1]
         assert np.linalg.norm(contact - target) < 0.006  # the ball touched the fixture at the suggested point
+
+
+@pytest.mark.parametrize("chosen, conclusion", [
+    ("bracket", "Only the chosen fixture fits these taps"),
+    ("plate", "The taps do not fit the chosen fixture; they fit Demo bracket (bundled). Leave (Esc), choose it")])
+async def test_which_fixture_checks_the_taps_against_every_offered_mesh(context, tmp_path, chosen, conclusion):
+    context.fixtures_dir = tmp_path / "no-fixtures-here"
+    if chosen == "plate":
+        context.fixture = disc_fixture()  # the cell holds the bracket: the operator picked the wrong mesh
+    app = ScreenHost(lambda: SamplingScreen(context))
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        await tap(pilot, screen)
+        await pilot.press("i")
+        assert "Tap at least 3 points before asking which fixture this is" in text_of(screen, "#problem")
+        for _ in range(5):
+            await tap(pilot, screen)
+        await pilot.press("i")
+        await until(pilot, lambda: isinstance(app.screen, Dialog), timeout_s=60)
+        text = str(app.screen.query_one("#dialog-message", Static).content)
+        bracket_mark = " (the chosen one)" if chosen == "bracket" else ""
+        plate_mark = " (the chosen one)" if chosen == "plate" else ""
+        assert f"fits       Demo bracket (bundled){bracket_mark}" in text
+        assert f"ruled out  Round plate (bundled){plate_mark}" in text
+        assert conclusion in text
+        await pilot.press("enter")
+        await until(pilot, lambda: app.screen is screen)

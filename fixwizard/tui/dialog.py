@@ -41,3 +41,6 @@ class Dialog(ModalScreen[ResultType]):
 
     def on_mount(self) -> None:
         self.query_one(f"#{self.focused_id}", Button).focus()
+
+    def on_button_pressed(self, event: Button.Pressed) -> None:
+        self.dismiss(event.button.id)

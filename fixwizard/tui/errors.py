@@ -50,6 +50,3 @@ class ErrorModal(Dialog[Recovery]):
             yield Button("Reconnect", id="reconnect")
         if isinstance(self.error, ProtectiveStop) and self.simulated:
             yield Button("SIMULATED: unlock (teach pendant)", id="unlock")
-
-    def on_button_pressed(self, event: Button.Pressed) -> None:
-        self.dismiss(event.button.id)

@@ -25,13 +25,16 @@ from fixwizard.plots.taps_view import taps_view
 from fixwizard.robot.base import ProtectiveStop, RobotError, TapResult
 from fixwizard.solver.search import SearchCancelled
 from fixwizard.solver.solve import MIN_TAPS
+from fixwizard.tui.choices import fixture_choices
 from fixwizard.tui.confirm import ConfirmMove
 from fixwizard.tui.context import WizardContext
+from fixwizard.tui.dialog import Dialog
 from fixwizard.tui.errors import error_message
 from fixwizard.tui.picture_view import PictureView
-from fixwizard.tui.sampling_text import guide_text, hover_question, live_text, robot_problem_text
+from fixwizard.tui.sampling_text import guide_text, hover_question, identify_text, live_text, robot_problem_text
 from fixwizard.workflow.advice import TapAdvice, next_tap
 from fixwizard.workflow.hover import hover_path
+from fixwizard.workflow.identify import identify
 from fixwizard.workflow.live import LiveCheck, quick_check, tap_surface_distances_m
 from fixwizard.workflow.session import Tap
 
@@ -66,6 +69,7 @@ class SamplingScreen(Screen[bool]):
         Binding("t", "tap", "Tap"),
         Binding("u", "undo", "Undo last"),
         Binding("g", "go_above", "Go above next"),
+        Binding("i", "identify", "Which fixture?"),
         Binding("s", "solve", "Solve"),
         Binding("m", "simulated_move", "SIM: move arm"),
         Binding("k", "simulated_unlock", "SIM: unlock"),
@@ -79,6 +83,7 @@ class SamplingScreen(Screen[bool]):
         self.live: LiveCheck | None = None
         self.advice: TapAdvice | None = None
         self._live_cancel = threading.Event()
+        self._identify_cancel = threading.Event()
         self._spread_index = len(context.session.taps)
         self._stopped = False
 
@@ -105,7 +110,8 @@ class SamplingScreen(Screen[bool]):
         self._run_robot(lambda: self.context.robot.freedrive(True), lambda _: None)
 
     def on_unmount(self) -> None:
-        self._live_cancel.set()  # nobody is left to show it
+        self._live_cancel.set()  # nobody is left to show them
+        self._identify_cancel.set()
 
     # --- keys ---
 
@@ -159,6 +165,36 @@ class SamplingScreen(Screen[bool]):
                     "The ball hovers above the suggested point (freedrive is on again): press t to tap it."))
 
         self.app.push_screen(ConfirmMove("Move the robot?", hover_question(advice, self.context.simulated)), answered)
+
+    def action_identify(self) -> None:
+        """Check the taps against every fixture the wizard offers (in a worker) and show which fit."""
+        base_p_taps = self.context.session.base_p_taps
+        if len(base_p_taps) < MIN_TAPS:
+            self._problem(f"Tap at least {MIN_TAPS} points before asking which fixture this is.")
+            return
+        self._identify_cancel.set()
+        cancel = self._identify_cancel = threading.Event()
+        choices = fixture_choices(self.context.fixtures_dir)
+        calibration, chosen = self.context.calibration, self.context.fixture.path
+        self._say(f"Checking the {len(base_p_taps)} taps against {len(choices)} fixtures...")
+
+        def work() -> None:
+            try:
+                verdicts = identify(base_p_taps, [(choice.path, choice.units) for choice in choices],
+                                    calibration.ball_diameter_m, calibration.sample_bound_m, cancel=cancel)
+            except SearchCancelled:
+                return
+            except FixwizardError as error:
+                self.app.call_from_thread(self._problem, error_message(error))
+                return
+            self.app.call_from_thread(self._identified, cancel, identify_text(choices, verdicts, chosen))
+
+        self.run_worker(work, thread=True, group="identify", exclusive=True)
+
+    def _identified(self, cancel: threading.Event, text: str) -> None:
+        if not cancel.is_set() and self.is_attached:
+            self._say("")
+            self.app.push_screen(Dialog("Which fixture is this?", text))
 
     def action_simulated_move(self) -> None:
         index = self._spread_index

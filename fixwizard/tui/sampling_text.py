@@ -5,8 +5,10 @@ from pathlib import Path
 import numpy as np
 
 from fixwizard.solver.solve import MIN_TAPS
+from fixwizard.tui.choices import FixtureChoice
 from fixwizard.workflow.advice import TapAdvice
 from fixwizard.workflow.hover import CLEARANCE_M, HOVER_M
+from fixwizard.workflow.identify import MeshVerdict
 from fixwizard.workflow.live import LIVE_MAX_CELLS, LiveCheck
 
 
@@ -54,6 +56,31 @@ def hover_question(advice: TapAdvice, simulated: bool) -> str:
             f"fixture, move across, turn the tool towards {advice.face} and stop {HOVER_M * 1e3:.0f} mm above the "
             f"point near x {round(x)}, y {round(y)}, z {round(z)} mm. Keep hands and objects clear of the arm. "
             "Press y to move, n to cancel.")
+
+
+def identify_text(choices: list[FixtureChoice], verdicts: list[MeshVerdict], chosen: Path) -> str:
+    """Which of the offered fixtures the taps fit, one line each, then what to do."""
+    lines, fitting = [], []
+    chosen_fits = False
+    for choice, verdict in zip(choices, verdicts, strict=True):
+        is_chosen = choice.path.resolve() == chosen.resolve()
+        mark = " (the chosen one)" if is_chosen else ""
+        lines.append(f"{verdict.verdict:9}  {choice.label}{mark}" + (f": {verdict.message}"
+                                                                   if verdict.verdict == "unreadable" else ""))
+        if verdict.verdict == "fits":
+            fitting.append(choice.label)
+            chosen_fits = chosen_fits or is_chosen
+    if not fitting:
+        lines.append("No fixture fits these taps: check the mesh units, the tip calibration and the sample bound.")
+    elif len(fitting) > 1:
+        lines.append(f"{len(fitting)} fixtures fit these taps: tap features that differ between them.")
+    elif chosen_fits:
+        lines.append("Only the chosen fixture fits these taps (a fixture is ruled out when no pose of it explains "
+                     "them).")
+    else:
+        lines.append(f"The taps do not fit the chosen fixture; they fit {fitting[0]}. Leave (Esc), choose it on the "
+                     "start screen and tap again.")
+    return "\n".join(lines)
 
 
 def robot_problem_text(message: str, tap_count: int, session_path: Path) -> str:

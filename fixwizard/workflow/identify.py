@@ -2,7 +2,8 @@
 is ruled out (the search keeps every pose that could explain them, so an empty set is a proof at any cell
 budget); a mesh with surviving poses fits as far as that budget can tell.
 
-``fixwizard identify POINTS MESH [MESH ...]`` prints one line per mesh and warns when more than one fits.
+``fixwizard identify POINTS MESH [MESH ...]`` prints one line per mesh and warns when more than one fits;
+the sampling screen's "Which fixture?" runs the same against every mesh the wizard offers.
 """
 
 import argparse
@@ -34,15 +35,16 @@ class MeshVerdict:
     message: str
 
 
-def identify(base_p_taps: np.ndarray, meshes: list[Path], mesh_units: str, ball_diameter_m: float,
+def identify(base_p_taps: np.ndarray, meshes: list[tuple[Path, str]], ball_diameter_m: float,
              sample_bound_m: float, max_cells: float = DEFAULT_MAX_CELLS,
              cancel: threading.Event | None = None) -> list[MeshVerdict]:
-    """The verdict of every mesh for the taps (N, 3, base frame, m); lengths in m. A mesh that cannot be
-    loaded gets the verdict "unreadable" with the loader's message instead of stopping the others."""
+    """The verdict of every mesh (path and its units, "m" or "mm") for the taps (N, 3, base frame, m); lengths
+    in m. A mesh that cannot be loaded gets the verdict "unreadable" with the loader's message instead of
+    stopping the others. Raises ``SearchCancelled`` when ``cancel`` is set meanwhile."""
     base_p_taps = np.asarray(base_p_taps, float)
     validate_inputs(base_p_taps, ball_diameter_m, sample_bound_m, sample_bound_m / 3.0, max_cells)
-    return [_verdict(base_p_taps, Path(mesh), mesh_units, ball_diameter_m, sample_bound_m, max_cells, cancel)
-            for mesh in meshes]
+    return [_verdict(base_p_taps, Path(mesh), units, ball_diameter_m, sample_bound_m, max_cells, cancel)
+            for mesh, units in meshes]
 
 
 def _verdict(base_p_taps: np.ndarray, mesh: Path, mesh_units: str, ball_diameter_m: float, sample_bound_m: float,
@@ -75,7 +77,7 @@ def summary_lines(verdicts: list[MeshVerdict]) -> list[str]:
 
 def identify_command(args: argparse.Namespace) -> int:
     """Run ``fixwizard identify``: exit 0 when some mesh fits, 2 when none does."""
-    verdicts = identify(load_points(args.points), [Path(mesh) for mesh in args.meshes], args.mesh_units,
+    verdicts = identify(load_points(args.points), [(Path(mesh), args.mesh_units) for mesh in args.meshes],
                         parse_length_m(args.ball_diameter), parse_length_m(args.sample_bound), args.max_cells)
     print("\n".join(summary_lines(verdicts)))
     return 0 if any(verdict.verdict == "fits" for verdict in verdicts) else 2
