@@ -32,7 +32,7 @@ from fixwizard.fixture import Fixture, load_fixture
 from fixwizard.geometry.se3 import transform_points
 from fixwizard.robot.base import NoContact
 from fixwizard.robot.sim import SimulatedCell
-from fixwizard.workflow.advice import TapAdvice, _candidates, next_tap
+from fixwizard.workflow.advice import TapAdvice, next_tap, reachable_points
 from fixwizard.workflow.hover import hover_path
 from fixwizard.workflow.live import quick_check
 
@@ -81,7 +81,7 @@ def run(fixture: Fixture, seed: int, strategy: str, max_taps: int) -> list[tuple
                                       fk_error_bound_m=SAMPLE_BOUND_M)
     cell.connect()
     rng = np.random.default_rng(seed)
-    cad_points, base_normals = _candidates(fixture, cell.truth.base_T_cad, seed)
+    cad_points, base_normals = reachable_points(fixture, cell.truth.base_T_cad, seed)
     base_points = transform_points(cell.truth.base_T_cad, cad_points)
     taps: list[np.ndarray] = []
     tapped_points: list[np.ndarray] = []

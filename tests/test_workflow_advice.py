@@ -12,7 +12,7 @@ from fixwizard.geometry.se3 import make_transform, transform_points
 from fixwizard.points import load_points
 from fixwizard.solver.solve import solve
 from fixwizard.workflow.advice import (REACHABLE_MIN_NORMAL_Z, TABLE_CLEARANCE_M, TapAdvice, distinguishing_tap,
-                                       next_tap)
+                                       next_tap, reachable_points)
 from fixwizard.workflow.hover import CLEARANCE_M, HOVER_M, hover_path
 from fixwizard.workflow.live import tap_surface_distances_m
 
@@ -94,3 +94,17 @@ def test_the_hover_path_rises_clear_of_the_fixture_then_stops_above_the_point_fa
     np.testing.assert_allclose(lifted[:2, 3], now[:2, 3])  # straight up first
     np.testing.assert_allclose(across[:2, 3], hover[:2, 3])  # then across, then straight down
     assert np.isclose(np.linalg.det(hover[:3, :3]), 1.0)
+
+
+def test_no_point_under_an_overhang_is_offered():
+    fixture = demo_fixture()  # an L-bracket with a step: lying on its side, the step overhangs part of the base
+    pose = make_transform(Rotation.from_euler("x", 90, degrees=True), [0.4, 0.0, 0.0])
+    pose[2, 3] -= transform_points(pose, fixture.mesh.vertices)[:, 2].min()
+    cad_p_points, base_n_points = reachable_points(fixture, pose, seed=0)
+    base_p_points = transform_points(pose, cad_p_points)
+    fix_T_base = fixture.fix_T_cad @ np.linalg.inv(pose)
+    for along_m in (0.01, 0.08):
+        starts = transform_points(fix_T_base, base_p_points + along_m * base_n_points)
+        up = np.broadcast_to(fix_T_base[:3, :3] @ [0.0, 0.0, 1.0], starts.shape)
+        assert np.all(np.isinf(fixture.oracle.ray_hit_distance_m(starts, up)))
+    assert len(cad_p_points) > 100

@@ -10,8 +10,9 @@ is the point of the most probable pose farthest from the other pose's surface
 what a tap sees: on a symmetric part a point can move far and still land on the surface.
 
 Candidates are points the tool can reach: on faces whose outward normal does not point down, clear of
-the table, with a free line along the normal for the tool, and on a patch flat over the ball's
-footprint (so the ball touches the face aimed at, not an edge beside it).
+the table, with a free line along the normal for the tool and free space straight above that line
+(the robot comes down to the hover pose from above, see ``hover``), and on a patch flat over the
+ball's footprint (so the ball touches the face aimed at, not an edge beside it).
 """
 
 from dataclasses import dataclass
@@ -30,6 +31,7 @@ REACHABLE_MIN_NORMAL_Z = -0.2
 UPWARD_MIN_NORMAL_Z = 0.7  # a face this close to horizontal is "upward-facing"
 TABLE_CLEARANCE_M = 0.01  # a point this close above the table (the fixture's lowest point) is not offered
 TOOL_CLEARANCE_M = 0.08  # free length along the normal that the tip and tool need
+ABOVE_SAMPLES_M = (0.01, 0.045, 0.08)  # points along that line from which the way up must be free
 FLAT_RADIUS_M = 0.003  # the surface must stay within FLAT_TOLERANCE_M of the tangent plane this far around
 FLAT_TOLERANCE_M = 0.0002
 BASE_DIRECTIONS = {"+x": np.array([1.0, 0.0, 0.0]), "-x": np.array([-1.0, 0.0, 0.0]),
@@ -66,7 +68,7 @@ class TapAdvice:
                 f"a tap there rules out about {self.ruled_out:.0%} of them.")
 
 
-def _candidates(fixture: Fixture, base_T_cad: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
+def reachable_points(fixture: Fixture, base_T_cad: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Reachable surface points (CAD frame, m) and their outward normals (base frame) at ``base_T_cad``."""
     mesh = fixture.mesh
     cad_p_points, faces = trimesh.sample.sample_surface(mesh, SURFACE_SAMPLES, seed=seed)
@@ -78,6 +80,9 @@ def _candidates(fixture: Fixture, base_T_cad: np.ndarray, seed: int) -> tuple[np
     fix_p_points = cad_p_points[keep] - fixture.cad_p_center
     cad_n_points = cad_n_points[keep]
     free = fixture.oracle.ray_hit_distance_m(fix_p_points + 1e-4 * cad_n_points, cad_n_points) > TOOL_CLEARANCE_M
+    cad_d_up = np.broadcast_to(base_T_cad[:3, :3].T @ [0.0, 0.0, 1.0], fix_p_points.shape)
+    for along_m in ABOVE_SAMPLES_M:
+        free &= np.isinf(fixture.oracle.ray_hit_distance_m(fix_p_points + along_m * cad_n_points, cad_d_up))
     tangent = np.cross(cad_n_points, np.where(np.abs(cad_n_points[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]]))
     tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
     bitangent = np.cross(cad_n_points, tangent)
@@ -96,7 +101,7 @@ def next_tap(fixture: Fixture, solution: Solution, sample_bound_m: float, seed: 
         return None
     if len(solution.modes) > 1:
         return distinguishing_tap(fixture, solution.modes[0].base_T_cad, solution.modes[1].base_T_cad, seed)
-    cad_p_points, base_n_points = _candidates(fixture, solution.base_T_cad, seed)
+    cad_p_points, base_n_points = reachable_points(fixture, solution.base_T_cad, seed)
     if len(cad_p_points) == 0:
         return None
     cells = solution.cells
@@ -121,7 +126,7 @@ def distinguishing_tap(fixture: Fixture, first_base_T_cad: np.ndarray, second_ba
                        seed: int = 0) -> TapAdvice | None:
     """The reachable surface point of ``first_base_T_cad`` farthest from the surface at ``second_base_T_cad``;
     None when no point of the first pose is reachable."""
-    cad_p_points, base_n_points = _candidates(fixture, first_base_T_cad, seed)
+    cad_p_points, base_n_points = reachable_points(fixture, first_base_T_cad, seed)
     if len(cad_p_points) == 0:
         return None
     base_p_points = transform_points(first_base_T_cad, cad_p_points)
