@@ -16,7 +16,7 @@ Strategies choose the next point among the surface points the tool can reach (``
 - random: a random one, on the true pose (the operator sees the fixture);
 - farthest: the one farthest from the points tapped so far (farthest-point sampling), on the true pose;
 - guided: farthest-point until the live check has an estimate, then ``next_tap``'s suggestion for the
-  estimated pose.
+  estimated pose (farthest-point again right after a suggestion that touched nothing or the table).
 """
 
 import argparse
@@ -88,15 +88,17 @@ def run(fixture: Fixture, seed: int, strategy: str, max_taps: int) -> list[tuple
     live = None
     bounds = (np.inf, np.inf)
     trajectory = []
+    missed = False
     for attempt in range(1, max_taps + 1):
         advice = None
-        if strategy == "guided" and live is not None and live.estimate_base_T_cad is not None:
+        if strategy == "guided" and live is not None and live.estimate_base_T_cad is not None and not missed:
             advice = next_tap(fixture, live.solution, SAMPLE_BOUND_M, seed=attempt)
         if advice is None:
             index = (int(rng.integers(len(base_points))) if strategy == "random"
                      else _farthest(base_points, tapped_points, rng))
             advice = TapAdvice(base_points[index], cad_points[index], base_normals[index], 0.0)
         ball = _tap_at(cell, fixture, advice)
+        missed = ball is None  # the estimate was off: the next tap is chosen by the fallback rule
         if ball is not None:
             taps.append(ball)
             tapped_points.append(advice.base_p_point_m)
