@@ -163,7 +163,8 @@ async def test_once_the_pose_is_pinned_down_the_screen_suggests_a_tap_and_moves_
         assert "No suggestion yet" in text_of(screen, "#note")
         for _ in range(10):
             await tap(pilot, screen)
-        await until(pilot, lambda: screen.advice is not None and screen.live.tap_count == 10)
+        await until(pilot, lambda: screen.live is not None and screen.live.tap_count == 10
+                    and screen.advice is not None)
         assert screen.live.verdict == "unique"
         guide = text_of(screen, "#guide")
         assert guide.startswith("Next (* in the view): Tap the ") and "Press g to go above it" in guide

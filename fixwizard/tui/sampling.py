@@ -294,22 +294,29 @@ class SamplingScreen(Screen[bool]):
             try:
                 check = quick_check(fixture, base_p_taps, calibration.ball_diameter_m, calibration.sample_bound_m,
                                     cancel, previous=previous)
-                advice = (next_tap(fixture, check.solution, calibration.sample_bound_m)
-                          if check.estimate_base_T_cad is not None else None)
             except SearchCancelled:
                 return
             except FixwizardError as error:
                 self.app.call_from_thread(self._live_failed, cancel, error)
                 return
-            self.app.call_from_thread(self._live_done, cancel, check, advice)
+            self.app.call_from_thread(self._live_done, cancel, check)
+            if check.estimate_base_T_cad is not None and not cancel.is_set():
+                advice = next_tap(fixture, check.solution, calibration.sample_bound_m)
+                self.app.call_from_thread(self._advice_done, cancel, advice)
 
         self.run_worker(work, thread=True, group="live", exclusive=True)
 
-    def _live_done(self, cancel: threading.Event, check: LiveCheck, advice: TapAdvice | None) -> None:
+    def _live_done(self, cancel: threading.Event, check: LiveCheck) -> None:
         if cancel.is_set() or not self.is_attached:
             return
-        self.live, self.advice = check, advice
+        self.live = check
         self._show_taps()
+        self._show_live(running=False)
+
+    def _advice_done(self, cancel: threading.Event, advice: TapAdvice | None) -> None:
+        if cancel.is_set() or not self.is_attached:
+            return
+        self.advice = advice
         self._show_live(running=False)
 
     def _live_failed(self, cancel: threading.Event, error: FixwizardError) -> None:
