@@ -7,12 +7,12 @@ import trimesh
 from scipy.spatial.transform import Rotation
 from shapes import as_fixture
 
-from fixwizard.demo import DEMO_TAPS, demo_fixture
+from fixwizard.demo import DEMO_TAPS, demo_fixture, disc_fixture
 from fixwizard.geometry.se3 import make_transform, transform_points
 from fixwizard.points import load_points
 from fixwizard.solver.solve import solve
-from fixwizard.workflow.advice import (REACHABLE_MIN_NORMAL_Z, TABLE_CLEARANCE_M, TapAdvice, distinguishing_tap,
-                                       next_tap, reachable_points)
+from fixwizard.workflow.advice import (REACHABLE_MIN_NORMAL_Z, TABLE_CLEARANCE_M, TapAdvice, corners_cad_m,
+                                       distinguishing_tap, next_tap, reachable_points)
 from fixwizard.workflow.hover import CLEARANCE_M, HOVER_M, hover_path
 from fixwizard.workflow.live import tap_surface_distances_m
 
@@ -62,8 +62,15 @@ def test_the_next_tap_lies_on_the_estimated_surface_where_a_tap_rules_out_most_p
     assert abs(distance) < 1e-6 and advice.base_n_face[2] >= REACHABLE_MIN_NORMAL_Z
     assert 0.5 < advice.ruled_out <= 1.0 and advice.separation_m > 0.001
     assert "rules out about" in advice.sentence() and advice.face in advice.sentence()
-    table_z = transform_points(solution.base_T_cad, fixture.mesh.vertices)[:, 2].min()
-    assert advice.base_p_point_m[2] >= table_z + TABLE_CLEARANCE_M
+    base_p_vertices = transform_points(solution.base_T_cad, fixture.mesh.vertices)
+    assert advice.base_p_point_m[2] >= base_p_vertices[:, 2].min() + TABLE_CLEARANCE_M
+    assert np.min(np.linalg.norm(base_p_vertices - advice.base_p_corner_m, axis=1)) < 1e-9  # a real corner
+    assert "mm from the corner at x" in advice.sentence()
+
+
+def test_corners_are_the_vertices_where_three_face_directions_meet():
+    assert len(corners_cad_m(demo_fixture())) == 16  # the bracket is a prism: every vertex is a corner
+    assert len(corners_cad_m(disc_fixture())) == 12  # the round plate: the flat's and the notch's ends only
 
 
 def test_an_ambiguous_set_is_told_apart_and_a_set_without_an_estimate_gets_no_advice():

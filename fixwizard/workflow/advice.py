@@ -15,7 +15,7 @@ the table, with a free line along the normal for the tool and free space straigh
 ball's footprint (so the ball touches the face aimed at, not an edge beside it).
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import trimesh
@@ -34,6 +34,7 @@ TOOL_CLEARANCE_M = 0.08  # free length along the normal that the tip and tool ne
 ABOVE_SAMPLES_M = (0.01, 0.045, 0.08)  # points along that line from which the way up must be free
 FLAT_RADIUS_M = 0.003  # the surface must stay within FLAT_TOLERANCE_M of the tangent plane this far around
 FLAT_TOLERANCE_M = 0.0002
+CORNER_SPREAD = 0.15  # a vertex is a corner when its faces' normals span 3D: third singular value over the first
 BASE_DIRECTIONS = {"+x": np.array([1.0, 0.0, 0.0]), "-x": np.array([-1.0, 0.0, 0.0]),
                    "+y": np.array([0.0, 1.0, 0.0]), "-y": np.array([0.0, -1.0, 0.0])}
 
@@ -43,13 +44,15 @@ class TapAdvice:
     """Tap at ``base_p_point_m`` (base frame, m; ``cad_p_point_m`` on the CAD model), on a face whose outward
     normal is ``base_n_face`` (base frame). Two-pose advice: the second pose's surface is ``separation_m``
     from there. Set advice (``ruled_out`` given): the possible poses put the surface up to ``separation_m``
-    from there along the normal, and a tap there rules out that share of them."""
+    from there along the normal, and a tap there rules out that share of them. ``base_p_corner_m``: the
+    fixture corner nearest the point (base frame, m), to find it by."""
 
     base_p_point_m: np.ndarray
     cad_p_point_m: np.ndarray
     base_n_face: np.ndarray
     separation_m: float
     ruled_out: float | None = None
+    base_p_corner_m: np.ndarray | None = None
 
     @property
     def face(self) -> str:
@@ -62,10 +65,33 @@ class TapAdvice:
     def sentence(self) -> str:
         x, y, z = self.base_p_point_m * 1e3
         where = f"Tap {self.face} near x {round(x)}, y {round(y)}, z {round(z)} mm (robot base)"
+        if self.base_p_corner_m is not None:
+            corner_x, corner_y, corner_z = self.base_p_corner_m * 1e3
+            distance_mm = np.linalg.norm(self.base_p_point_m - self.base_p_corner_m) * 1e3
+            where += (f", {distance_mm:.0f} mm from the corner at x {round(corner_x)}, y {round(corner_y)}, "
+                      f"z {round(corner_z)} mm")
         if self.ruled_out is None:
             return f"{where}: the two most likely poses put the surface {self.separation_m * 1e3:.1f} mm apart there."
         return (f"{where}: the possible poses put the surface up to {self.separation_m * 1e3:.1f} mm from there; "
                 f"a tap there rules out about {self.ruled_out:.0%} of them.")
+
+
+def corners_cad_m(fixture: Fixture) -> np.ndarray:
+    """The mesh's corners (K, 3; CAD frame, m): vertices whose faces' normals span all three directions."""
+    mesh = fixture.mesh
+    vertex_faces = mesh.vertex_faces
+    normals = np.where(vertex_faces[:, :, None] >= 0, mesh.face_normals[np.maximum(vertex_faces, 0)], 0.0)
+    spread = np.linalg.svd(normals, compute_uv=False)
+    return mesh.vertices[spread[:, 2] > CORNER_SPREAD * spread[:, 0]]
+
+
+def _with_corner(advice: TapAdvice, fixture: Fixture, base_T_cad: np.ndarray) -> TapAdvice:
+    """The advice with the fixture corner nearest its point (at ``base_T_cad``) to find it by, if there is one."""
+    corners = corners_cad_m(fixture)
+    if len(corners) == 0:
+        return advice
+    nearest = corners[np.argmin(np.linalg.norm(corners - advice.cad_p_point_m, axis=1))]
+    return replace(advice, base_p_corner_m=transform_points(base_T_cad, nearest[None])[0])
 
 
 def reachable_points(fixture: Fixture, base_T_cad: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -118,8 +144,9 @@ def next_tap(fixture: Fixture, solution: Solution, sample_bound_m: float, seed: 
                           - np.sum(base_p_points * base_n_points, axis=1))
     ruled_out = np.mean(along_normal > sample_bound_m, axis=0)
     best = int(np.lexsort((along_normal.max(axis=0), ruled_out))[-1])
-    return TapAdvice(base_p_points[best], cad_p_points[best], base_n_points[best], float(along_normal[:, best].max()),
-                     float(ruled_out[best]))
+    return _with_corner(TapAdvice(base_p_points[best], cad_p_points[best], base_n_points[best],
+                                  float(along_normal[:, best].max()), float(ruled_out[best])),
+                        fixture, solution.base_T_cad)
 
 
 def distinguishing_tap(fixture: Fixture, first_base_T_cad: np.ndarray, second_base_T_cad: np.ndarray,
@@ -133,4 +160,5 @@ def distinguishing_tap(fixture: Fixture, first_base_T_cad: np.ndarray, second_ba
     fix_p_second = transform_points(fixture.fix_T_cad @ invert(second_base_T_cad), base_p_points)
     separation_m = np.abs(fixture.oracle.signed_distance_m(fix_p_second))
     best = int(np.argmax(separation_m))
-    return TapAdvice(base_p_points[best], cad_p_points[best], base_n_points[best], float(separation_m[best]))
+    return _with_corner(TapAdvice(base_p_points[best], cad_p_points[best], base_n_points[best],
+                                  float(separation_m[best])), fixture, first_base_T_cad)
