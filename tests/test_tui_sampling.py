@@ -63,6 +63,11 @@ async def test_twelve_taps_fill_the_table_and_the_journal_and_the_live_check_fin
         await until(pilot, lambda: screen.live is not None and screen.live.tap_count == 12)
         assert screen.live.verdict == "unique" and screen.live.solution.contains(cell.truth.base_T_cad)
         assert "Live check of 12 taps: unique so far. Guaranteed now: origin within" in text_of(screen, "#live")
+        quick_bounds = screen.live.solution.bounds
+        await until(pilot, lambda: screen.live.refined)
+        assert screen.live.solution.bounds.position_m <= quick_bounds.position_m
+        assert screen.live.solution.contains(cell.truth.base_T_cad)
+        assert "as tight as the full solve's" in text_of(screen, "#live")
         distances_mm = [float(table.get_row_at(row)[4].plain) for row in range(12)]
         assert max(abs(distance) for distance in distances_mm) < 5.0
         await pilot.press("s")

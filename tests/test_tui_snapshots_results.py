@@ -59,7 +59,7 @@ def test_sampling_screen_after_eight_taps(snap_compare, tmp_path):
     async def live_check_done(pilot) -> None:
         screen = pilot.app.screen
         await until(pilot, lambda: not screen.busy and screen.live is not None and screen.live.tap_count == 8
-                    and screen.advice is not None)
+                    and screen.advice is not None and screen.live.refined)
 
     assert snap_compare(ScreenHost(lambda: SamplingScreen(context)), terminal_size=SIZE, run_before=live_check_done)
     context.session.release()

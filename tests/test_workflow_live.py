@@ -5,13 +5,14 @@ import threading
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 from shapes import as_fixture
 from tui_cell import SAMPLE_BOUND_M, spread_taps
 
 from fixwizard.demo import demo_cell
 from fixwizard.geometry.se3 import make_transform
 from fixwizard.solver.search import SearchCancelled
-from fixwizard.workflow.live import quick_check, tap_surface_distances_m
+from fixwizard.workflow.live import quick_check, refine_check, tap_surface_distances_m
 
 BALL_DIAMETER_M = 0.003
 
@@ -51,6 +52,20 @@ def test_quick_check_needs_three_taps_and_pins_the_pose_down_with_enough_taps(ta
     assert many.solution.contains(cell.truth.base_T_cad)
     distances = tap_surface_distances_m(cell.fixture, base_p_taps, BALL_DIAMETER_M, many.estimate_base_T_cad)
     assert np.all(np.abs(distances) < 0.005)
+
+
+def test_refining_a_check_tightens_its_bounds_on_the_same_set_and_keeps_the_true_pose(tapped):
+    cell, base_p_taps = tapped
+    quick = quick_check(cell.fixture, base_p_taps, BALL_DIAMETER_M, SAMPLE_BOUND_M)
+    refined = refine_check(cell.fixture, quick)
+    assert refined.refined and not quick.refined
+    assert refined.verdict == "unique" and refined.tap_count == quick.tap_count
+    assert refined.solution.cells is quick.solution.cells  # the set is taken as it is, not searched again
+    assert refined.solution.bounds.position_m <= quick.solution.bounds.position_m
+    assert refined.solution.bounds.rotation_rad <= quick.solution.bounds.rotation_rad
+    truth, centre = cell.truth.base_T_cad, refined.solution.bounds.base_T_cad_center
+    assert np.linalg.norm(truth[:3, 3] - centre[:3, 3]) <= refined.solution.bounds.position_m
+    assert Rotation.from_matrix(centre[:3, :3].T @ truth[:3, :3]).magnitude() <= refined.solution.bounds.rotation_rad
 
 
 def test_quick_check_says_inconsistent_for_a_tap_in_the_air(tapped):

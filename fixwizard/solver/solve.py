@@ -86,12 +86,13 @@ class Solution:
         return None if self.tree is None else self.tree.final.cells
 
     def extends_to(self, problem: SearchProblem) -> bool:
-        """Whether ``problem`` is this solution's with taps added: same mesh, ball and bound, earlier taps kept."""
+        """Whether ``problem`` is this solution's with the same or more taps: same mesh, ball and bound, earlier taps
+        kept."""
         known = self.problem.base_p_taps
         return (self.tree is not None and problem.oracle is self.problem.oracle
                 and problem.ball_radius_m == self.problem.ball_radius_m
                 and problem.sample_bound_m == self.problem.sample_bound_m
-                and len(problem.base_p_taps) > len(known)
+                and len(problem.base_p_taps) >= len(known)
                 and np.array_equal(problem.base_p_taps[:len(known)], known))
 
     def contains(self, base_T_cad: np.ndarray) -> bool:
@@ -191,7 +192,9 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
     ``base_p_taps`` (N, 3): measured ball centres in the robot base frame (m). ``sigma_m``
     defaults to ``sample_bound_m / 3``. Raises ``SearchCancelled`` if ``cancel`` is set.
     ``previous``: a solution of the same fixture and bounds with fewer taps; when the taps extend its
-    taps, the search goes on from its surviving set instead of starting over. ``hull_cells``: the cells hull
+    taps, the search goes on from its surviving set instead of starting over. With the same taps its set is
+    taken as it is: only the estimates and the hull refinement run again (with a larger ``hull_cells``, to
+    tighten the bounds). ``hull_cells``: the cells hull
     refinement may evaluate (default ``HULL_SHARE`` of ``max_cells``).
     """
     base_p_taps = np.asarray(base_p_taps, dtype=float)
@@ -199,7 +202,9 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
     validate_inputs(base_p_taps, ball_diameter_m, sample_bound_m, sigma_m, max_cells)
     started = time.perf_counter()
     problem = SearchProblem(fixture.oracle, fixture.radius_m, base_p_taps, ball_diameter_m / 2.0, sample_bound_m)
-    if previous is not None and previous.extends_to(problem) and worth_extending(problem, previous.tree):
+    if previous is not None and previous.extends_to(problem) and len(base_p_taps) == len(previous.problem.base_p_taps):
+        tree = previous.tree
+    elif previous is not None and previous.extends_to(problem) and worth_extending(problem, previous.tree):
         tree = add_taps(problem, previous.tree, max_cells, progress, cancel)
     else:
         tree = search(problem, max_cells, progress, cancel)

@@ -35,7 +35,7 @@ from fixwizard.tui.sampling_text import guide_text, hover_question, identify_tex
 from fixwizard.workflow.advice import TapAdvice, next_tap
 from fixwizard.workflow.hover import hover_path
 from fixwizard.workflow.identify import identify
-from fixwizard.workflow.live import LiveCheck, quick_check, tap_surface_distances_m
+from fixwizard.workflow.live import LiveCheck, quick_check, refine_check, tap_surface_distances_m
 from fixwizard.workflow.session import Tap
 
 SIMULATED_ACTIONS = {"simulated_move", "simulated_unlock"}
@@ -300,9 +300,15 @@ class SamplingScreen(Screen[bool]):
                 self.app.call_from_thread(self._live_failed, cancel, error)
                 return
             self.app.call_from_thread(self._live_done, cancel, check)
-            if check.estimate_base_T_cad is not None and not cancel.is_set():
-                advice = next_tap(fixture, check.solution, calibration.sample_bound_m)
-                self.app.call_from_thread(self._advice_done, cancel, advice)
+            if check.estimate_base_T_cad is None or cancel.is_set():
+                return
+            advice = next_tap(fixture, check.solution, calibration.sample_bound_m)
+            self.app.call_from_thread(self._advice_done, cancel, advice)
+            try:
+                refined = refine_check(fixture, check, cancel)
+            except SearchCancelled:
+                return
+            self.app.call_from_thread(self._live_done, cancel, refined)
 
         self.run_worker(work, thread=True, group="live", exclusive=True)
 

@@ -41,7 +41,8 @@ def live_text(check: LiveCheck | None, tap_count: int, running: bool) -> str:
         top = solution.modes[0]
         return (head + f"AMBIGUOUS so far, {len(solution.modes)} poses fit (most likely {top.probability:.0%}); tap "
                 f"features that tell them apart. Guaranteed now: {bounds_text(check)}.")
-    return head + f"unique so far. Guaranteed now: {bounds_text(check)}; the full solve is tighter."
+    tightness = "as tight as the full solve's" if check.refined else "tightening them..."
+    return head + f"unique so far. Guaranteed now: {bounds_text(check)}; {tightness}"
 
 
 def guide_text(advice: TapAdvice) -> str:

@@ -2,7 +2,9 @@
 from the fixture surface under the pose it estimates.
 
 The quick solve is the real solver with fewer likelihood samples, so what it says is guaranteed: an empty
-set means the taps are inconsistent. After each new tap it goes on from the previous check's set. While the
+set means the taps are inconsistent. After each new tap it goes on from the previous check's set. Its
+bounds come from a light hull refinement; ``refine_check`` then spends the full solve's hull budget on the
+same set, for the bounds the report will give. While the
 most probable mode still spans more than ``OPEN_ROTATION_RAD`` of rotation the pose is called "open" (not
 pinned down yet) and no estimate is offered.
 """
@@ -15,10 +17,11 @@ import numpy as np
 
 from fixwizard.fixture import Fixture
 from fixwizard.geometry.se3 import invert, transform_points
-from fixwizard.solver.solve import MIN_TAPS, Solution, solve
+from fixwizard.solver.solve import HULL_SHARE, MIN_TAPS, Solution, solve
 
 LIVE_MAX_CELLS = 1e7  # the full solve's budget: the live bounds are as guaranteed and nearly as tight
 LIVE_HULL_CELLS = 2e5  # less hull refinement than the full solve, for an update in about two seconds
+REFINED_HULL_CELLS = HULL_SHARE * LIVE_MAX_CELLS  # the full solve's hull refinement: its bounds
 LIVE_MAX_SAMPLES = 1000
 OPEN_ROTATION_RAD = np.radians(45.0)
 
@@ -42,6 +45,7 @@ class LiveCheck:
     verdict: Verdict
     solution: Solution
     tap_count: int
+    refined: bool = False  # the bounds come from the full solve's hull refinement
 
     @property
     def estimate_base_T_cad(self) -> np.ndarray | None:
@@ -71,3 +75,13 @@ def quick_check(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: floa
                      max_samples=LIVE_MAX_SAMPLES, previous=None if previous is None else previous.solution,
                      hull_cells=LIVE_HULL_CELLS)
     return LiveCheck(verdict_of(solution), solution, len(base_p_taps))
+
+
+def refine_check(fixture: Fixture, check: LiveCheck, cancel: threading.Event | None = None) -> LiveCheck:
+    """The same check with the full solve's hull refinement of its set: bounds as tight as the report's
+    (about a second more). Raises ``SearchCancelled`` when ``cancel`` is set meanwhile."""
+    problem = check.solution.problem
+    solution = solve(fixture, problem.base_p_taps, 2.0 * problem.ball_radius_m, problem.sample_bound_m,
+                     max_cells=check.solution.stats.max_cells, cancel=cancel, max_samples=LIVE_MAX_SAMPLES,
+                     previous=check.solution, hull_cells=REFINED_HULL_CELLS)
+    return LiveCheck(verdict_of(solution), solution, check.tap_count, refined=True)
