@@ -3,7 +3,7 @@ against farthest-point and random taps, on the simulated cell.
 
 Usage (from the repository root; the MATLAB logo needs ../shared beside the repository):
     .venv/bin/python benchmarks/guidance.py                          # 20 seeds, all fixtures and strategies
-    .venv/bin/python benchmarks/guidance.py --seeds 3 --fixtures bracket
+    .venv/bin/python benchmarks/guidance.py --seeds 3 --fixtures bracket --strategies guided --each-run
 
 Each run puts a fixture at a random resting pose (seeded) in the simulated cell (1 mm bounded tap error,
 3 mm ball, perfect tip calibration) and makes ``--max-taps`` tap attempts, running the live check (the
@@ -155,6 +155,15 @@ def _summary(counts: list[int | None], max_taps: int) -> str:
             f"range {values[0]}-{values[-1]}  reached {reached}/{len(counts)}")
 
 
+def _run_line(trajectory: list[tuple[float, float]]) -> str:
+    """One run's attempts to each target ("-" when not reached) and its bounds after ``PAPER_TAPS``."""
+    counts = [taps_to_reach(trajectory, position_m, rotation_rad) for position_m, rotation_rad in TARGETS]
+    position_m, rotation_rad = trajectory[PAPER_TAPS - 1]
+    return (" ".join(f"{position * 1e3:.0f}mm/{np.degrees(rotation):.1f}deg {'-' if count is None else count}"
+                     for count, (position, rotation) in zip(counts, TARGETS, strict=True))
+            + f"  after {PAPER_TAPS}: {position_m * 1e3:.2f} mm {np.degrees(rotation_rad):.2f} deg")
+
+
 def _quartiles(values: np.ndarray, spec: str) -> str:
     low, high = np.quantile(values, [0.25, 0.75], method="closest_observation")  # no inf - inf
     return f"{low:{spec}}-{high:{spec}}"
@@ -166,6 +175,7 @@ def main() -> None:
     parser.add_argument("--fixtures", nargs="*", default=None, help="bracket, plate, logo (default: all found)")
     parser.add_argument("--strategies", nargs="*", default=list(STRATEGIES))
     parser.add_argument("--max-taps", type=int, default=30)
+    parser.add_argument("--each-run", action="store_true", help="also print each run's figures as it ends")
     args = parser.parse_args()
     if args.max_taps < PAPER_TAPS:
         parser.error(f"--max-taps must be at least {PAPER_TAPS}")
@@ -179,7 +189,11 @@ def main() -> None:
         fixture = available[name]()
         for strategy in args.strategies:
             started = time.perf_counter()
-            trajectories = [run(fixture, seed, strategy, args.max_taps) for seed in range(args.seeds)]
+            trajectories = []
+            for seed in range(args.seeds):
+                trajectories.append(run(fixture, seed, strategy, args.max_taps))
+                if args.each_run:
+                    print(f"{name:8} {strategy:9} seed {seed:2}: {_run_line(trajectories[-1])}", flush=True)
             for position_m, rotation_rad in TARGETS:
                 counts = [taps_to_reach(trajectory, position_m, rotation_rad) for trajectory in trajectories]
                 print(f"{name:8} {strategy:9} {position_m * 1e3:.0f} mm {np.degrees(rotation_rad):.1f} deg: "
