@@ -4,6 +4,7 @@ against farthest-point and random taps, on the simulated cell.
 Usage (from the repository root; the MATLAB logo needs ../shared beside the repository):
     .venv/bin/python benchmarks/guidance.py                          # 20 seeds, all fixtures and strategies
     .venv/bin/python benchmarks/guidance.py --seeds 3 --fixtures bracket --strategies guided --each-run
+    .venv/bin/python benchmarks/guidance.py --first-seed 10 --seeds 10 --fixtures plate --each-run   # seeds 10-19
 
 Each run puts a fixture at a random resting pose (seeded) in the simulated cell (1 mm bounded tap error,
 3 mm ball, perfect tip calibration) and makes ``--max-taps`` tap attempts, running the live check (the
@@ -172,6 +173,8 @@ def _quartiles(values: np.ndarray, spec: str) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seeds", type=int, default=20)
+    parser.add_argument("--first-seed", type=int, default=0,
+                        help="seeds run from this one on (to split a benchmark over processes)")
     parser.add_argument("--fixtures", nargs="*", default=None, help="bracket, plate, logo (default: all found)")
     parser.add_argument("--strategies", nargs="*", default=list(STRATEGIES))
     parser.add_argument("--max-taps", type=int, default=30)
@@ -190,7 +193,7 @@ def main() -> None:
         for strategy in args.strategies:
             started = time.perf_counter()
             trajectories = []
-            for seed in range(args.seeds):
+            for seed in range(args.first_seed, args.first_seed + args.seeds):
                 trajectories.append(run(fixture, seed, strategy, args.max_taps))
                 if args.each_run:
                     print(f"{name:8} {strategy:9} seed {seed:2}: {_run_line(trajectories[-1])}", flush=True)
