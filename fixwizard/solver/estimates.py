@@ -130,6 +130,15 @@ def sample_cells(cells: CellSet, oracle: DistanceOracle, base_p_taps: np.ndarray
                            -np.log(pick_probability[picks]), rng)
 
 
+def mixture(parts: list[tuple[Samples, np.ndarray]], shares: np.ndarray) -> Samples:
+    """One sample set from several (each with the indices of its cells in the whole set), part ``k``
+    holding ``shares[k]`` of the weight."""
+    return Samples(Rotation.concatenate([samples.rotations for samples, _ in parts]),
+                   np.vstack([samples.positions_m for samples, _ in parts]),
+                   np.concatenate([cells[samples.cell_index] for samples, cells in parts]),
+                   np.concatenate([share * samples.weights for (samples, _), share in zip(parts, shares, strict=True)]))
+
+
 def effective_sample_size(weights: np.ndarray) -> float:
     """Kish's effective number of samples of normalised weights: 1 / sum(w^2)."""
     return float(1.0 / np.sum(weights ** 2))

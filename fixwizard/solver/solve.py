@@ -7,7 +7,7 @@ the sample error bound in metres; it returns a ``Solution`` with the pose of the
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -17,7 +17,9 @@ from fixwizard.fixture import Fixture
 from fixwizard.geometry.se3 import invert
 from fixwizard.solver.diagnose import SuspectTap, find_suspect_tap
 from fixwizard.solver.estimates import (Bounds, Interval, Samples, bound_centre, bounds_from_figures,
-                                        cell_bound_figures, expected_pose, intervals, rotation_center, sample_cells)
+                                        cell_bound_figures, expected_pose, intervals, mixture, rotation_center,
+                                        sample_cells)
+from fixwizard.solver.mode_mass import ModeLikelihood, mode_shares
 from fixwizard.solver.refine import refined_largest_figures
 from fixwizard.solver.modes import rotation_modes
 from fixwizard.solver.cells import CellSet
@@ -152,16 +154,31 @@ def _inconsistent_warnings(suspect: SuspectTap | None) -> list[SolveWarning]:
                          "is too small for this robot.")]
 
 
-def _modes(problem: SearchProblem, survivors: Survivors, samples: Samples, fix_p_origin: np.ndarray,
+@dataclass(frozen=True)
+class _Likelihood:
+    """What the likelihood samples need: the fixture's oracle and size, sigma (m) and the sample budget."""
+
+    fixture: Fixture
+    sigma_m: float
+    max_samples: int
+    rng: np.random.Generator
+
+
+def _modes(problem: SearchProblem, survivors: Survivors, likelihood: _Likelihood, fix_p_origin: np.ndarray,
            fix_T_cad: np.ndarray, refine_budget: float,
-           cancel: threading.Event | None) -> tuple[list[Mode], np.ndarray]:
+           cancel: threading.Event | None) -> tuple[list[Mode], np.ndarray, Samples | None]:
     """The modes of a non-empty set that refinement does not prove empty, most probable first, each with refined
-    bounds, and which cells belong to them."""
+    bounds; which cells belong to them; and likelihood samples of them all.
+
+    Each mode is sampled on its own (an equal share of the budget), and the modes' probabilities come from
+    Laplace's approximation (``mode_mass``), not from the samples.
+    """
     cells = survivors.cells
     labels = rotation_modes(cells)
-    sample_labels = labels[samples.cell_index]
     mode_labels = np.unique(labels)
-    modes, kept = [], np.zeros(len(cells), bool)
+    per_mode_samples = max(1, likelihood.max_samples // len(mode_labels))
+    oracle = likelihood.fixture.oracle
+    found = []
     for label in mode_labels:
         mode_survivors = survivors.subset(labels == label)
         mode_cells = mode_survivors.cells
@@ -170,16 +187,23 @@ def _modes(problem: SearchProblem, survivors: Survivors, samples: Samples, fix_p
                                           refine_budget / len(mode_labels), cancel)
         if largest is None:
             continue
+        samples = sample_cells(mode_cells, oracle, problem.base_p_taps, problem.ball_radius_m, likelihood.sigma_m,
+                               per_mode_samples, likelihood.rng)
         bounds = bounds_from_figures(centre, largest)
-        mode_samples = sample_labels == label
-        probability = float(samples.weights[mode_samples].sum())
-        base_T_cad = expected_pose(samples, mode_samples, fix_T_cad) if probability > 0 else bounds.base_T_cad_center
-        modes.append(Mode(probability, base_T_cad, bounds, len(mode_cells)))
-        kept |= labels == label
-    total = sum(mode.probability for mode in modes)
-    if total > 0:
-        modes = [replace(mode, probability=mode.probability / total) for mode in modes]
-    return sorted(modes, key=lambda mode: -mode.probability), kept
+        found.append((bounds, samples, np.flatnonzero(labels == label),
+                      ModeLikelihood(mode_cells, samples, bounds.max_point_displacement_m)))
+    if not found:
+        return [], np.zeros(len(cells), bool), None
+    shares = mode_shares(likelihood.fixture, problem.base_p_taps, problem.ball_radius_m, likelihood.sigma_m,
+                         problem.sample_bound_m, [mode for *_, mode in found], likelihood.rng)
+    modes = [Mode(float(share), expected_pose(samples, np.ones(len(samples.weights), bool), fix_T_cad), bounds,
+                  len(mode_cells))
+             for share, (bounds, samples, mode_cells, _) in zip(shares, found, strict=True)]
+    kept = np.zeros(len(cells), bool)
+    for _, _, mode_cells, _ in found:
+        kept[mode_cells] = True
+    samples = mixture([(samples, mode_cells) for _, samples, mode_cells, _ in found], shares)
+    return sorted(modes, key=lambda mode: -mode.probability), kept, samples
 
 
 def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sample_bound_m: float,
@@ -222,10 +246,9 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
     if cells is None or len(cells) == 0:
         return inconsistent()
     fix_p_origin = -fixture.cad_p_center
-    samples = sample_cells(cells, fixture.oracle, base_p_taps, ball_diameter_m / 2.0, sigma_m, max_samples,
-                           np.random.default_rng(seed))
     hull_cells = max_cells * HULL_SHARE if hull_cells is None else hull_cells
-    modes, in_modes = _modes(problem, survivors, samples, fix_p_origin, fix_T_cad, hull_cells, cancel)
+    likelihood = _Likelihood(fixture, sigma_m, max_samples, np.random.default_rng(seed))
+    modes, in_modes, samples = _modes(problem, survivors, likelihood, fix_p_origin, fix_T_cad, hull_cells, cancel)
     if not modes:
         return inconsistent()
     top = modes[0]
