@@ -5,6 +5,7 @@ import threading
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 from shapes import as_fixture
 
 from fixwizard.calibration.taps import ball_centres_m
@@ -109,6 +110,27 @@ def test_tap_pointing_away_finds_no_contact(cell):
     cell.move_linear(make_transform(np.eye(3), [0.3, 0.0, 0.3]))  # tool z points up, into free space
     with pytest.raises(NoContact, match="no surface within 20 mm: move the tool closer"):
         cell.tap()
+
+
+def test_a_move_into_the_fixture_stops_short_of_it_with_a_protective_stop_until_unlocked(fixture):
+    cell = SimulatedCell.with_fixture(fixture, seed=3, base_T_cad=make_transform(np.eye(3), [0.4, 0.0, 0.0]),
+                                      tcp_p_tip_m=np.array([0.0, 0.0, 0.1]), fk_error_bound_m=0.0)
+    cell.connect()
+    down = Rotation.from_euler("x", 180, degrees=True)
+    above = make_transform(down, [0.41, 0.01, 0.15])  # the ball 50 mm above the 10 mm thick plate
+    cell.move_linear(above)
+    with pytest.raises(ProtectiveStop, match="the ball hit the fixture or the table during a move"):
+        cell.move_linear(make_transform(down, [0.41, 0.01, 0.105]))  # the ball 5 mm deep into the plate
+    base_p_ball = transform_points(cell.base_T_tcp(), cell.truth.tcp_p_tip_m[None])[0]
+    assert 0.01 + 0.0015 - 0.0002 <= base_p_ball[2] <= 0.01 + 0.0015 + 0.001  # stopped on the surface
+    assert cell.status().protective_stop
+    with pytest.raises(ProtectiveStop):
+        cell.move_linear(above)
+    cell.unlock()
+    cell.move_linear(above)
+    with pytest.raises(ProtectiveStop):
+        cell.move_linear(make_transform(down, [0.3, 0.0, 0.1]))  # beside the plate, into the table
+    assert transform_points(cell.base_T_tcp(), cell.truth.tcp_p_tip_m[None])[0][2] >= 0.0015 - 0.0002
 
 
 def test_tap_never_reaches_beyond_its_travel(cell):

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+from scipy.spatial.transform import Rotation, Slerp
 
 from fixwizard.fixture import Fixture
 from fixwizard.geometry.se3 import invert, make_transform, transform_points
@@ -35,6 +35,10 @@ Fault = Literal["protective_stop_during_tap", "connection_loss", "no_surface"]
 # The ball touches a surface when its centre is within this distance (m) of the ball-offset surface.
 CONTACT_TOLERANCE_M = 1e-6
 SETTLE_S = 0.2
+# move_linear: the ball's path is checked every MOVE_STEP_M (m); dipping deeper than COLLISION_DEPTH_M (m) into
+# the fixture or the table is a collision (a step can pass a corner by up to about MOVE_STEP_M / 2 unseen).
+MOVE_STEP_M = 0.0005
+COLLISION_DEPTH_M = 0.0002
 # place_tip_near: hover height range (m), largest tilt of the tool z axis from the inward normal (rad),
 # smallest base-z component of a fixture face normal that counts as facing up.
 HOVER_M = (0.005, 0.010)
@@ -152,11 +156,20 @@ class SimulatedCell:
             return TapResult(self._reported(base_T_contact), travel_m, force_limit_n, SETTLE_S)
 
     def move_linear(self, base_T_tcp: np.ndarray, speed_m_s: float = 0.05) -> None:
+        """Move the flange straight to ``base_T_tcp``; if the ball would hit the fixture or the table on the
+        way, stop just before and make a protective stop, as a real controller's collision detection does."""
         check_limit("linear speed", speed_m_s, MAX_LINEAR_SPEED_M_S, "mm/s", 1e3)
         self._move_for_pace("move")
         with self._lock:
             self._require_ready()
-            self._base_T_tcp = np.array(base_T_tcp, float)
+            path = self._flange_path(np.array(base_T_tcp, float))
+            hit = self._first_collision(path)
+            if hit is None:
+                self._base_T_tcp = np.array(base_T_tcp, float)
+                return
+            self._base_T_tcp = path[hit - 1]
+            self._protective_stop = True
+            raise ProtectiveStop(" because the ball hit the fixture or the table during a move")
 
     def status(self) -> RobotStatus:
         with self._lock:
@@ -257,6 +270,29 @@ class SimulatedCell:
                                                                                  np.asarray(point, float)[None]))
             cad_p_ball = cad_p_surface[0] + radius * mesh.face_normals[face]
         return transform_points(self.truth.base_T_cad, cad_p_ball[None])[0], base_R_cad @ mesh.face_normals[face]
+
+    def _flange_path(self, base_T_tcp_end: np.ndarray) -> np.ndarray:
+        """Flange poses (K, 4, 4) along a linear move from the current pose, position linear and rotation
+        slerped, with the ball advancing at most ``MOVE_STEP_M`` between poses."""
+        start, end = self._base_T_tcp, base_T_tcp_end
+        tip = self.truth.tcp_p_tip_m
+        rotations = Rotation.from_matrix(np.stack([start[:3, :3], end[:3, :3]]))
+        turn = rotations[0].inv() * rotations[1]
+        length_m = np.linalg.norm(end[:3, 3] - start[:3, 3]) + turn.magnitude() * np.linalg.norm(tip)
+        fractions = np.linspace(0.0, 1.0, max(2, int(np.ceil(length_m / MOVE_STEP_M)) + 1))
+        path = np.repeat(np.eye(4)[None], len(fractions), axis=0)
+        path[:, :3, :3] = Slerp([0.0, 1.0], rotations)(fractions).as_matrix()
+        path[:, :3, 3] = start[:3, 3] + fractions[:, None] * (end[:3, 3] - start[:3, 3])
+        return path
+
+    def _first_collision(self, path: np.ndarray) -> int | None:
+        """Index of the first flange pose of ``path`` after its start where the ball dips more than
+        ``COLLISION_DEPTH_M`` into the fixture or the table, or None."""
+        base_p_balls = path[1:, :3, 3] + path[1:, :3, :3] @ self.truth.tcp_p_tip_m
+        fix_p_balls = transform_points(self._fix_T_base, base_p_balls)
+        clearance = np.minimum(self.fixture.oracle.signed_distance_m(fix_p_balls), base_p_balls[:, 2])
+        deep = np.flatnonzero(clearance - self._ball_radius_m < -COLLISION_DEPTH_M)
+        return int(deep[0]) + 1 if len(deep) else None
 
     def _first_contact(self, base_T_tcp: np.ndarray, max_travel_m: float) -> tuple[float, Surface | None]:
         """Travel (m) of the ball along the tool z axis from ``base_T_tcp`` until it touches the fixture or
