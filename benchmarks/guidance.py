@@ -15,8 +15,8 @@ sees a second or two after the tap: the check's set with the full solve's hull r
 computed when the quick bounds are within ``REFINE_WITHIN`` of a target not reached yet (refinement tightens
 them by about 10 %; below that a target is out of reach, so skipping it saves time without changing a count)
 and after ``PAPER_TAPS`` attempts. A run stops once it has reached both targets and made ``PAPER_TAPS``
-attempts. A tap that touches nothing or
-the table (the operator would see it and undo it) costs its attempt and adds no point.
+attempts. A tap that touches nothing or the table (the operator would see it and undo it) costs its
+attempt and adds no point.
 
 Strategies choose the next point among the surface points the tool can reach (``workflow.advice``):
 - random: a random one, on the true pose (the operator sees the fixture);
@@ -26,6 +26,7 @@ Strategies choose the next point among the surface points the tool can reach (``
 """
 
 import argparse
+from dataclasses import dataclass, field
 import statistics
 import sys
 import time
@@ -36,10 +37,11 @@ import numpy as np
 from fixwizard.demo import demo_fixture, disc_fixture
 from fixwizard.fixture import Fixture, load_fixture
 from fixwizard.geometry.se3 import transform_points
-from fixwizard.robot.base import NoContact
+from fixwizard.robot.base import NoContact, ProtectiveStop
+from fixwizard.solver.estimates import Bounds
 from fixwizard.robot.sim import SimulatedCell
-from fixwizard.workflow.advice import TapAdvice, next_tap, reachable_points
-from fixwizard.workflow.hover import hover_path
+from fixwizard.workflow.advice import TapAdvice, reachable_points
+from fixwizard.workflow.hover import HoverPlan, hover_path, next_tap_and_plan, plan_hover
 from fixwizard.workflow.live import LiveCheck, quick_check, refine_check
 
 LOGO = Path(__file__).resolve().parents[2] / "shared" / "data" / "matlab-logo" / "meshes" / "matlab_logo.ply"
@@ -62,21 +64,35 @@ def fixtures() -> dict[str, callable]:
     return found
 
 
-def _farthest(candidates: np.ndarray, tapped: list[np.ndarray], rng: np.random.Generator) -> int:
+def _farthest(candidates: np.ndarray, tapped: list[np.ndarray], usable: np.ndarray, rng: np.random.Generator) -> int:
+    """A random candidate at first, then the usable one farthest from the points tapped so far."""
     if not tapped:
         return int(rng.integers(len(candidates)))
     distances = np.linalg.norm(candidates[:, None, :] - np.array(tapped)[None], axis=2).min(axis=1)
-    return int(np.argmax(distances))
+    return int(np.argmax(np.where(usable, distances, -1.0)))
 
 
-def _tap_at(cell: SimulatedCell, fixture: Fixture, advice: TapAdvice) -> np.ndarray | None:
-    """Move above the advised point and tap; the ball centre (base frame, m), or None if the tap touched nothing
-    or the table (the operator sees that and undoes the tap)."""
-    top_z = transform_points(cell.truth.base_T_cad, fixture.mesh.vertices)[:, 2].max()
-    for pose in hover_path(advice, cell.truth.tcp_p_tip_m, BALL_DIAMETER_M / 2, cell.base_T_tcp(), top_z):
-        cell.move_linear(pose)
+@dataclass
+class Run:
+    """One run: the guaranteed bounds (m, rad; inf while not unique) after each tap attempt, the protective stops
+    of the moves above a point, and the live checks whose set missed the true pose (both must stay 0)."""
+
+    trajectory: list[tuple[float, float]] = field(default_factory=list)
+    protective_stops: int = 0
+    coverage_misses: int = 0
+
+
+def _tap_at(cell: SimulatedCell, plan: HoverPlan, run: Run) -> np.ndarray | None:
+    """Move above the planned point and tap; the ball centre (base frame, m), or None if a move stopped or the tap
+    touched nothing or the table (the operator sees that and undoes the tap)."""
     try:
+        for pose in hover_path(plan, cell.truth.tcp_p_tip_m, BALL_DIAMETER_M / 2, cell.base_T_tcp()):
+            cell.move_linear(pose)
         result = cell.tap()
+    except ProtectiveStop:
+        run.protective_stops += 1
+        cell.unlock()
+        return None
     except NoContact:
         return None
     ball = transform_points(result.base_T_tcp_contact, cell.truth.tcp_p_tip_m[None])[0]
@@ -98,46 +114,58 @@ def _worth_refining(bounds: tuple[float, float], reached: list[bool], attempt: i
     return np.isfinite(bounds[0]) and (near or attempt == PAPER_TAPS)
 
 
-def run(fixture: Fixture, seed: int, strategy: str, max_taps: int) -> list[tuple[float, float]]:
-    """The guaranteed bounds (m, rad; inf while not unique) after each tap attempt, up to ``max_taps`` or until
-    both targets are reached after at least ``PAPER_TAPS``."""
+def run(fixture: Fixture, seed: int, strategy: str, max_taps: int) -> Run:
+    """Tap attempts up to ``max_taps``, or until both targets are reached after at least ``PAPER_TAPS``."""
     cell = SimulatedCell.with_fixture(fixture, seed=seed, ball_diameter_m=BALL_DIAMETER_M,
                                       fk_error_bound_m=SAMPLE_BOUND_M)
     cell.connect()
     rng = np.random.default_rng(seed)
     cad_points, base_normals = reachable_points(fixture, cell.truth.base_T_cad, seed)
     base_points = transform_points(cell.truth.base_T_cad, cad_points)
+    seen = [Bounds(cell.truth.base_T_cad, 0.0, 0.0, 0.0)]  # the operator sees the fixture where it is
+    usable = np.ones(len(base_points), bool)
     taps: list[np.ndarray] = []
     tapped_points: list[np.ndarray] = []
     live = None
     bounds = (np.inf, np.inf)
-    trajectory = []
+    result = Run()
     reached = [False] * len(TARGETS)
     missed = False
     for attempt in range(1, max_taps + 1):
-        advice = None
+        plan = guided_index = None
         if strategy == "guided" and live is not None and live.estimate_base_T_cad is not None and not missed:
-            advice = next_tap(fixture, live.solution, SAMPLE_BOUND_M, seed=attempt)
-        if advice is None:
-            index = (int(rng.integers(len(base_points))) if strategy == "random"
-                     else _farthest(base_points, tapped_points, rng))
-            advice = TapAdvice(base_points[index], cad_points[index], base_normals[index], 0.0)
-        ball = _tap_at(cell, fixture, advice)
+            advice, plan = next_tap_and_plan(fixture, live.solution, SAMPLE_BOUND_M, BALL_DIAMETER_M / 2, seed=attempt)
+            if advice is not None and plan is None:  # the operator guides the ball to the nearest point they see
+                guided_index = int(np.argmin(np.linalg.norm(base_points - advice.base_p_point_m, axis=1)))
+        while plan is None:
+            if guided_index is not None:
+                index, guided_index = guided_index, None
+            elif strategy == "random":
+                index = int(rng.integers(len(base_points)))
+            else:
+                index = _farthest(base_points, tapped_points, usable, rng)
+            plan = None if not usable[index] else plan_hover(
+                TapAdvice(base_points[index], cad_points[index], base_normals[index], 0.0), fixture, seen,
+                BALL_DIAMETER_M / 2)
+            usable[index] = plan is not None  # nobody would pick a point the robot cannot get to
+        ball = _tap_at(cell, plan, result)
         missed = ball is None  # the estimate was off: the next tap is chosen by the fallback rule
         if ball is not None:
             taps.append(ball)
-            tapped_points.append(advice.base_p_point_m)
+            tapped_points.append(plan.advice.base_p_point_m)
             live = quick_check(fixture, np.array(taps), BALL_DIAMETER_M, SAMPLE_BOUND_M, previous=live)
             bounds = _bounds(live)
             if _worth_refining(bounds, reached, attempt):
                 live = refine_check(fixture, live)
                 bounds = _bounds(live)
-        trajectory.append(bounds)
+            if live is not None and not live.solution.contains(cell.truth.base_T_cad):
+                result.coverage_misses += 1
+        result.trajectory.append(bounds)
         reached = [done or (bounds[0] <= position and bounds[1] <= rotation)
                    for done, (position, rotation) in zip(reached, TARGETS, strict=True)]
         if all(reached) and attempt >= PAPER_TAPS:
             break
-    return trajectory
+    return result
 
 
 def taps_to_reach(trajectory: list[tuple[float, float]], position_m: float, rotation_rad: float) -> int | None:
@@ -156,13 +184,15 @@ def _summary(counts: list[int | None], max_taps: int) -> str:
             f"range {values[0]}-{values[-1]}  reached {reached}/{len(counts)}")
 
 
-def _run_line(trajectory: list[tuple[float, float]]) -> str:
-    """One run's attempts to each target ("-" when not reached) and its bounds after ``PAPER_TAPS``."""
-    counts = [taps_to_reach(trajectory, position_m, rotation_rad) for position_m, rotation_rad in TARGETS]
-    position_m, rotation_rad = trajectory[PAPER_TAPS - 1]
+def _run_line(one: Run) -> str:
+    """One run's attempts to each target ("-" when not reached), its bounds after ``PAPER_TAPS``, and its
+    protective stops and coverage misses."""
+    counts = [taps_to_reach(one.trajectory, position_m, rotation_rad) for position_m, rotation_rad in TARGETS]
+    position_m, rotation_rad = one.trajectory[PAPER_TAPS - 1]
     return (" ".join(f"{position * 1e3:.0f}mm/{np.degrees(rotation):.1f}deg {'-' if count is None else count}"
                      for count, (position, rotation) in zip(counts, TARGETS, strict=True))
-            + f"  after {PAPER_TAPS}: {position_m * 1e3:.2f} mm {np.degrees(rotation_rad):.2f} deg")
+            + f"  after {PAPER_TAPS}: {position_m * 1e3:.2f} mm {np.degrees(rotation_rad):.2f} deg"
+            + f"  stops {one.protective_stops} misses {one.coverage_misses}")
 
 
 def _quartiles(values: np.ndarray, spec: str) -> str:
@@ -192,11 +222,12 @@ def main() -> None:
         fixture = available[name]()
         for strategy in args.strategies:
             started = time.perf_counter()
-            trajectories = []
+            runs = []
             for seed in range(args.first_seed, args.first_seed + args.seeds):
-                trajectories.append(run(fixture, seed, strategy, args.max_taps))
+                runs.append(run(fixture, seed, strategy, args.max_taps))
                 if args.each_run:
-                    print(f"{name:8} {strategy:9} seed {seed:2}: {_run_line(trajectories[-1])}", flush=True)
+                    print(f"{name:8} {strategy:9} seed {seed:2}: {_run_line(runs[-1])}", flush=True)
+            trajectories = [one.trajectory for one in runs]
             for position_m, rotation_rad in TARGETS:
                 counts = [taps_to_reach(trajectory, position_m, rotation_rad) for trajectory in trajectories]
                 print(f"{name:8} {strategy:9} {position_m * 1e3:.0f} mm {np.degrees(rotation_rad):.1f} deg: "
@@ -206,6 +237,8 @@ def main() -> None:
                   f"{np.degrees(np.median(after[:, 1])):.2f} deg, quartiles "
                   f"{_quartiles(after[:, 0] * 1e3, '.1f')} mm {_quartiles(np.degrees(after[:, 1]), '.2f')} deg "
                   f"({time.perf_counter() - started:.0f} s)", flush=True)
+            print(f"{name:8} {strategy:9} protective stops {sum(one.protective_stops for one in runs)}, live sets "
+                  f"that missed the true pose {sum(one.coverage_misses for one in runs)}", flush=True)
 
 
 if __name__ == "__main__":

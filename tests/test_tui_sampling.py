@@ -1,6 +1,7 @@
 """The sampling screen on the simulated cell: the simulated hands and the tap key fill the table and the
 journal, undo is journaled, the live check follows the taps, robot problems are explained and lose nothing,
-the next tap is suggested (and reached on confirmation), and the taps are checked against every fixture."""
+the next tap is suggested (and reached on confirmation when the way there is safe), and the taps are checked
+against every fixture."""
 
 import asyncio
 import json
@@ -15,6 +16,7 @@ from fixwizard.demo import disc_fixture
 from fixwizard.tui.confirm import ConfirmMove
 from fixwizard.tui.dialog import Dialog
 from fixwizard.tui.sampling import SamplingScreen
+from fixwizard.workflow import hover
 
 pytestmark = pytest.mark.asyncio
 SIZE = (80, 24)
@@ -37,6 +39,10 @@ async def tap(pilot, screen: SamplingScreen, keys: str = "mt") -> None:
 
 def text_of(screen, selector: str) -> str:
     return str(screen.query_one(selector, Static).content)
+
+
+def live_check_running(app) -> bool:
+    return any(worker.group == "live" and worker.is_running for worker in app.workers)
 
 
 def journal_kinds(context) -> list[str]:
@@ -171,9 +177,16 @@ async def test_once_the_pose_is_pinned_down_the_screen_suggests_a_tap_and_moves_
         await until(pilot, lambda: screen.live is not None and screen.live.tap_count == 10
                     and screen.advice is not None)
         assert screen.live.verdict == "unique"
-        guide = text_of(screen, "#guide")
-        assert guide.startswith("Next (* in the view): Tap the ") and "Press g to go above it" in guide
+        assert text_of(screen, "#guide").startswith("Next (* in the view): Tap the ")
         assert not screen.query_one("#top-view").has_class("-empty")
+        while screen.hover_plan is None:  # a set too wide for a safe way down: the operator guides the ball
+            assert "by hand" in text_of(screen, "#guide") and len(context.session.taps) < 20
+            context.hands.near_fixture(screen.advice.base_p_point_m)
+            await tap(pilot, screen, "t")
+            count = len(context.session.taps)
+            await until(pilot, lambda: screen.live is not None and screen.live.tap_count == count
+                        and screen.live.refined and not live_check_running(app))
+        assert "Press g to go above it" in text_of(screen, "#guide")
         before = cell.base_T_tcp()
         await pilot.press("g")
         await until(pilot, lambda: isinstance(app.screen, ConfirmMove))
@@ -187,10 +200,30 @@ async def test_once_the_pose_is_pinned_down_the_screen_suggests_a_tap_and_moves_
         await until(pilot, lambda: app.screen is screen and not screen.busy)
         assert "hovers above the suggested point" in text_of(screen, "#note")
         assert cell.status().mode == "freedrive"
+        taps_before = len(context.session.taps)
         await tap(pilot, screen, "t")
-        assert len(context.session.taps) == 11
+        assert len(context.session.taps) == taps_before + 1
         contact = context.session.base_p_taps[-1]
         assert np.linalg.norm(contact - target) < 0.006  # the ball touched the fixture at the suggested point
+
+
+async def test_when_the_possible_poses_leave_no_safe_way_down_the_screen_asks_to_guide_the_ball_by_hand(
+        context, monkeypatch):
+    monkeypatch.setattr(hover, "plan_hover", lambda *args: None)  # as for a set still too wide
+    app = ScreenHost(lambda: SamplingScreen(context))
+    cell = cell_of(context)
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        for _ in range(10):
+            await tap(pilot, screen)
+        await until(pilot, lambda: screen.live is not None and screen.live.tap_count == 10
+                    and screen.advice is not None)
+        assert "guide the ball above the point by hand" in text_of(screen, "#guide")
+        before = cell.base_T_tcp()
+        await pilot.press("g")
+        await pilot.pause()
+        assert app.screen is screen and "guide the ball above the point by hand" in text_of(screen, "#note")
+        np.testing.assert_allclose(cell.base_T_tcp()[:3, 3], before[:3, 3], atol=1e-3)
 
 
 @pytest.mark.parametrize("chosen, conclusion", [

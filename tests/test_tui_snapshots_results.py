@@ -60,6 +60,8 @@ def test_sampling_screen_after_eight_taps(snap_compare, tmp_path):
         screen = pilot.app.screen
         await until(pilot, lambda: not screen.busy and screen.live is not None and screen.live.tap_count == 8
                     and screen.advice is not None and screen.live.refined)
+        await pilot.app.workers.wait_for_complete()  # the way above the suggestion may follow the refinement
+        await pilot.pause()
 
     assert snap_compare(ScreenHost(lambda: SamplingScreen(context)), terminal_size=SIZE, run_before=live_check_done)
     context.session.release()

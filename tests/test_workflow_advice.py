@@ -1,5 +1,5 @@
 """Where to tap next: for a unique set the reachable point where a tap rules out most possible poses, for an
-ambiguous one the point where the two candidate poses differ most; and the robot's way to hover above it."""
+ambiguous one the point where the two candidate poses differ most."""
 
 import numpy as np
 import pytest
@@ -11,9 +11,8 @@ from fixwizard.demo import DEMO_TAPS, demo_fixture, disc_fixture
 from fixwizard.geometry.se3 import make_transform, transform_points
 from fixwizard.points import load_points
 from fixwizard.solver.solve import solve
-from fixwizard.workflow.advice import (REACHABLE_MIN_NORMAL_Z, TABLE_CLEARANCE_M, TapAdvice, corners_cad_m,
-                                       distinguishing_tap, next_tap, reachable_points)
-from fixwizard.workflow.hover import CLEARANCE_M, HOVER_M, hover_path
+from fixwizard.workflow.advice import (PREFER_SHARE, PREFER_TRIES, REACHABLE_MIN_NORMAL_Z, TABLE_CLEARANCE_M,
+                                       corners_cad_m, distinguishing_tap, next_tap, reachable_points)
 from fixwizard.workflow.live import tap_surface_distances_m
 
 
@@ -68,6 +67,25 @@ def test_the_next_tap_lies_on_the_estimated_surface_where_a_tap_rules_out_most_p
     assert "mm from the corner at x" in advice.sentence()
 
 
+def test_a_preference_picks_the_first_acceptable_of_the_candidates_nearly_as_good_as_the_best(demo_set):
+    fixture, solution = demo_set
+    best = next_tap(fixture, solution, 0.001)
+    offered = []
+
+    def refuse_all(advice) -> bool:
+        offered.append(advice)
+        return False
+
+    assert np.array_equal(next_tap(fixture, solution, 0.001, prefer=refuse_all).base_p_point_m, best.base_p_point_m)
+    assert 1 <= len(offered) <= PREFER_TRIES
+    assert all(advice.ruled_out >= PREFER_SHARE * best.ruled_out for advice in offered)
+    assert [advice.ruled_out for advice in offered] == sorted((advice.ruled_out for advice in offered), reverse=True)
+    last = offered[-1]
+    chosen = next_tap(fixture, solution, 0.001, prefer=lambda advice: advice.ruled_out == last.ruled_out
+                      and np.array_equal(advice.base_p_point_m, last.base_p_point_m))
+    np.testing.assert_array_equal(chosen.base_p_point_m, last.base_p_point_m)
+
+
 def test_corners_are_the_vertices_where_three_face_directions_meet():
     assert len(corners_cad_m(demo_fixture())) == 16  # the bracket is a prism: every vertex is a corner
     assert len(corners_cad_m(disc_fixture())) == 12  # the round plate: the flat's and the notch's ends only
@@ -86,21 +104,6 @@ def test_an_ambiguous_set_is_told_apart_and_a_set_without_an_estimate_gets_no_ad
     inconsistent = solve(cell.fixture, np.vstack([taps, taps[-1] + [0.0, 0.0, 0.2]]), 0.003, 0.00035,
                          max_cells=2e5)
     assert inconsistent.status == "inconsistent" and next_tap(cell.fixture, inconsistent, 0.00035) is None
-
-
-def test_the_hover_path_rises_clear_of_the_fixture_then_stops_above_the_point_facing_it():
-    advice = TapAdvice(np.array([0.5, 0.1, 0.04]), np.zeros(3), np.array([1.0, 0.0, 0.0]), 0.002, 0.7)
-    tcp_p_tip = np.array([0.0, 0.0, 0.1])
-    now = make_transform(Rotation.from_euler("x", 180, degrees=True), [0.3, 0.0, 0.12])
-    lifted, across, hover = hover_path(advice, tcp_p_tip, 0.0015, now, fixture_top_z_m=0.06)
-    np.testing.assert_allclose(transform_points(hover, tcp_p_tip[None])[0],
-                               advice.base_p_point_m + (0.0015 + HOVER_M) * advice.base_n_face, atol=1e-12)
-    np.testing.assert_allclose(hover[:3, 2], -advice.base_n_face, atol=1e-12)
-    for pose in (lifted, across):
-        assert transform_points(pose, tcp_p_tip[None])[0][2] >= 0.06 + CLEARANCE_M - 1e-12
-    np.testing.assert_allclose(lifted[:2, 3], now[:2, 3])  # straight up first
-    np.testing.assert_allclose(across[:2, 3], hover[:2, 3])  # then across, then straight down
-    assert np.isclose(np.linalg.det(hover[:3, :3]), 1.0)
 
 
 def test_no_point_under_an_overhang_is_offered():

@@ -20,7 +20,6 @@ from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Static
 
 from fixwizard.errors import FixwizardError
-from fixwizard.geometry.se3 import transform_points
 from fixwizard.plots.taps_view import taps_view
 from fixwizard.robot.base import ProtectiveStop, RobotError, TapResult
 from fixwizard.solver.search import SearchCancelled
@@ -31,9 +30,16 @@ from fixwizard.tui.context import WizardContext
 from fixwizard.tui.dialog import Dialog
 from fixwizard.tui.errors import error_message
 from fixwizard.tui.picture_view import PictureView
-from fixwizard.tui.sampling_text import guide_text, hover_question, identify_text, live_text, robot_problem_text
-from fixwizard.workflow.advice import TapAdvice, next_tap
-from fixwizard.workflow.hover import hover_path
+from fixwizard.tui.sampling_text import (
+    NO_SAFE_HOVER,
+    guide_text,
+    hover_question,
+    identify_text,
+    live_text,
+    robot_problem_text,
+)
+from fixwizard.workflow.advice import TapAdvice
+from fixwizard.workflow.hover import HoverPlan, hover_path, next_tap_and_plan, plan_hover
 from fixwizard.workflow.identify import identify
 from fixwizard.workflow.live import LiveCheck, quick_check, refine_check, tap_surface_distances_m
 from fixwizard.workflow.session import Tap
@@ -82,6 +88,7 @@ class SamplingScreen(Screen[bool]):
         self.busy = False
         self.live: LiveCheck | None = None
         self.advice: TapAdvice | None = None
+        self.hover_plan: HoverPlan | None = None  # the robot's safe way above the advised point, if there is one
         self._live_cancel = threading.Event()
         self._identify_cancel = threading.Event()
         self._spread_index = len(context.session.taps)
@@ -154,17 +161,20 @@ class SamplingScreen(Screen[bool]):
                         on_failed=lambda _: self.dismiss(False))
 
     def action_go_above(self) -> None:
-        advice, estimate = self.advice, self.live.estimate_base_T_cad if self.live is not None else None
-        if advice is None or estimate is None:
+        advice, plan = self.advice, self.hover_plan
+        if advice is None:
             self._say("No suggestion yet: once the live check pins the pose down, it suggests where to tap next.")
+            return
+        if plan is None:
+            self._say(NO_SAFE_HOVER)
             return
 
         def answered(move: bool | None) -> None:
             if move:
-                self._run_robot(lambda: self._move_above(advice, estimate), lambda _: self._say(
+                self._run_robot(lambda: self._move_above(plan), lambda _: self._say(
                     "The ball hovers above the suggested point (freedrive is on again): press t to tap it."))
 
-        self.app.push_screen(ConfirmMove("Move the robot?", hover_question(advice, self.context.simulated)), answered)
+        self.app.push_screen(ConfirmMove("Move the robot?", hover_question(plan, self.context.simulated)), answered)
 
     def action_identify(self) -> None:
         """Check the taps against every fixture the wizard offers (in a worker) and show which fit."""
@@ -249,14 +259,13 @@ class SamplingScreen(Screen[bool]):
             except RobotError:
                 pass  # the tap's own error (or the next robot call) tells the operator
 
-    def _move_above(self, advice: TapAdvice, base_T_cad: np.ndarray) -> None:
+    def _move_above(self, plan: HoverPlan) -> None:
         """Freedrive off, the three moves of ``hover_path``, freedrive on again (also after a failed move)."""
         robot, calibration = self.context.robot, self.context.calibration
-        top_z = float(transform_points(base_T_cad, self.context.fixture.mesh.vertices)[:, 2].max())
         try:
             robot.freedrive(False)
-            for base_T_tcp in hover_path(advice, calibration.tcp_p_tip_m, calibration.ball_diameter_m / 2.0,
-                                         robot.base_T_tcp(), top_z):
+            for base_T_tcp in hover_path(plan, calibration.tcp_p_tip_m, calibration.ball_diameter_m / 2.0,
+                                         robot.base_T_tcp()):
                 robot.move_linear(base_T_tcp, HOVER_SPEED_M_S)
         finally:
             try:
@@ -285,7 +294,7 @@ class SamplingScreen(Screen[bool]):
         calibration, fixture = self.context.calibration, self.context.fixture
         base_p_taps = self.context.session.base_p_taps
         previous = self.live
-        self.advice = None  # it was for the taps before
+        self.advice = self.hover_plan = None  # they were for the taps before
         self._show_live(running=len(base_p_taps) >= MIN_TAPS)
         if len(base_p_taps) < MIN_TAPS:
             return
@@ -302,13 +311,18 @@ class SamplingScreen(Screen[bool]):
             self.app.call_from_thread(self._live_done, cancel, check)
             if check.estimate_base_T_cad is None or cancel.is_set():
                 return
-            advice = next_tap(fixture, check.solution, calibration.sample_bound_m)
-            self.app.call_from_thread(self._advice_done, cancel, advice)
+            advice, plan = next_tap_and_plan(fixture, check.solution, calibration.sample_bound_m,
+                                             calibration.ball_diameter_m / 2.0)
+            self.app.call_from_thread(self._advice_done, cancel, advice, plan)
             try:
                 refined = refine_check(fixture, check, cancel)
             except SearchCancelled:
                 return
             self.app.call_from_thread(self._live_done, cancel, refined)
+            if advice is not None and plan is None:  # the refined bounds may leave room for a safe way down
+                plan = plan_hover(advice, fixture, [mode.bounds for mode in refined.solution.modes],
+                                  calibration.ball_diameter_m / 2.0)
+                self.app.call_from_thread(self._advice_done, cancel, advice, plan)
 
         self.run_worker(work, thread=True, group="live", exclusive=True)
 
@@ -319,10 +333,10 @@ class SamplingScreen(Screen[bool]):
         self._show_taps()
         self._show_live(running=False)
 
-    def _advice_done(self, cancel: threading.Event, advice: TapAdvice | None) -> None:
+    def _advice_done(self, cancel: threading.Event, advice: TapAdvice | None, plan: HoverPlan | None) -> None:
         if cancel.is_set() or not self.is_attached:
             return
-        self.advice = advice
+        self.advice, self.hover_plan = advice, plan
         self._show_live(running=False)
 
     def _live_failed(self, cancel: threading.Event, error: FixwizardError) -> None:
@@ -356,7 +370,7 @@ class SamplingScreen(Screen[bool]):
     def _show_live(self, running: bool) -> None:
         self.query_one("#live", Static).update(live_text(self.live, len(self.context.session.taps), running))
         guide = self.query_one("#guide", Static)
-        text = guide_text(self.advice) if self.advice is not None and not running else ""
+        text = guide_text(self.advice, self.hover_plan) if self.advice is not None and not running else ""
         guide.update(text)
         guide.set_class(not text, "-empty")
         top_view = self.query_one("#top-view", PictureView)

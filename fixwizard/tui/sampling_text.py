@@ -7,7 +7,7 @@ import numpy as np
 from fixwizard.solver.solve import MIN_TAPS
 from fixwizard.tui.choices import FixtureChoice
 from fixwizard.workflow.advice import TapAdvice
-from fixwizard.workflow.hover import CLEARANCE_M, HOVER_M
+from fixwizard.workflow.hover import CLEARANCE_M, HoverPlan
 from fixwizard.workflow.identify import MeshVerdict
 from fixwizard.workflow.live import LIVE_MAX_CELLS, LiveCheck
 
@@ -45,17 +45,23 @@ def live_text(check: LiveCheck | None, tap_count: int, running: bool) -> str:
     return head + f"unique so far. Guaranteed now: {bounds_text(check)}; {tightness}"
 
 
-def guide_text(advice: TapAdvice) -> str:
+NO_SAFE_HOVER = ("The possible poses still differ too much for the robot to go there on its own: guide the ball "
+                 "above the point by hand, then press t.")
+
+
+def guide_text(advice: TapAdvice, plan: HoverPlan | None) -> str:
     """The suggested next tap (marked * in the top view) and how to get there."""
-    return f"Next (* in the view): {advice.sentence()} Press g to go above it."
+    how = "Press g to go above it." if plan is not None else NO_SAFE_HOVER
+    return f"Next (* in the view): {advice.sentence()} {how}"
 
 
-def hover_question(advice: TapAdvice, simulated: bool) -> str:
+def hover_question(plan: HoverPlan, simulated: bool) -> str:
     """What the robot will do when the operator confirms the move to the suggested point."""
+    advice = plan.advice
     x, y, z = advice.base_p_point_m * 1e3
     return (f"{'SIMULATED: ' if simulated else ''}The robot will rise to {CLEARANCE_M * 1e3:.0f} mm above the "
-            f"fixture, move across, turn the tool towards {advice.face} and stop {HOVER_M * 1e3:.0f} mm above the "
-            f"point near x {round(x)}, y {round(y)}, z {round(z)} mm. Keep hands and objects clear of the arm. "
+            f"fixture, move across, turn the tool towards {advice.face} and stop {plan.hover_m * 1e3:.0f} mm above "
+            f"the point near x {round(x)}, y {round(y)}, z {round(z)} mm. Keep hands and objects clear of the arm. "
             "Press y to move, n to cancel.")
 
 

@@ -15,6 +15,7 @@ the table, with a free line along the normal for the tool and free space straigh
 ball's footprint (so the ball touches the face aimed at, not an edge beside it).
 """
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -35,6 +36,8 @@ ABOVE_SAMPLES_M = (0.01, 0.045, 0.08)  # points along that line from which the w
 FLAT_RADIUS_M = 0.003  # the surface must stay within FLAT_TOLERANCE_M of the tangent plane this far around
 FLAT_TOLERANCE_M = 0.0002
 CORNER_SPREAD = 0.15  # a vertex is a corner when its faces' normals span 3D: third singular value over the first
+PREFER_TRIES = 8  # candidates, best first, from which a caller's preference may pick
+PREFER_SHARE = 0.8  # ... each scoring at least this share of the best one's
 BASE_DIRECTIONS = {"+x": np.array([1.0, 0.0, 0.0]), "-x": np.array([-1.0, 0.0, 0.0]),
                    "+y": np.array([0.0, 1.0, 0.0]), "-y": np.array([0.0, -1.0, 0.0])}
 
@@ -119,14 +122,32 @@ def reachable_points(fixture: Fixture, base_T_cad: np.ndarray, seed: int) -> tup
     return cad_p_points[chosen], base_n_points[chosen]
 
 
-def next_tap(fixture: Fixture, solution: Solution, sample_bound_m: float, seed: int = 0) -> TapAdvice | None:
+def _first_preferred(ranked: list[TapAdvice], prefer: Callable[[TapAdvice], bool] | None) -> TapAdvice:
+    """The first advice of ``ranked`` (best first) that ``prefer`` accepts, else the best."""
+    if prefer is not None:
+        for advice in ranked:
+            if prefer(advice):
+                return advice
+    return ranked[0]
+
+
+def _near_best(order: np.ndarray, scores: np.ndarray) -> np.ndarray:
+    """The first ``PREFER_TRIES`` candidates of ``order`` (best first) that score within ``PREFER_SHARE`` of the
+    best."""
+    top = order[:PREFER_TRIES]
+    return top[scores[top] >= PREFER_SHARE * scores[order[0]]]
+
+
+def next_tap(fixture: Fixture, solution: Solution, sample_bound_m: float, seed: int = 0,
+             prefer: Callable[[TapAdvice], bool] | None = None) -> TapAdvice | None:
     """The reachable point of the estimated pose where a tap rules out the most surviving cells (see module doc);
     for an ambiguous result, ``distinguishing_tap`` of its two most probable modes. None without an estimate or
-    without a reachable candidate."""
+    without a reachable candidate. ``prefer``: among the few candidates nearly as good as the best, the first it
+    accepts is taken instead (the robot's safe way there, say)."""
     if solution.base_T_cad is None or solution.cells is None:
         return None
     if len(solution.modes) > 1:
-        return distinguishing_tap(fixture, solution.modes[0].base_T_cad, solution.modes[1].base_T_cad, seed)
+        return distinguishing_tap(fixture, solution.modes[0].base_T_cad, solution.modes[1].base_T_cad, seed, prefer)
     cad_p_points, base_n_points = reachable_points(fixture, solution.base_T_cad, seed)
     if len(cad_p_points) == 0:
         return None
@@ -143,22 +164,23 @@ def next_tap(fixture: Fixture, solution: Solution, sample_bound_m: float, seed: 
     along_normal = np.abs(base_R_fix.reshape(-1, 9) @ outer.T + base_t_fix @ base_n_points.T
                           - np.sum(base_p_points * base_n_points, axis=1))
     ruled_out = np.mean(along_normal > sample_bound_m, axis=0)
-    best = int(np.lexsort((along_normal.max(axis=0), ruled_out))[-1])
-    return _with_corner(TapAdvice(base_p_points[best], cad_p_points[best], base_n_points[best],
-                                  float(along_normal[:, best].max()), float(ruled_out[best])),
-                        fixture, solution.base_T_cad)
+    order = np.lexsort((along_normal.max(axis=0), ruled_out))[::-1]
+    ranked = [TapAdvice(base_p_points[i], cad_p_points[i], base_n_points[i], float(along_normal[:, i].max()),
+                        float(ruled_out[i])) for i in _near_best(order, ruled_out)]
+    return _with_corner(_first_preferred(ranked, prefer), fixture, solution.base_T_cad)
 
 
 def distinguishing_tap(fixture: Fixture, first_base_T_cad: np.ndarray, second_base_T_cad: np.ndarray,
-                       seed: int = 0) -> TapAdvice | None:
+                       seed: int = 0, prefer: Callable[[TapAdvice], bool] | None = None) -> TapAdvice | None:
     """The reachable surface point of ``first_base_T_cad`` farthest from the surface at ``second_base_T_cad``;
-    None when no point of the first pose is reachable."""
+    None when no point of the first pose is reachable. ``prefer``: as for ``next_tap``."""
     cad_p_points, base_n_points = reachable_points(fixture, first_base_T_cad, seed)
     if len(cad_p_points) == 0:
         return None
     base_p_points = transform_points(first_base_T_cad, cad_p_points)
     fix_p_second = transform_points(fixture.fix_T_cad @ invert(second_base_T_cad), base_p_points)
     separation_m = np.abs(fixture.oracle.signed_distance_m(fix_p_second))
-    best = int(np.argmax(separation_m))
-    return _with_corner(TapAdvice(base_p_points[best], cad_p_points[best], base_n_points[best],
-                                  float(separation_m[best])), fixture, first_base_T_cad)
+    order = np.argsort(-separation_m, kind="stable")
+    ranked = [TapAdvice(base_p_points[i], cad_p_points[i], base_n_points[i], float(separation_m[i]))
+              for i in _near_best(order, separation_m)]
+    return _with_corner(_first_preferred(ranked, prefer), fixture, first_base_T_cad)
