@@ -18,11 +18,16 @@ and after ``PAPER_TAPS`` attempts. A run stops once it has reached both targets 
 attempts. A tap that touches nothing or the table (the operator would see it and undo it) costs its
 attempt and adds no point.
 
-Strategies choose the next point among the surface points the tool can reach (``workflow.advice``):
+Strategies choose the next point among the surface points the tool can reach (``workflow.advice``) and the
+robot has a clear way to at the true pose (``workflow.hover``):
 - random: a random one, on the true pose (the operator sees the fixture);
 - farthest: the one farthest from the points tapped so far (farthest-point sampling), on the true pose;
-- guided: farthest-point until the live check has an estimate, then ``next_tap``'s suggestion for the
-  estimated pose (farthest-point again right after a suggestion that touched nothing or the table).
+- guided: farthest-point until the live check has an estimate, then the sampling screen's suggestion
+  (``next_tap_and_plan``): the robot goes above it when its way is clear at every pose the bounds allow,
+  else the operator guides the ball by hand to the nearest of those points (farthest-point again right
+  after a suggestion that touched nothing or the table).
+Every move goes through the simulated cell, which makes a protective stop if the ball would hit
+something; the summary counts those and the live sets that missed the true pose (both must be 0).
 """
 
 import argparse
@@ -54,6 +59,7 @@ EASY_POSITION_M = 0.003  # a second, looser target: the paper's students reached
 EASY_ROTATION_RAD = np.radians(3.0)
 TARGETS = ((TARGET_POSITION_M, TARGET_ROTATION_RAD), (EASY_POSITION_M, EASY_ROTATION_RAD))
 REFINE_WITHIN = 1.3
+BY_HAND_TRIES = 20  # reachable points nearest a suggestion the robot cannot go to, tried in turn by hand
 PAPER_TAPS = 15  # the paper's students tapped 15 points; the bounds after as many attempts are printed
 
 
@@ -132,14 +138,14 @@ def run(fixture: Fixture, seed: int, strategy: str, max_taps: int) -> Run:
     reached = [False] * len(TARGETS)
     missed = False
     for attempt in range(1, max_taps + 1):
-        plan = guided_index = None
+        plan, by_hand = None, []
         if strategy == "guided" and live is not None and live.estimate_base_T_cad is not None and not missed:
             advice, plan = next_tap_and_plan(fixture, live.solution, SAMPLE_BOUND_M, BALL_DIAMETER_M / 2, seed=attempt)
-            if advice is not None and plan is None:  # the operator guides the ball to the nearest point they see
-                guided_index = int(np.argmin(np.linalg.norm(base_points - advice.base_p_point_m, axis=1)))
+            if advice is not None and plan is None:  # the operator guides the ball to the nearest point they can
+                by_hand = list(np.argsort(np.linalg.norm(base_points - advice.base_p_point_m, axis=1))[:BY_HAND_TRIES])
         while plan is None:
-            if guided_index is not None:
-                index, guided_index = guided_index, None
+            if by_hand:
+                index = int(by_hand.pop(0))
             elif strategy == "random":
                 index = int(rng.integers(len(base_points)))
             else:
