@@ -43,8 +43,8 @@ from fixwizard.demo import demo_fixture, disc_fixture
 from fixwizard.fixture import Fixture, load_fixture
 from fixwizard.geometry.se3 import transform_points
 from fixwizard.robot.base import NoContact, ProtectiveStop
-from fixwizard.solver.estimates import Bounds
 from fixwizard.robot.sim import SimulatedCell
+from fixwizard.solver.estimates import Bounds
 from fixwizard.workflow.advice import TapAdvice, reachable_points
 from fixwizard.workflow.hover import HoverPlan, hover_path, next_tap_and_plan, plan_hover
 from fixwizard.workflow.live import LiveCheck, quick_check, refine_check
@@ -92,7 +92,7 @@ def _tap_at(cell: SimulatedCell, plan: HoverPlan, run: Run) -> np.ndarray | None
     """Move above the planned point and tap; the ball centre (base frame, m), or None if a move stopped or the tap
     touched nothing or the table (the operator sees that and undoes the tap)."""
     try:
-        for pose in hover_path(plan, cell.truth.tcp_p_tip_m, BALL_DIAMETER_M / 2, cell.base_T_tcp()):
+        for pose in hover_path(plan, cell.truth.tcp_p_tip_m, cell.base_T_tcp()):
             cell.move_linear(pose)
         result = cell.tap()
     except ProtectiveStop:

@@ -79,7 +79,7 @@ def test_the_guaranteed_gap_is_never_more_than_the_gap_at_any_allowed_pose(brick
 def test_the_path_rises_then_crosses_then_comes_straight_down_to_face_the_point(brick):
     plan = plan_hover(on_face([0.05, 0.0, 0.0], [1, 0, 0]), brick, within(0.0), BALL_RADIUS_M)
     now = make_transform(Rotation.from_euler("x", 180, degrees=True), [0.3, 0.0, 0.12])
-    lifted, across, hover = hover_path(plan, TCP_P_TIP_M, BALL_RADIUS_M, now)
+    lifted, across, hover = hover_path(plan, TCP_P_TIP_M, now)
     np.testing.assert_allclose(transform_points(hover, TCP_P_TIP_M[None])[0],
                                plan.advice.base_p_point_m + (BALL_RADIUS_M + plan.hover_m) * plan.advice.base_n_face,
                                atol=1e-12)
@@ -109,7 +109,7 @@ def test_the_robot_gets_above_the_point_without_touching_the_fixture_wherever_th
                                           fk_error_bound_m=0.0)
         cell.connect()
         cell.guide_by_hand(TOOL_FLAT)
-        for pose in hover_path(plan, TCP_P_TIP_M, BALL_RADIUS_M, cell.base_T_tcp()):
+        for pose in hover_path(plan, TCP_P_TIP_M, cell.base_T_tcp()):
             cell.move_linear(pose)
         base_p_ball = transform_points(cell.base_T_tcp(), TCP_P_TIP_M[None])
         fix_p_ball = transform_points(brick.fix_T_cad @ np.linalg.inv(cell.truth.base_T_cad), base_p_ball)

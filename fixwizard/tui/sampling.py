@@ -264,8 +264,7 @@ class SamplingScreen(Screen[bool]):
         robot, calibration = self.context.robot, self.context.calibration
         try:
             robot.freedrive(False)
-            for base_T_tcp in hover_path(plan, calibration.tcp_p_tip_m, calibration.ball_diameter_m / 2.0,
-                                         robot.base_T_tcp()):
+            for base_T_tcp in hover_path(plan, calibration.tcp_p_tip_m, robot.base_T_tcp()):
                 robot.move_linear(base_T_tcp, HOVER_SPEED_M_S)
         finally:
             try:

@@ -5,7 +5,8 @@ outward normal and the tool z axis points along the inward normal, so a default 
 tool z) touches the face there. The flange keeps its current spin as far as the new tool axis allows.
 The way there has three straight moves: up until the ball is ``CLEARANCE_M`` above the highest the fixture
 can reach and the flange is high enough that no turn of the tool brings the ball lower, across at that
-height while turning the tool, then straight down to hover.
+height while turning the tool, then straight down to hover. The first move starts where the operator left
+the ball and is not checked: straight up from there is free unless the ball was left under an overhang.
 
 The point comes from an estimate, and the fixture may sit anywhere in the set of possible poses. So the way
 down is planned against all of them (``plan_hover``): the ball, and the tool behind it along the normal,
@@ -35,11 +36,12 @@ PATH_STEP_M = 0.001  # spacing (m) of the checked points on the way down
 
 @dataclass(frozen=True)
 class HoverPlan:
-    """Go above ``advice``'s point: the ball ``hover_m`` (m) off the surface along the face normal, crossing over
-    with the ball at base z ``safe_ball_z_m`` (m) or higher."""
+    """Go above ``advice``'s point: the ball centre to ``base_p_ball_m`` (base frame, m), ``hover_m`` (m) off the
+    surface along the face normal, crossing over with the ball at base z ``safe_ball_z_m`` (m) or higher."""
 
     advice: TapAdvice
     hover_m: float
+    base_p_ball_m: np.ndarray
     safe_ball_z_m: float
 
 
@@ -76,7 +78,7 @@ def plan_hover(advice: TapAdvice, fixture: Fixture, pose_bounds: Sequence[Bounds
         swept = (base_p_ball + rises[:, None, None] * np.array([0.0, 0.0, 1.0])
                  + along_tool[None, :, None] * base_n).reshape(-1, 3)
         if np.all(guaranteed_gap_m(fixture, pose_bounds, swept) >= needed_m):
-            return HoverPlan(advice, float(hover_m), safe_ball_z_m)
+            return HoverPlan(advice, float(hover_m), base_p_ball, safe_ball_z_m)
     return None
 
 
@@ -104,15 +106,12 @@ def _aligned(base_R_tcp: np.ndarray, base_d_tool_z: np.ndarray) -> np.ndarray:
     return turn.as_matrix() @ base_R_tcp
 
 
-def hover_path(plan: HoverPlan, tcp_p_tip_m: np.ndarray, ball_radius_m: float,
-               base_T_tcp_now: np.ndarray) -> list[np.ndarray]:
+def hover_path(plan: HoverPlan, tcp_p_tip_m: np.ndarray, base_T_tcp_now: np.ndarray) -> list[np.ndarray]:
     """Flange poses (4x4, base frame, m) of the three moves to ``plan``'s hover pose. ``tcp_p_tip_m``: ball
     centre in the flange frame (m)."""
-    advice = plan.advice
-    base_n = advice.base_n_face / np.linalg.norm(advice.base_n_face)
+    base_n = plan.advice.base_n_face / np.linalg.norm(plan.advice.base_n_face)
     base_R_hover = _aligned(base_T_tcp_now[:3, :3], -base_n)
-    base_p_ball = advice.base_p_point_m + (ball_radius_m + plan.hover_m) * base_n
-    hover = make_transform(base_R_hover, base_p_ball - base_R_hover @ tcp_p_tip_m)
+    hover = make_transform(base_R_hover, plan.base_p_ball_m - base_R_hover @ tcp_p_tip_m)
     # whatever the tool's turn, the ball is at most |tcp_p_tip_m| below the flange
     lift_z = max(base_T_tcp_now[2, 3], plan.safe_ball_z_m + float(np.linalg.norm(tcp_p_tip_m)))
     lifted = base_T_tcp_now.copy()
