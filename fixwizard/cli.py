@@ -2,7 +2,9 @@
 arm with ``--robot HOST``; ``--resume`` reopens an unfinished session); the headless sub-commands solve,
 import-poses, calibrate-tip and identify.
 
-Exit codes: 0 success (unique or ambiguous), 1 bad input, 2 inconsistent taps, 130 cancelled.
+Exit codes (``EXIT_CODES``): 0 unique (one pose, pinned down), 1 bad input, 2 inconsistent (no pose explains the
+taps), 3 ambiguous (several distinct poses), 4 undetermined (the taps do not pin the pose down), 130 cancelled.
+Only 0 means a pose a robot program can use.
 """
 
 import argparse
@@ -20,6 +22,7 @@ from fixwizard.workflow.solve_run import SolveRequest, run_solve, summary_lines
 from fixwizard.workflow.tip_calibration import register_calibrate_tip_parser
 
 EXIT_OK, EXIT_BAD_INPUT, EXIT_INCONSISTENT, EXIT_CANCELLED = 0, 1, 2, 130
+EXIT_CODES = {"unique": EXIT_OK, "inconsistent": EXIT_INCONSISTENT, "ambiguous": 3, "undetermined": 4}
 
 
 def _parse_cell_budget(text: str) -> float:
@@ -54,7 +57,7 @@ def solve_command(args: argparse.Namespace) -> int:
     print("\n".join(summary_lines(outcome)))
     report.write(output, outcome.report)
     print(f"report written to {output}")
-    return EXIT_INCONSISTENT if outcome.solution.status == "inconsistent" else EXIT_OK
+    return EXIT_CODES[outcome.solution.status]
 
 
 def wizard_command(args: argparse.Namespace) -> int:
@@ -84,7 +87,9 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="fixwizard", description="Fixture pose calibration with guaranteed bounds from a few "
-                     "robot taps. Without a COMMAND it starts the interactive wizard.")
+                     "robot taps. Without a COMMAND it starts the interactive wizard.",
+                     epilog="exit codes of solve: 0 unique, 1 bad input, 2 inconsistent, 3 ambiguous, 4 undetermined, "
+                     "130 cancelled")
     parser.add_argument("--robot", metavar="HOST", help="wizard: the UR arm at HOST (default: the simulated demo cell)")
     parser.add_argument("--resume", nargs="?", const="", metavar="SESSION",
                         help="wizard: reopen SESSION, or the newest unfinished session, straight into sampling")

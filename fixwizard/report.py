@@ -18,10 +18,11 @@ from fixwizard.fixture import Fixture
 from fixwizard.geometry.se3 import format_ur_pose, make_transform
 from fixwizard.solver.estimates import Bounds
 from fixwizard.solver.solve import Solution
+from fixwizard.solver.verdict import STATUSES
 from fixwizard.yamlfile import load_document
 
 SCHEMA = "fixwizard.report/1"
-STATUSES = ("unique", "ambiguous", "inconsistent")
+
 
 
 def _floats(values) -> list[float]:
@@ -58,6 +59,7 @@ def report_dict(solution: Solution, fixture: Fixture, base_p_taps: np.ndarray, b
         "intervals": [{"level": interval.level, "position_m": float(interval.position_m),
                        "rotation_deg": float(np.degrees(interval.rotation_rad))}
                       for interval in solution.intervals] or None,
+        "effective_samples": round(float(solution.effective_samples), 1),
         "modes": [{"probability": mode.probability, "cells": mode.cell_count, "pose": pose_dict(mode.base_T_cad),
                    "bounds": bounds_dict(mode.bounds)} for mode in solution.modes],
         "warnings": [{"code": warning.code, "message": warning.message} for warning in solution.warnings],

@@ -20,7 +20,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(scope="module")
 def bracket(tmp_path_factory):
-    """An L-plate exported in millimetres, 12 taps at a known pose, and that pose."""
+    """An L-plate exported in millimetres, 20 taps at a known pose, and that pose."""
     folder = tmp_path_factory.mktemp("bracket")
     mesh_m = l_prism()
     mesh_mm = mesh_m.copy()
@@ -28,7 +28,7 @@ def bracket(tmp_path_factory):
     mesh_mm.export(folder / "plate.stl")
     rng = np.random.default_rng(11)
     base_T_cad = make_transform(Rotation.from_euler("z", 40, degrees=True), [0.5, 0.1, 0.0])
-    taps = transform_points(base_T_cad, touching_ball_centres(mesh_m, 12, 0.0015, rng)) + bounded_noise(12, 0.0005, rng)
+    taps = transform_points(base_T_cad, touching_ball_centres(mesh_m, 20, 0.0015, rng)) + bounded_noise(20, 0.0005, rng)
     write_points(folder / "taps.yaml", taps)
     return folder, taps, base_T_cad
 
@@ -40,7 +40,7 @@ def replaced(args: list[str], old: str, new: str) -> list[str]:
 
 def solve_args(folder, points="taps.yaml", *extra):
     return ["solve", str(folder / "plate.stl"), str(folder / points), "--mesh-units", "mm", "--sample-bound", "0.5mm",
-            "--ball-diameter", "3mm", "--max-cells", "1e5", "-q", "-o", str(folder / "report.yaml"), *extra]
+            "--ball-diameter", "3mm", "--max-cells", "1e6", "-q", "-o", str(folder / "report.yaml"), *extra]
 
 
 def test_solve_prints_a_summary_and_writes_a_loadable_report(bracket, capsys):
@@ -95,7 +95,7 @@ def test_a_tap_5cm_off_the_fixture_is_inconsistent_and_named(bracket, capsys):
     off = taps.copy()
     off[6] += np.array([0.0, 0.0, 0.05])
     write_points(folder / "off.yaml", off)
-    args = replaced(solve_args(folder, "off.yaml"), "1e5", "8e6")
+    args = replaced(solve_args(folder, "off.yaml"), "1e6", "8e6")
     assert main(args) == 2
     out = capsys.readouterr().out
     assert "status: inconsistent" in out and "Tap 7" in out
@@ -164,7 +164,7 @@ def test_a_length_without_unit_that_means_metres_is_caught(bracket, capsys):
 
 def test_bad_usage_exits_1_not_2(bracket, capsys):
     folder, _, _ = bracket
-    args = replaced(solve_args(folder), "1e5", "lots")
+    args = replaced(solve_args(folder), "1e6", "lots")
     with pytest.raises(SystemExit) as exit_info:
         main(args)
     assert exit_info.value.code == 1

@@ -1,4 +1,4 @@
-"""Loading fixture meshes: units, bad files, open meshes, and the float32 distance error bound."""
+"""Loading fixture meshes: units, bad files, open meshes; distance intervals and signs."""
 
 import numpy as np
 import pytest
@@ -69,19 +69,18 @@ def test_internal_frame_is_the_minimum_enclosing_ball_centre(tmp_path):
 
 
 @pytest.mark.parametrize("name", sorted(SHAPES))
-def test_float32_distance_error_stays_well_inside_its_bound(name):
+def test_distance_intervals_hold_the_float64_brute_force_distance_and_name_a_nearest_face(name):
     fixture = as_fixture(name)
     rng = np.random.default_rng(1)
     near = touching_ball_centres(fixture.mesh, 300, 0.0015, rng) + rng.normal(size=(300, 3)) * 0.002
     far = fixture.mesh.bounds[0] + rng.random((300, 3)) * (fixture.mesh.extents * 1.5)
     points = np.vstack([near, far]) - fixture.cad_p_center
     exact = exact_distances_m(trimesh.Trimesh(fixture.fix_vertices_m, fixture.mesh.faces, process=False), points)
-    bound = fixture.oracle.error_bound_m(points)
-    distance, faces = fixture.oracle.distance_and_face(points, signed=np.zeros(len(points), bool))
-    assert np.all(np.abs(distance - exact) <= bound / 4)
+    low, high, faces = fixture.oracle.distance_interval_m(points, signed=np.zeros(len(points), bool))
+    assert np.all(low <= exact + 1e-12) and np.all(exact <= high + 1e-12) and np.max(high - low) < 1e-9
     corners = fixture.fix_vertices_m[fixture.mesh.faces[faces]]
     on_face = closest_on_triangles(points, corners[:, 0], corners[:, 1], corners[:, 2])
-    assert np.all(np.abs(np.linalg.norm(points - on_face, axis=1) - exact) <= bound / 4)
+    assert np.all(np.abs(np.linalg.norm(points - on_face, axis=1) - exact) <= 1e-12)
 
 
 def test_signed_distance_is_negative_inside_a_closed_mesh():

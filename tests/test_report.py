@@ -14,8 +14,9 @@ from shapes import as_fixture
 def solved():
     fixture = as_fixture("l_prism")
     rng = np.random.default_rng(4)
-    taps = touching_ball_centres(fixture.mesh, 12, 0.0015, rng) + bounded_noise(12, 0.0005, rng)
-    solution = solve(fixture, taps, 0.003, 0.0005, max_cells=1e5, max_samples=2000)
+    taps = touching_ball_centres(fixture.mesh, 20, 0.0015, rng) + bounded_noise(20, 0.0005, rng)
+    solution = solve(fixture, taps, 0.003, 0.0005, max_cells=1e6, max_samples=2000)
+    assert solution.status == "unique"
     return fixture, taps, solution
 
 

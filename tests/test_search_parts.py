@@ -20,10 +20,9 @@ def test_distance_lattice_interval_holds_the_exact_signed_distance(name):
     grid = DistanceGrid(fixture.oracle)
     rng = np.random.default_rng(0)
     points = rng.uniform(-2.0, 2.0, (100_000, 3)) * fixture.radius_m
-    exact = fixture.oracle.signed_distance_m(points)
-    error = fixture.oracle.error_bound_m(points)
+    exact_low, exact_high, _ = fixture.oracle.distance_interval_m(points)
     low, high = grid.interval_m(points)
-    assert np.all(exact + error >= low) and np.all(exact - error <= high)
+    assert np.all(exact_high >= low) and np.all(exact_low <= high)
 
 
 @numba.njit
@@ -40,23 +39,24 @@ def test_the_nearest_vertex_bound_of_the_cheap_pass_holds_and_the_voxel_interval
     fixture = as_fixture(name)
     grid = DistanceGrid(fixture.oracle)
     points = np.random.default_rng(2).uniform(-2.0, 2.0, (50_000, 3)) * fixture.radius_m
-    exact = fixture.oracle.signed_distance_m(points)
-    error = fixture.oracle.error_bound_m(points)
+    exact_low, exact_high, _ = fixture.oracle.distance_interval_m(points)
     nearest = _nearest_vertex_intervals_m(points, grid.kernel_arguments)
-    assert np.all(exact + error >= nearest[:, 0]) and np.all(exact - error <= nearest[:, 1])
+    assert np.all(exact_high >= nearest[:, 0]) and np.all(exact_low <= nearest[:, 1])
     low, high = grid.interval_m(points)
     assert np.all(low >= nearest[:, 0]) and np.all(high <= nearest[:, 1])
     assert np.mean(high - low) < np.mean(nearest[:, 1] - nearest[:, 0])
 
 
 def test_a_degenerate_face_still_bounds_the_distance_from_above():
+    from fixwizard.geometry.mesh_distance import MeshDistance
     from fixwizard.solver.interval_kernel import face_distances_m
 
     vertices = np.array([[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.02, 0.0, 0.0], [0.0, 0.0, 0.0]])
     triangles = np.array([[0, 1, 2], [0, 3, 1], [0, 3, 3], [0, 0, 0]])  # collinear, two corners equal, a point
     points = np.random.default_rng(5).uniform(-0.03, 0.03, (300, 3))
+    rows = MeshDistance(vertices, triangles).rows
     for face in range(len(triangles)):
-        bound = face_distances_m(points, np.full(len(points), face), (vertices, triangles))
+        bound = face_distances_m(points, np.full(len(points), face), rows)
         corners = vertices[triangles[face]]
         farthest = np.max([np.linalg.norm(points - corner, axis=1) for corner in corners], axis=0)
         assert np.all(np.isfinite(bound)) and np.all(bound <= farthest + 1e-8)  # a point of the face, not beyond
@@ -137,7 +137,7 @@ def test_float32_interval_ends_are_rounded_outward():
 
 @pytest.mark.parametrize("name", sorted(SHAPES))
 def test_the_distance_to_any_one_face_bounds_the_distance_from_above_and_is_exact_for_its_face(name):
-    from fixwizard.solver.interval_kernel import FACE_MARGIN_M, face_distances_m
+    from fixwizard.solver.interval_kernel import face_distances_m
     from fixwizard.synthetic import closest_on_triangles, exact_distances_m
 
     fixture = as_fixture(name)
@@ -147,7 +147,7 @@ def test_the_distance_to_any_one_face_bounds_the_distance_from_above_and_is_exac
     faces = rng.integers(0, len(triangles), len(points))
     corners = vertices[triangles[faces]]
     on_face = np.linalg.norm(points - closest_on_triangles(points, corners[:, 0], corners[:, 1], corners[:, 2]), axis=1)
-    bound = face_distances_m(points, faces, fixture.oracle.mesh_arrays)
-    assert np.all(bound >= on_face) and np.all(bound - on_face <= 2 * FACE_MARGIN_M)
+    bound = face_distances_m(points, faces, fixture.oracle.triangle_rows)
+    assert np.all(bound >= on_face) and np.all(bound - on_face <= 1e-12)
     surface = exact_distances_m(trimesh.Trimesh(vertices, triangles, process=False), points)
     assert np.all(bound >= surface)

@@ -149,13 +149,13 @@ async def test_an_inconsistent_result_names_the_suspect_and_dropping_it_solves(t
 
 async def test_an_ambiguous_result_lists_the_modes_and_says_where_to_tap_next(tmp_path):
     context = wizard_context(tmp_path, cell=symmetric_cell())
-    record_spread_taps(context, 8)
+    record_spread_taps(context, 12)
     solved(context)
     assert context.solution.status == "ambiguous"
     app = ScreenHost(lambda: ResultsScreen(context))
     async with app.run_test(size=SIZE) as pilot:
         summary = text_of(app.screen, "#summary-text")
-        assert "AMBIGUOUS: 4 distinct poses explain the 8 taps" in text_of(app.screen, "#headline")
+        assert "AMBIGUOUS: 4 distinct poses explain the 12 taps" in text_of(app.screen, "#headline")
         assert "Poses that explain the taps (probability, pose, guaranteed bounds):" in summary
         assert "  1. " in summary and "  2. " in summary
         assert "Next: Tap the " in summary and "mm apart there" in summary

@@ -103,7 +103,7 @@ def test_results_screen_of_an_inconsistent_result(snap_compare, tmp_path):
 
 
 def test_results_screen_of_an_ambiguous_result(snap_compare, tmp_path):
-    context = demo_context(tmp_path, 8, 8e6, symmetric=True)
+    context = demo_context(tmp_path, 12, 8e6, symmetric=True)
     assert context.solution.status == "ambiguous"
     assert snap_compare(ScreenHost(lambda: ResultsScreen(context)), terminal_size=SIZE)
     context.session.release()

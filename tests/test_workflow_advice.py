@@ -96,7 +96,7 @@ def test_an_ambiguous_set_is_told_apart_and_a_set_without_an_estimate_gets_no_ad
 
     cell = symmetric_cell()
     cell.connect()
-    taps = spread_taps(cell, 8)
+    taps = spread_taps(cell, 12)
     ambiguous = solve(cell.fixture, taps, 0.003, 0.00035, max_cells=8e6)
     assert ambiguous.status == "ambiguous"
     advice = next_tap(cell.fixture, ambiguous, 0.00035)

@@ -59,11 +59,19 @@ class CellSet:
 
     def contains(self, base_T_fix: np.ndarray) -> bool:
         """Whether a pose of the internal fixture frame lies in one of the cells."""
-        rotation = self.rotation_grid.cell_of(self.rotation_level, Rotation.from_matrix(base_T_fix[:3, :3]))[0]
-        position = self.position_grid.cell_of(self.position_level, base_T_fix[:3, 3])
-        rows = np.flatnonzero(self.rotation_ids == rotation)
-        return bool(len(rows)) and bool(np.any((self.rotation_index == rows[0])
-                                               & np.all(self.position_cells == position, axis=1)))
+        return bool(self.locate(Rotation.from_matrix(base_T_fix[:3, :3]), base_T_fix[:3, 3])[0] >= 0)
+
+    def locate(self, base_R_fix: Rotation, base_p_fix: np.ndarray) -> np.ndarray:
+        """The cell (row) holding each pose (rotations and positions (N, 3), m), -1 where no cell does."""
+        rotation = self.rotation_grid.cell_of(self.rotation_level, base_R_fix)
+        position = np.floor((np.asarray(base_p_fix).reshape(-1, 3) - self.position_grid.corner_m)
+                            / self.position_grid.cell_side_m(self.position_level)).astype(np.int64)
+        keys = np.column_stack([self.rotation_cells, self.position_cells.astype(np.int64)])
+        _, ids = np.unique(np.vstack([keys, np.column_stack([rotation, position])]), axis=0, return_inverse=True)
+        ids = ids.reshape(-1)
+        row_of = np.full(int(ids.max()) + 1, -1)
+        row_of[ids[:len(keys)]] = np.arange(len(keys))
+        return row_of[ids[len(keys):]]
 
     def subset(self, mask: np.ndarray) -> "CellSet":
         """The cells where ``mask`` is true, keeping only the rotation cells still used."""

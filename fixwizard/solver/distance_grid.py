@@ -9,7 +9,7 @@ surface as from the box.
 
 Building a lattice takes a second of Open3D queries, so lattices are kept on disk between runs
 (``cache_folder()``), named by a hash of everything they depend on: the mesh's vertices and
-triangles, the lattice's geometry, the float32 error model and the file format. A file that does
+triangles, the lattice's geometry, and the file format. A file that does
 not match its name or cannot be read is rebuilt.
 """
 
@@ -23,13 +23,16 @@ from pathlib import Path
 import numpy as np
 
 from fixwizard.atomic import write_bytes_atomic
-from fixwizard.fixture import FLOAT32_ULPS, DistanceOracle
+from fixwizard.fixture import DistanceOracle
 from fixwizard.solver.interval_kernel import lattice_intervals_m
 
 MAX_VERTICES = 400_000
 MIN_SPACING_M = 0.0015
 MARGIN_M = 0.01
-CACHE_FORMAT = 1  # raise whenever what a lattice holds or how the oracle computes it changes
+# The oracle's intervals are at most ~1e-8 m wide for metre-sized triangles of any shape (mesh_distance); a
+# cached error bound above this one did not come from it.
+MAX_VALUE_ERROR_M = 1e-6
+CACHE_FORMAT = 2  # raise whenever what a lattice holds or how the oracle computes it changes
 
 
 def cache_folder() -> Path:
@@ -52,11 +55,12 @@ class DistanceGrid:
         self._low, self._spacing = low, spacing
         axes = [low[axis] + spacing * np.arange(self._shape[axis]) for axis in range(3)]
         vertices = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-        self._value_error_m = float(np.max(oracle.error_bound_m(vertices)))
         key = self._key(oracle)
         path = cache_folder() / f"lattice-{key}.npz"
-        if not self._load(path, key, len(vertices), len(oracle.mesh_arrays[1])):
-            self._values, self._faces = oracle.distance_and_face(vertices)
+        if not self._load(path, key, len(vertices), oracle.triangle_count):
+            low, high, self._faces = oracle.distance_interval_m(vertices)
+            self._values = 0.5 * (low + high)
+            self._value_error_m = float(np.max(high - low))  # half the width, doubled for the midpoint's rounding
             self._store(path, key)
 
     def _key(self, oracle: DistanceOracle) -> str:
@@ -64,28 +68,31 @@ class DistanceGrid:
         digest = hashlib.sha256()
         for part in (mesh_vertices, triangles, self._low, np.array([self._spacing]), self._shape):
             digest.update(np.ascontiguousarray(part).tobytes())
-        digest.update(repr((oracle.signed, FLOAT32_ULPS, CACHE_FORMAT)).encode())
+        digest.update(repr((oracle.signed, CACHE_FORMAT)).encode())
         return digest.hexdigest()
 
     def _load(self, path: Path, key: str, count: int, triangle_count: int) -> bool:
-        """Take values and faces from a cached lattice; False when there is none fit to use (the compiled search
-        reads faces without bounds checks, so an index out of range must never get through). Their error bound
-        is always computed afresh."""
+        """Take values, their error and faces from a cached lattice; False when there is none fit to use (the
+        compiled search reads faces without bounds checks, so an index out of range must never get through, and
+        an error bound must be one the oracle can give)."""
         try:
             with np.load(path) as stored:
                 values, faces, stored_key = stored["values"], stored["faces"], str(stored["key"])
-        except (OSError, EOFError, KeyError, ValueError, zipfile.BadZipFile):
+                value_error_m = float(stored["value_error_m"])
+        except (OSError, EOFError, KeyError, ValueError, TypeError, zipfile.BadZipFile):
             return False
         if (stored_key != key or values.shape != (count,) or faces.shape != (count,) or not np.all(np.isfinite(values))
-                or faces.min() < 0 or faces.max() >= triangle_count):
+                or faces.min() < 0 or faces.max() >= triangle_count or not 0.0 <= value_error_m <= MAX_VALUE_ERROR_M):
             return False
         self._values, self._faces = values.astype(np.float64), faces.astype(np.int64)
+        self._value_error_m = value_error_m
         return True
 
     def _store(self, path: Path, key: str) -> None:
         """Keep the lattice for the next run; a cache that cannot be written only costs time."""
         buffer = io.BytesIO()
-        np.savez(buffer, values=self._values, faces=self._faces.astype(np.int32), key=key)
+        np.savez(buffer, values=self._values, faces=self._faces.astype(np.int32), key=key,
+                 value_error_m=self._value_error_m)
         try:
             write_bytes_atomic(path, buffer.getvalue())
         except OSError:

@@ -7,7 +7,7 @@ Frames: cells hold ``base_T_fix`` (internal frame); everything returned is of th
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import logsumexp
+from scipy.special import gammaln, logsumexp
 from scipy.spatial.transform import Rotation
 
 from fixwizard.fixture import DistanceOracle
@@ -18,8 +18,16 @@ from fixwizard.solver.cells import CellSet
 from fixwizard.solver.distance_grid import distance_grid_for
 
 CENTER_ITERATIONS = 200
-# Below this many effective samples, sample_cells draws a second, importance-weighted round.
+# Below this many effective samples, sample_cells draws a second, importance-weighted round, then a third.
 MIN_EFFECTIVE_SAMPLES = 1000
+# Then rounds of a share of draws from a Student-t fitted to the previous round's weighted samples (wider by
+# PROPOSAL_INFLATION in scale, and never narrower per coordinate than a cell's own spread scaled by the previous
+# effective sample size), the rest uniform over the cells so that no part of the set goes unsampled; up to
+# FITTED_ROUNDS of them while they gain.
+PROPOSAL_SHARE = 0.8
+PROPOSAL_DOF = 5.0
+PROPOSAL_INFLATION = 1.5
+FITTED_ROUNDS = 4
 
 
 @dataclass(frozen=True)
@@ -108,7 +116,7 @@ def bounds_from_figures(centre: BoundCentre, largest: np.ndarray) -> Bounds:
 
 
 def sample_cells(cells: CellSet, oracle: DistanceOracle, base_p_taps: np.ndarray, ball_radius_m: float,
-                 sigma_m: float, max_samples: int, rng: np.random.Generator) -> Samples:
+                 sigma_m: float, max_samples: int, rng: np.random.Generator, radius_m: float = 0.1) -> Samples:
     """Poses inside the cells, weighted so that weighted sums estimate the likelihood-weighted posterior.
 
     Likelihood: independent Gaussians on the signed point-to-surface residual ``d(x_i) - r_ball``; all cells
@@ -116,7 +124,10 @@ def sample_cells(cells: CellSet, oracle: DistanceOracle, base_p_taps: np.ndarray
     ``max_samples`` randomly chosen) cells. When a few cells carry almost all the weight (effective sample
     size under ``MIN_EFFECTIVE_SAMPLES``, usual for coarse cells), a second round draws ``max_samples``
     poses from cells picked in proportion to a half-and-half mix of the first weights and uniform, weighted
-    by likelihood over the picking probability (importance sampling), and replaces the first.
+    by likelihood over the picking probability (importance sampling), and replaces the first. When the
+    likelihood is still narrower than the cells, rounds drawn from a Student-t fitted to the round before
+    (``_fitted_round``, each fitted to the one before; ``radius_m`` the fixture radius that scales rotations to
+    lengths): the round with the largest effective sample size is kept.
     """
     count = len(cells)
     chosen = np.arange(count) if count <= max_samples else np.sort(rng.choice(count, max_samples, replace=False))
@@ -126,8 +137,116 @@ def sample_cells(cells: CellSet, oracle: DistanceOracle, base_p_taps: np.ndarray
         return samples
     pick_probability = 0.5 * samples.weights + 0.5 / len(chosen)
     picks = rng.choice(len(chosen), max_samples, p=pick_probability / pick_probability.sum())
-    return _weighted_draws(cells, oracle, base_p_taps, ball_radius_m, sigma_m, chosen[picks],
-                           -np.log(pick_probability[picks]), rng)
+    samples = _weighted_draws(cells, oracle, base_p_taps, ball_radius_m, sigma_m, chosen[picks],
+                              -np.log(pick_probability[picks]), rng)
+    fitted = samples
+    for _ in range(FITTED_ROUNDS):
+        if effective_sample_size(samples.weights) >= MIN_EFFECTIVE_SAMPLES:
+            break
+        fitted = _fitted_round(cells, oracle, base_p_taps, ball_radius_m, sigma_m, fitted, max_samples, rng, radius_m)
+        if effective_sample_size(fitted.weights) > effective_sample_size(samples.weights):
+            samples = fitted
+    return samples
+
+
+def _uniform_poses(cells: CellSet, cell_index: np.ndarray, rng: np.random.Generator) -> tuple[Rotation, np.ndarray]:
+    """One uniform pose (Haar measure times volume) in each listed cell."""
+    rotations = cells.rotation_grid.sample(cells.rotation_level, cells.rotation_cells[cell_index], rng)
+    side = cells.position_grid.cell_side_m(cells.position_level)
+    return rotations, cells.positions_m(cell_index) + (rng.random((len(cell_index), 3)) - 0.5) * side
+
+
+def _log_likelihood(oracle: DistanceOracle, base_p_taps: np.ndarray, ball_radius_m: float, sigma_m: float,
+                    rotations: Rotation, positions_m: np.ndarray) -> np.ndarray:
+    """Log-likelihood (up to a constant) of each pose ``base_T_fix``: Gaussian residuals of every tap."""
+    fix_R_base = rotations.inv()
+    fix_p_taps = np.concatenate([fix_R_base.apply(tap - positions_m) for tap in base_p_taps])
+    outside = distance_grid_for(oracle).interval_m(fix_p_taps)[0] > 0.0  # no inside test needed there
+    residual = oracle.signed_distance_m(fix_p_taps, ~outside) - ball_radius_m
+    return -0.5 * np.sum((residual.reshape(len(base_p_taps), -1) / sigma_m) ** 2, axis=0)
+
+
+def _normalised(log_weight: np.ndarray) -> np.ndarray:
+    weights = np.exp(log_weight - logsumexp(log_weight))
+    return weights / weights.sum()
+
+
+def _weighted_draws(cells: CellSet, oracle: DistanceOracle, base_p_taps: np.ndarray, ball_radius_m: float,
+                    sigma_m: float, cell_index: np.ndarray, log_weight_offset: np.ndarray,
+                    rng: np.random.Generator) -> Samples:
+    """One uniform pose in each listed cell (repeats allowed), weight = likelihood x exp(offset), normalised."""
+    rotations, positions = _uniform_poses(cells, cell_index, rng)
+    log_weight = log_weight_offset + _log_likelihood(oracle, base_p_taps, ball_radius_m, sigma_m, rotations,
+                                                     positions)
+    return Samples(rotations, positions, cell_index, _normalised(log_weight))
+
+
+def _haar_jacobian(rotvec_rad: np.ndarray) -> np.ndarray:
+    """Density of the Haar measure (total 8 pi^2) in rotation-vector coordinates: 2 (1 - cos a) / a^2."""
+    angle = np.linalg.norm(rotvec_rad, axis=1)
+    small = angle < 1e-4
+    safe = np.where(small, 1.0, angle)
+    return np.where(small, 1.0 - angle**2 / 12.0, 2.0 * (1.0 - np.cos(safe)) / safe**2)
+
+
+def _fitted_round(cells: CellSet, oracle: DistanceOracle, base_p_taps: np.ndarray, ball_radius_m: float,
+                  sigma_m: float, previous: Samples, count: int, rng: np.random.Generator,
+                  radius_m: float) -> Samples:
+    """``count`` poses by defensive importance sampling: ``PROPOSAL_SHARE`` from a multivariate Student-t in
+    the coordinates ``y = (omega * radius_m, p - p0)`` (m) about the weighted mean pose ``(R0, p0)`` of the
+    previous samples, ``R = R0 exp(omega)``, fitted to their weighted covariance; the rest uniform over the cells.
+    Weights are the likelihood over the mixture's density (both with respect to the Haar measure times volume),
+    zero outside the cells."""
+    mean_quaternion = np.linalg.eigh((previous.rotations.as_quat() * previous.weights[:, None]).T
+                                     @ previous.rotations.as_quat())[1][:, -1]
+    centre = Rotation.from_quat(mean_quaternion)
+    centre_p = previous.weights @ previous.positions_m
+
+    def coordinates(rotations: Rotation, positions: np.ndarray) -> np.ndarray:
+        return np.hstack([(centre.inv() * rotations).as_rotvec() * radius_m, positions - centre_p])
+
+    known = coordinates(previous.rotations, previous.positions_m)
+    mean = previous.weights @ known
+    offsets = known - mean
+    # a cell's own spread (uniform over its side; its rotation radius gamma as a length), shrunk as the previous
+    # round's samples grow many enough to tell the shape of the likelihood
+    gamma = float(np.max(cells.rotation_grid.gamma(cells.rotation_level, cells.rotation_ids)))
+    side = cells.position_grid.cell_side_m(cells.position_level)
+    cell_variance = np.array([(gamma * radius_m) ** 2 / 3.0] * 3 + [side**2 / 12.0] * 3)
+    covariance = (PROPOSAL_INFLATION**2 * (offsets * previous.weights[:, None]).T @ offsets
+                  + np.diag(cell_variance) / effective_sample_size(previous.weights))
+    factor = np.linalg.cholesky(covariance)
+    fitted_count = int(round(PROPOSAL_SHARE * count))
+    scale = np.sqrt(rng.chisquare(PROPOSAL_DOF, fitted_count) / PROPOSAL_DOF)
+    drawn = mean + (rng.standard_normal((fitted_count, 6)) @ factor.T) / scale[:, None]
+    drawn_rotations = centre * Rotation.from_rotvec(drawn[:, :3] / radius_m)
+    uniform_index = rng.integers(0, len(cells), count - fitted_count)
+    uniform_rotations, uniform_positions = _uniform_poses(cells, uniform_index, rng)
+    rotations = Rotation.concatenate([drawn_rotations, uniform_rotations])
+    positions = np.vstack([centre_p + drawn[:, 3:], uniform_positions])
+    y = coordinates(rotations, positions)
+    cell_index = cells.locate(rotations, positions)
+    cell_index[:fitted_count][np.linalg.norm(drawn[:, :3], axis=1) / radius_m >= np.pi] = -1  # outside the chart
+    inside = np.flatnonzero(cell_index >= 0)
+    # densities with respect to the Haar measure (rad^3, total 8 pi^2) times volume (m^3)
+    solved = np.linalg.solve(factor, (y[inside] - mean).T)
+    log_t = (-0.5 * (PROPOSAL_DOF + 6.0) * np.log1p(np.sum(solved**2, axis=0) / PROPOSAL_DOF)
+             - np.sum(np.log(np.diag(factor))) + _t_log_normaliser(PROPOSAL_DOF, 6))
+    log_t += 3.0 * np.log(radius_m) - np.log(_haar_jacobian(y[inside, :3] / radius_m))
+    cell_volume = (8.0 * np.pi**2 / cells.rotation_grid.n_cells(cells.rotation_level)
+                   * cells.position_grid.cell_side_m(cells.position_level) ** 3)
+    log_uniform = np.full(len(inside), -np.log(len(cells) * cell_volume))
+    log_proposal = np.logaddexp(np.log(PROPOSAL_SHARE) + log_t, np.log1p(-PROPOSAL_SHARE) + log_uniform)
+    log_weight = np.full(len(positions), -np.inf)
+    log_weight[inside] = _log_likelihood(oracle, base_p_taps, ball_radius_m, sigma_m, rotations[inside],
+                                         positions[inside]) - log_proposal
+    kept = np.flatnonzero(np.isfinite(log_weight))
+    return Samples(rotations[kept], positions[kept], cell_index[kept], _normalised(log_weight[kept]))
+
+
+def _t_log_normaliser(dof: float, dimension: int) -> float:
+    """Log of the multivariate Student-t density's constant for an identity scale."""
+    return float(gammaln(0.5 * (dof + dimension)) - gammaln(0.5 * dof) - 0.5 * dimension * np.log(dof * np.pi))
 
 
 def mixture(parts: list[tuple[Samples, np.ndarray]], shares: np.ndarray) -> Samples:
@@ -142,22 +261,6 @@ def mixture(parts: list[tuple[Samples, np.ndarray]], shares: np.ndarray) -> Samp
 def effective_sample_size(weights: np.ndarray) -> float:
     """Kish's effective number of samples of normalised weights: 1 / sum(w^2)."""
     return float(1.0 / np.sum(weights ** 2))
-
-
-def _weighted_draws(cells: CellSet, oracle: DistanceOracle, base_p_taps: np.ndarray, ball_radius_m: float,
-                    sigma_m: float, cell_index: np.ndarray, log_weight_offset: np.ndarray,
-                    rng: np.random.Generator) -> Samples:
-    """One uniform pose in each listed cell (repeats allowed), weight = likelihood x exp(offset), normalised."""
-    rotations = cells.rotation_grid.sample(cells.rotation_level, cells.rotation_cells[cell_index], rng)
-    side = cells.position_grid.cell_side_m(cells.position_level)
-    positions = cells.positions_m(cell_index) + (rng.random((len(cell_index), 3)) - 0.5) * side
-    fix_R_base = rotations.inv()
-    fix_p_taps = np.concatenate([fix_R_base.apply(tap - positions) for tap in base_p_taps])
-    outside = distance_grid_for(oracle).interval_m(fix_p_taps)[0] > 0.0  # no inside test needed there
-    residual = oracle.distance_and_face(fix_p_taps, ~outside)[0] - ball_radius_m
-    log_weight = log_weight_offset - 0.5 * np.sum((residual.reshape(len(base_p_taps), -1) / sigma_m) ** 2, axis=0)
-    weights = np.exp(log_weight - logsumexp(log_weight))
-    return Samples(rotations, positions, cell_index, weights / weights.sum())
 
 
 def expected_pose(samples: Samples, mask: np.ndarray, fix_T_cad: np.ndarray) -> np.ndarray:

@@ -17,15 +17,14 @@ import math
 import numba
 import numpy as np
 
+from fixwizard.geometry.mesh_distance import triangle_row_high_m
+
 # OpenMP where the system has it, else Numba's own work queue, which never fails: TBB, whose version
 # check warns on the terminal the wizard draws on, is never tried. Callers run one parallel kernel at
 # a time (the work queue is not thread-safe).
 numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
 
 NOT_REJECTED = -1
-# Added to a distance computed in float64 from float64 vertices: far above its rounding error (about
-# 1e-15 m for sub-metre coordinates), far below anything that matters to a bound.
-FACE_MARGIN_M = 1e-9
 BLOCK_CELLS = 4096  # cells per parallel work item
 
 
@@ -49,52 +48,6 @@ def _tolerance_m(x0: float, x1: float, x2: float, chord: float, sample_bound_m: 
 @numba.njit(nogil=True, cache=True, inline="always")
 def _straddles(low: float, high: float, band_low: float, band_high: float) -> bool:
     return high >= band_low and low <= band_high and (low < band_low or high > band_high)
-
-
-@numba.njit(nogil=True, cache=True, inline="always")
-def _fraction(numerator: float, denominator: float) -> float:
-    """``numerator / denominator`` clamped to [0, 1]; 0 where the denominator is not positive (a degenerate
-    triangle), so the point stays on the triangle."""
-    return min(max(numerator / denominator, 0.0), 1.0) if denominator > 0.0 else 0.0
-
-
-@numba.njit(nogil=True, cache=True)
-def _face_distance_m(x0: float, x1: float, x2: float, face: int, mesh: tuple) -> float:
-    """Distance (m) from a point to one triangle of ``mesh = (vertices (V, 3) m, triangles (F, 3))``, plus
-    ``FACE_MARGIN_M``: an upper bound on the point's distance to the whole surface. Closest point by Voronoi
-    regions (Ericson 5.1.5); every branch returns a point of the triangle, so rounding cannot break the bound."""
-    vertices, triangles = mesh
-    a, b, c = vertices[triangles[face, 0]], vertices[triangles[face, 1]], vertices[triangles[face, 2]]
-    ab0, ab1, ab2 = b[0] - a[0], b[1] - a[1], b[2] - a[2]
-    ac0, ac1, ac2 = c[0] - a[0], c[1] - a[1], c[2] - a[2]
-    d1 = ab0 * (x0 - a[0]) + ab1 * (x1 - a[1]) + ab2 * (x2 - a[2])
-    d2 = ac0 * (x0 - a[0]) + ac1 * (x1 - a[1]) + ac2 * (x2 - a[2])
-    d3 = ab0 * (x0 - b[0]) + ab1 * (x1 - b[1]) + ab2 * (x2 - b[2])
-    d4 = ac0 * (x0 - b[0]) + ac1 * (x1 - b[1]) + ac2 * (x2 - b[2])
-    d5 = ab0 * (x0 - c[0]) + ab1 * (x1 - c[1]) + ab2 * (x2 - c[2])
-    d6 = ac0 * (x0 - c[0]) + ac1 * (x1 - c[1]) + ac2 * (x2 - c[2])
-    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
-    if d1 <= 0.0 and d2 <= 0.0:  # vertex a
-        v, w = 0.0, 0.0
-    elif d3 >= 0.0 and d4 <= d3:  # vertex b
-        v, w = 1.0, 0.0
-    elif d6 >= 0.0 and d5 <= d6:  # vertex c
-        v, w = 0.0, 1.0
-    elif vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:  # edge ab
-        v, w = _fraction(d1, d1 - d3), 0.0
-    elif vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:  # edge ac
-        v, w = 0.0, _fraction(d2, d2 - d6)
-    elif va <= 0.0 and d4 - d3 >= 0.0 and d5 - d6 >= 0.0:  # edge bc
-        w = _fraction(d4 - d3, (d4 - d3) + (d5 - d6))
-        v = 1.0 - w
-    else:  # inside the face
-        v, w = _fraction(vb, va + vb + vc), _fraction(vc, va + vb + vc)
-        if v + w > 1.0:
-            v, w = 0.0, 0.0
-    e0 = x0 - (a[0] + v * ab0 + w * ac0)
-    e1 = x1 - (a[1] + v * ab1 + w * ac1)
-    e2 = x2 - (a[2] + v * ab2 + w * ac2)
-    return math.sqrt(e0 * e0 + e1 * e1 + e2 * e2) + FACE_MARGIN_M
 
 
 @numba.njit(nogil=True, cache=True, inline="always")
@@ -168,28 +121,29 @@ def lattice_intervals_m(points_m: np.ndarray, lattice: tuple) -> tuple[np.ndarra
 
 
 @numba.njit(nogil=True, cache=True)
-def face_distances_m(points_m: np.ndarray, faces: np.ndarray, mesh: tuple) -> np.ndarray:
-    """``_face_distance_m`` of each (N, 3) point to its face."""
+def face_distances_m(points_m: np.ndarray, faces: np.ndarray, triangle_rows: np.ndarray) -> np.ndarray:
+    """The face bound of each (N, 3) point: ``triangle_row_high_m`` to its face."""
     distances = np.empty(len(points_m))
     for row in range(len(points_m)):
-        distances[row] = _face_distance_m(points_m[row, 0], points_m[row, 1], points_m[row, 2], faces[row], mesh)
+        distances[row] = triangle_row_high_m(points_m[row, 0], points_m[row, 1], points_m[row, 2],
+                                             triangle_rows[faces[row]])
     return distances
 
 
 @numba.njit(nogil=True, cache=True, parallel=True)
 def cheap_pass(cells: tuple, taps: tuple, band: tuple, parent_index: np.ndarray, parents: tuple, lattice: tuple,
-               mesh: tuple, out: tuple) -> None:
+               triangle_rows: np.ndarray, out: tuple) -> None:
     """``_cheap_pass_range`` over all cells, in blocks spread over the cores."""
     count = len(cells[1])
     blocks = (count + BLOCK_CELLS - 1) // BLOCK_CELLS
     for block in numba.prange(blocks):
         _cheap_pass_range(block * BLOCK_CELLS, min(count, (block + 1) * BLOCK_CELLS), cells, taps, band,
-                          parent_index, parents, lattice, mesh, out)
+                          parent_index, parents, lattice, triangle_rows, out)
 
 
 @numba.njit(nogil=True, cache=True)
 def _cheap_pass_range(start: int, stop: int, cells: tuple, taps: tuple, band: tuple, parent_index: np.ndarray,
-                      parents: tuple, lattice: tuple, mesh: tuple, out: tuple) -> None:
+                      parents: tuple, lattice: tuple, triangle_rows: np.ndarray, out: tuple) -> None:
     """Cheap test of cells ``start .. stop`` of a chunk of ``n`` cells against every tap, in order.
 
     ``cells = (fix_R_base (U, 3, 3), rotation_index (n,), position_cells (n, 3), chords (U,), octree)`` with
@@ -199,7 +153,7 @@ def _cheap_pass_range(start: int, stop: int, cells: tuple, taps: tuple, band: tu
     lever_cap)`` in m. ``parents = (fix_R_base, rotation_index, rotated_positions, low, high, faces)``
     (cell ``k``'s parent is row ``parent_index[k]``; no rows at the root level); intervals are float32
     (parents, T).
-    ``lattice``: ``DistanceGrid.kernel_arguments``; ``mesh``: float64 vertices and triangles.
+    ``lattice``: ``DistanceGrid.kernel_arguments``; ``triangle_rows``: ``DistanceOracle.triangle_rows``.
     ``out = (rotated_positions (n, 3), low (n, T), high, faces, straddling, rejected_by (n,))``: per
     tap tested, the interval, the face whose distance bounds it from above, and whether it straddles a
     band edge; the tap that rejected each cell or ``NOT_REJECTED``.
@@ -243,7 +197,7 @@ def _cheap_pass_range(start: int, stop: int, cells: tuple, taps: tuple, band: tu
                 high = parent_high[parent, tap] + shift
                 face = parent_faces[parent, tap]
                 if face >= 0 and high > band_high and _straddles(low, high, band_low, band_high):
-                    high = min(high, _face_distance_m(x0, x1, x2, face, mesh))
+                    high = min(high, triangle_row_high_m(x0, x1, x2, triangle_rows[face]))
             undecided = _straddles(low, high, band_low, band_high)
             if undecided:
                 lattice_low, lattice_high, lattice_face = _nearest_vertex_interval_m(x0, x1, x2, lattice)
@@ -251,7 +205,7 @@ def _cheap_pass_range(start: int, stop: int, cells: tuple, taps: tuple, band: tu
                 if face < 0:
                     face = lattice_face
                 if lattice_face != face and high > band_high and _straddles(low, high, band_low, band_high):
-                    lattice_face_distance = _face_distance_m(x0, x1, x2, lattice_face, mesh)
+                    lattice_face_distance = triangle_row_high_m(x0, x1, x2, triangle_rows[lattice_face])
                     if lattice_face_distance < high:
                         high, face = lattice_face_distance, lattice_face
                 undecided = _straddles(low, high, band_low, band_high)

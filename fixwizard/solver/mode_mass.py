@@ -45,7 +45,7 @@ def _residuals(oracle: DistanceOracle, base_p_taps: np.ndarray, ball_radius_m: f
     rotations = base_R_fix * Rotation.from_rotvec(steps[:, :3] / radius_m)
     positions = base_p_fix + steps[:, 3:]
     fix_p_taps = np.concatenate([rotations.inv().apply(tap - positions) for tap in base_p_taps])
-    distances = oracle.distance_and_face(fix_p_taps, np.full(len(fix_p_taps), signed))[0]
+    distances = oracle.signed_distance_m(fix_p_taps, np.full(len(fix_p_taps), signed))
     distances = distances.reshape(len(base_p_taps), len(steps))
     return ((distances - ball_radius_m) / sigma_m).T
 

@@ -40,12 +40,10 @@ QUERY_CHUNK = 1 << 18  # cells per batch; a multiple of 8 so batches hold whole 
 RESTART_ROOT_SHRINK = 0.95
 # The uniform descent stops before a level would evaluate more than UNIFORM_SHARE of the cell budget
 # (refining the hull takes over from there), unless its cells are still coarse (a cell spans more than
-# COARSE_FRACTION of the fixture radius) while the taps still prune hard (under PRUNING_RATIO of the
-# level's cells survived): such a bottleneck level may use the whole budget, since stopping there would
-# leave bounds of centimetres that the next few levels shrink to millimetres.
+# COARSE_FRACTION of the fixture radius): such a level may use the whole budget, since stopping there would
+# leave bounds of centimetres (or a set that spans every rotation) that the next few levels shrink to millimetres.
 UNIFORM_SHARE = 1 / 12
 COARSE_FRACTION = 0.05
-PRUNING_RATIO = 0.25
 _KERNEL_LOCK = threading.Lock()  # one parallel kernel at a time, whichever thread searches
 
 
@@ -102,12 +100,10 @@ def _round_up_f32(values: np.ndarray) -> np.ndarray:
 
 def exact_distance_interval_m(oracle: DistanceOracle, fix_p_query: np.ndarray,
                               outside: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Interval (m) holding the signed distance of each query point (unsigned for open meshes), float32 error
-    included, and the face closest to each point. ``outside``: points already known to lie outside the solid,
-    whose signed distance is the unsigned one (no inside test needed)."""
-    distance, faces = oracle.distance_and_face(fix_p_query, None if outside is None else ~outside)
-    error = oracle.error_bound_m(fix_p_query)
-    return distance - error, distance + error, faces
+    """Interval (m) holding the signed distance of each query point (unsigned for open meshes), and the face
+    closest to each point. ``outside``: points already known to lie outside the solid, whose signed distance is
+    the unsigned one (no inside test needed)."""
+    return oracle.distance_interval_m(fix_p_query, None if outside is None else ~outside)
 
 
 class _Frames:
@@ -213,7 +209,7 @@ def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: in
              np.append(position_grid.corner_m, position_grid.cell_side_m(position_level)))
     with _KERNEL_LOCK:
         cheap_pass(cells, (problem.base_p_taps, np.asarray(tap_order, np.int64)), band_figures,
-                   parent_index[chunk], parent_arrays, grid.kernel_arguments, problem.oracle.mesh_arrays,
+                   parent_index[chunk], parent_arrays, grid.kernel_arguments, problem.oracle.triangle_rows,
                    (rotated_positions, low, high, faces, straddling, rejected_by))
     for tap_index in tap_order:
         if cancel is not None and cancel.is_set():
@@ -302,8 +298,7 @@ def _descends(problem: SearchProblem, tree: SearchTree, max_cells: float) -> boo
         return True
     gamma = float(np.max(cells.rotation_grid.gamma(cells.rotation_level, cells.rotation_ids)))
     span_m = cells.position_bound_m + problem.fixture_radius_m * chord(gamma)
-    coarse = span_m > COARSE_FRACTION * problem.fixture_radius_m
-    return coarse and len(cells) < PRUNING_RATIO * tree.evaluated
+    return span_m > COARSE_FRACTION * problem.fixture_radius_m
 
 
 def _descend(problem: SearchProblem, tree: SearchTree, max_cells: float, started: float,

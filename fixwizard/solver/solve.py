@@ -17,14 +17,15 @@ from fixwizard.fixture import Fixture
 from fixwizard.geometry.se3 import invert
 from fixwizard.solver.diagnose import SuspectTap, find_suspect_tap
 from fixwizard.solver.estimates import (Bounds, Interval, Samples, bound_centre, bounds_from_figures,
-                                        cell_bound_figures, expected_pose, intervals, mixture, rotation_center,
-                                        sample_cells)
+                                        cell_bound_figures, effective_sample_size, expected_pose, intervals, mixture,
+                                        rotation_center, sample_cells)
 from fixwizard.solver.mode_mass import ModeLikelihood, mode_shares
 from fixwizard.solver.refine import refined_largest_figures
 from fixwizard.solver.modes import rotation_modes
 from fixwizard.solver.cells import CellSet
 from fixwizard.solver.search import (SearchProblem, SearchProgress, SearchTree, Survivors, add_taps, search,
                                      worth_extending)
+from fixwizard.solver.verdict import MIN_INTERVAL_SAMPLES, Status, openness, status_of, undetermined_message
 
 DEFAULT_MAX_CELLS = 1e7
 # Refining the hull of the set (the cells that decide the bounds) may evaluate HULL_SHARE of the cell budget.
@@ -68,9 +69,11 @@ class SearchStats:
 
 @dataclass
 class Solution:
-    """Result of ``solve``. For ``inconsistent`` the pose, bounds and intervals are None/empty."""
+    """Result of ``solve``. For ``inconsistent`` the pose, bounds and intervals are None/empty. ``intervals`` is
+    also empty when the likelihood samples are too few to give one (``effective_samples`` below
+    ``verdict.MIN_INTERVAL_SAMPLES``)."""
 
-    status: str
+    status: Status
     base_T_cad: np.ndarray | None
     bounds: Bounds | None
     intervals: list[Interval]
@@ -81,6 +84,7 @@ class Solution:
     tree: SearchTree | None = field(repr=False)
     problem: SearchProblem = field(repr=False)
     fix_T_cad: np.ndarray = field(repr=False)
+    effective_samples: float = 0.0
 
     @property
     def cells(self) -> CellSet | None:
@@ -188,7 +192,7 @@ def _modes(problem: SearchProblem, survivors: Survivors, likelihood: _Likelihood
         if largest is None:
             continue
         samples = sample_cells(mode_cells, oracle, problem.base_p_taps, problem.ball_radius_m, likelihood.sigma_m,
-                               per_mode_samples, likelihood.rng)
+                               per_mode_samples, likelihood.rng, problem.fixture_radius_m)
         bounds = bounds_from_figures(centre, largest)
         found.append((bounds, samples, np.flatnonzero(labels == label),
                       ModeLikelihood(mode_cells, samples, bounds.max_point_displacement_m)))
@@ -259,7 +263,7 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
         centre = bound_centre(mode_cells, fix_p_origin, Rotation.from_matrix(top.bounds.base_T_cad_center[:3, :3]))
         bounds = bounds_from_figures(centre, cell_bound_figures(mode_cells, centre, fix_p_origin,
                                                                 fixture.radius_m).max(1))
-    status = "unique" if len(modes) == 1 else "ambiguous"
+    status = status_of([mode.bounds for mode in modes], fixture.radius_m)
     if status == "ambiguous":
         distance, angle = _mode_separation(modes)
         warnings.append(SolveWarning(
@@ -267,7 +271,20 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
             f"{len(modes)} distinct poses explain the taps (a symmetric fixture or taps on too few features); they "
             f"lie up to {distance * 1e3:.1f} mm and {np.degrees(angle):.1f} deg apart. The pose shown is the most "
             f"probable ({top.probability:.0%}); tap features that tell the poses apart."))
+    if status == "undetermined":
+        widest = max(modes, key=lambda mode: mode.bounds.max_point_displacement_m)
+        why = openness(fixture, base_p_taps, sample_bound_m, cells, widest.bounds, top.base_T_cad)
+        warnings.append(SolveWarning("undetermined", undetermined_message(why, widest.bounds, fixture.radius_m,
+                                                                          max_cells)))
+    effective = effective_sample_size(samples.weights)
+    solution_intervals = intervals(samples, top.base_T_cad, fix_p_origin) if effective >= MIN_INTERVAL_SAMPLES else []
+    if not solution_intervals:
+        warnings.append(SolveWarning(
+            "no_intervals",
+            f"No 95/99 % intervals: only {effective:.0f} effective likelihood samples (at least "
+            f"{MIN_INTERVAL_SAMPLES} are needed), since the cells are coarse next to how sharply the taps decide. "
+            "The guaranteed bounds hold; a larger cell budget gives intervals."))
     stats = SearchStats(len(cells), cells.rotation_level, cells.position_level, time.perf_counter() - started,
                         max_cells)
-    return Solution(status, top.base_T_cad, bounds, intervals(samples, top.base_T_cad, fix_p_origin), modes,
-                    warnings, None, stats, tree, problem, fix_T_cad)
+    return Solution(status, top.base_T_cad, bounds, solution_intervals, modes, warnings, None, stats, tree, problem,
+                    fix_T_cad, effective)

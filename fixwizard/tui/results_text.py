@@ -12,6 +12,7 @@ from fixwizard.workflow.advice import TapAdvice
 
 HEADLINES = {"unique": "UNIQUE: one pose of the fixture explains the {taps} taps.",
              "ambiguous": "AMBIGUOUS: {modes} distinct poses explain the {taps} taps.",
+             "undetermined": "UNDETERMINED: the {taps} taps do not pin the pose down.",
              "inconsistent": "INCONSISTENT: no pose of the fixture explains all {taps} taps."}
 
 SAID_BY_SUSPECT_LINES = ("inconsistent", "suspect_tap")

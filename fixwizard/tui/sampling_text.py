@@ -35,8 +35,9 @@ def live_text(check: LiveCheck | None, tap_count: int, running: bool) -> str:
         return (head + f"INCONSISTENT, tap {suspect.index + 1} lies about {suspect.distance_m * 1e3:.0f} mm off "
                 "the surface the others allow; if it missed the fixture, undo it (if last) or drop it on the "
                 "results screen.")
-    if check.verdict == "open":
-        return head + "the pose is not pinned down yet; keep tapping, on other faces too."
+    if check.verdict == "undetermined":
+        return (head + "the pose is not pinned down yet; keep tapping, on other faces too. Guaranteed so far: "
+                f"{bounds_text(check)}.")
     if check.verdict == "ambiguous":
         top = solution.modes[0]
         return (head + f"AMBIGUOUS so far, {len(solution.modes)} poses fit (most likely {top.probability:.0%}); tap "

@@ -4,28 +4,24 @@ from the fixture surface under the pose it estimates.
 The quick solve is the real solver with fewer likelihood samples, so what it says is guaranteed: an empty
 set means the taps are inconsistent. After each new tap it goes on from the previous check's set. Its
 bounds come from a light hull refinement; ``refine_check`` then spends the full solve's hull budget on the
-same set, for the bounds the report will give. While the
-most probable mode still spans more than ``OPEN_ROTATION_RAD`` of rotation the pose is called "open" (not
-pinned down yet) and no estimate is offered.
+same set, for the bounds the report will give. Its verdict is the solver's status: while the taps do not
+pin the pose down (``undetermined``) no estimate is offered, but the guaranteed bounds are.
 """
 
 import threading
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
 from fixwizard.fixture import Fixture
 from fixwizard.geometry.se3 import invert, transform_points
 from fixwizard.solver.solve import HULL_SHARE, MIN_TAPS, Solution, solve
+from fixwizard.solver.verdict import Status
 
 LIVE_MAX_CELLS = 1e7  # the full solve's budget: the live bounds are as guaranteed and nearly as tight
 LIVE_HULL_CELLS = 2e5  # less hull refinement than the full solve, for an update in about two seconds
 REFINED_HULL_CELLS = HULL_SHARE * LIVE_MAX_CELLS  # the full solve's hull refinement: its bounds
 LIVE_MAX_SAMPLES = 1000
-OPEN_ROTATION_RAD = np.radians(45.0)
-
-Verdict = Literal["open", "unique", "ambiguous", "inconsistent"]
 
 
 def tap_surface_distances_m(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float,
@@ -42,24 +38,18 @@ def tap_surface_distances_m(fixture: Fixture, base_p_taps: np.ndarray, ball_diam
 class LiveCheck:
     """A quick solve of the first ``tap_count`` taps and what it allows one to say."""
 
-    verdict: Verdict
     solution: Solution
     tap_count: int
     refined: bool = False  # the bounds come from the full solve's hull refinement
 
     @property
+    def verdict(self) -> Status:
+        return self.solution.status
+
+    @property
     def estimate_base_T_cad(self) -> np.ndarray | None:
         """The most probable pose when the set is narrow enough for it to mean something, else None."""
         return self.solution.base_T_cad if self.verdict in ("unique", "ambiguous") else None
-
-
-def verdict_of(solution: Solution) -> Verdict:
-    """Inconsistent, or open while the most probable mode spans a wide rotation, else the solver's status."""
-    if solution.status == "inconsistent":
-        return "inconsistent"
-    if solution.modes[0].bounds.rotation_rad > OPEN_ROTATION_RAD:
-        return "open"
-    return solution.status
 
 
 def quick_check(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sample_bound_m: float,
@@ -74,7 +64,7 @@ def quick_check(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: floa
     solution = solve(fixture, base_p_taps, ball_diameter_m, sample_bound_m, max_cells=max_cells, cancel=cancel,
                      max_samples=LIVE_MAX_SAMPLES, previous=None if previous is None else previous.solution,
                      hull_cells=LIVE_HULL_CELLS)
-    return LiveCheck(verdict_of(solution), solution, len(base_p_taps))
+    return LiveCheck(solution, len(base_p_taps))
 
 
 def refine_check(fixture: Fixture, check: LiveCheck, cancel: threading.Event | None = None) -> LiveCheck:
@@ -84,4 +74,4 @@ def refine_check(fixture: Fixture, check: LiveCheck, cancel: threading.Event | N
     solution = solve(fixture, problem.base_p_taps, 2.0 * problem.ball_radius_m, problem.sample_bound_m,
                      max_cells=check.solution.stats.max_cells, cancel=cancel, max_samples=LIVE_MAX_SAMPLES,
                      previous=check.solution, hull_cells=REFINED_HULL_CELLS)
-    return LiveCheck(verdict_of(solution), solution, check.tap_count, refined=True)
+    return LiveCheck(solution, check.tap_count, refined=True)

@@ -1,0 +1,162 @@
+"""The float64 distance intervals hold the exact distance for every triangle shape: needles, caps, collinear and
+repeated corners, far from the origin, points on the surface and a metre away; and the hierarchy finds the
+nearest triangle of a whole mesh, slivers included, where Open3D's float32 query errs by tenths of a millimetre."""
+
+from fractions import Fraction
+
+import numpy as np
+import open3d as o3d
+import pytest
+import trimesh
+
+from fixwizard.geometry.mesh_distance import MeshDistance, triangle_interval_m
+from fixwizard.synthetic import closest_on_triangles, exact_distances_m
+
+
+def _exact_squared_distance(x, a, b, c) -> Fraction:
+    """Squared distance from point x to triangle abc in exact rational arithmetic (the float64 inputs as given)."""
+    x, a, b, c = ([Fraction(float(value)) for value in point] for point in (x, a, b, c))
+
+    def sub(p, q):
+        return [p[i] - q[i] for i in range(3)]
+
+    def dot(p, q):
+        return sum(p[i] * q[i] for i in range(3))
+
+    def cross(p, q):
+        return [p[1] * q[2] - p[2] * q[1], p[2] * q[0] - p[0] * q[2], p[0] * q[1] - p[1] * q[0]]
+
+    def segment(p, q):
+        edge, offset = sub(q, p), sub(x, p)
+        length = dot(edge, edge)
+        t = min(max(dot(offset, edge) / length, Fraction(0)), Fraction(1)) if length else Fraction(0)
+        rest = [offset[i] - t * edge[i] for i in range(3)]
+        return dot(rest, rest)
+
+    best = min(segment(a, b), segment(b, c), segment(c, a))
+    normal = cross(sub(b, a), sub(c, a))
+    area = dot(normal, normal)
+    if area:
+        height = dot(sub(x, a), normal)
+        foot = [x[i] - height * normal[i] / area for i in range(3)]
+        if all(dot(cross(sub(q, p), sub(foot, p)), normal) >= 0 for p, q in ((a, b), (b, c), (c, a))):
+            best = min(best, height * height / area)
+    return best
+
+
+def _random_triangle(rng: np.random.Generator, kind: str) -> np.ndarray:
+    """Corners (3, 3) in m: a needle (one short edge), a cap (a corner near the opposite edge), a well-shaped
+    triangle, or a degenerate one (collinear, a repeated corner, a single point), up to 2 m from the origin."""
+    length = 10 ** rng.uniform(-3, 0)
+    aspect = 10 ** rng.uniform(0, 9)
+    a = rng.normal(size=3) * rng.choice([0.1, 1.0])
+    along = rng.normal(size=3)
+    along /= np.linalg.norm(along)
+    across = np.cross(along, rng.normal(size=3))
+    across /= np.linalg.norm(across)
+    b = a + length * along
+    if kind == "needle":
+        c = a + length * along * rng.uniform(0.5, 1.0) + across * length / aspect
+    elif kind == "cap":
+        c = a + length * along * rng.uniform(0.0, 1.0) + across * length / aspect
+    elif kind == "collinear":
+        c = a + length * along * rng.uniform(-0.5, 1.5)
+    elif kind == "repeated":
+        c = a.copy()
+    elif kind == "point":
+        b, c = a.copy(), a.copy()
+    else:
+        c = a + length * rng.normal(size=3)
+    corners = np.array([a, b, c])
+    return corners[rng.permutation(3)]
+
+
+KINDS = ("needle", "cap", "well_shaped", "collinear", "repeated", "point")
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_the_interval_holds_the_exact_distance_for_every_triangle_shape(kind):
+    rng = np.random.default_rng(KINDS.index(kind))
+    widest = 0.0
+    for _ in range(600):
+        a, b, c = _random_triangle(rng, kind)
+        weights = rng.dirichlet([1, 1, 1])
+        on_triangle = weights @ np.array([a, b, c])
+        normal = np.cross(b - a, c - a)
+        normal = normal / np.linalg.norm(normal) if np.linalg.norm(normal) > 0 else rng.normal(size=3)
+        distance = rng.choice([0.0, 10 ** rng.uniform(-7, 0)])
+        x = on_triangle + distance * (normal * rng.choice([-1, 1]) + rng.normal(size=3) * rng.choice([0, 0.3, 3]))
+        low, high, _, _ = triangle_interval_m(x, a, b, c)
+        exact = _exact_squared_distance(x, a, b, c)
+        assert Fraction(low) ** 2 <= exact <= Fraction(high) ** 2, (a, b, c, x)
+        size = np.linalg.norm(x - a) + max(np.linalg.norm(b - a), np.linalg.norm(c - a), np.linalg.norm(c - b))
+        widest = max(widest, (high - low) / max(size, 1e-300))
+    assert widest < 1e-7  # about sqrt(2^-53) of the point's distance plus the triangle's size, whatever its shape
+
+
+def test_the_returned_point_gives_the_upper_end():
+    rng = np.random.default_rng(9)
+    for _ in range(200):
+        a, b, c = _random_triangle(rng, "well_shaped")
+        x = rng.normal(size=3)
+        low, high, v, w = triangle_interval_m(x, a, b, c)
+        point = a + v * (b - a) + w * (c - a)
+        assert 0.0 <= v and 0.0 <= w and v + w <= 1.0
+        assert np.linalg.norm(x - point) <= high and low <= np.linalg.norm(x - point)
+
+
+def _rail(length_m: float, width_m: float) -> trimesh.Trimesh:
+    """A closed rail of square section (width x width), its long faces each two triangles of aspect
+    length / width."""
+    return trimesh.creation.box((length_m, width_m, width_m))
+
+
+def _points_above_long_faces(mesh: trimesh.Trimesh, rng: np.random.Generator, count: int) -> np.ndarray:
+    """Points 0.01-3 mm above the long faces of a rail lying along x."""
+    long_faces = np.flatnonzero(np.abs(mesh.face_normals[:, 0]) < 0.5)
+    faces = rng.choice(long_faces, count)
+    weights = rng.dirichlet([1, 1, 1], count)
+    on_face = np.einsum("ni,nij->nj", weights, mesh.triangles[faces])
+    return on_face + mesh.face_normals[faces] * 10 ** rng.uniform(-5, np.log10(0.003), (count, 1))
+
+
+@pytest.mark.parametrize("aspect", [10, 100, 1000])
+def test_slivers_a_metre_long_get_intervals_that_hold_the_float64_truth(aspect):
+    rail = _rail(1.0, 1.0 / aspect)
+    rng = np.random.default_rng(aspect)
+    points = _points_above_long_faces(rail, rng, 3000)
+    low, high, faces, _ = MeshDistance(rail.vertices, rail.faces).query(points)
+    truth = exact_distances_m(rail, points)
+    assert np.all(low <= truth + 1e-10) and np.all(truth - 1e-10 <= high)
+    assert np.max(high - low) < 1e-9
+    for row in rng.choice(len(points), 30, replace=False):  # exact arithmetic on a few, for the nearest face
+        corners = rail.vertices[rail.faces[faces[row]]]
+        exact = _exact_squared_distance(points[row], *corners)
+        assert Fraction(low[row]) ** 2 <= exact <= Fraction(high[row]) ** 2
+
+
+def test_open3d_float32_errs_on_the_same_slivers_so_the_test_above_can_tell():
+    rail = _rail(1.0, 0.001)
+    points = _points_above_long_faces(rail, np.random.default_rng(3), 3000)
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(rail.vertices.astype(np.float32)), o3d.core.Tensor(rail.faces.astype(np.uint32)))
+    closest = scene.compute_closest_points(o3d.core.Tensor(points.astype(np.float32)))["points"].numpy()
+    float32_error = np.abs(np.linalg.norm(points - closest, axis=1) - exact_distances_m(rail, points))
+    assert np.max(float32_error) > 1e-5
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_hierarchy_finds_the_nearest_triangle_of_a_whole_mesh(seed):
+    rng = np.random.default_rng(seed)
+    mesh = trimesh.creation.icosphere(subdivisions=3, radius=0.05)
+    mesh.vertices += rng.normal(size=mesh.vertices.shape) * 0.003
+    slivers = trimesh.creation.cylinder(radius=0.02, height=0.3, sections=256)  # 300 mm x 0.5 mm side faces
+    mesh = trimesh.util.concatenate([mesh, slivers.apply_translation([0.03, 0.0, 0.0])])
+    points = rng.uniform(-0.2, 0.2, (2000, 3)) * rng.choice([0.05, 0.3, 1.0], (2000, 1))
+    low, high, faces, _ = MeshDistance(mesh.vertices, mesh.faces).query(points)
+    truth = exact_distances_m(mesh, points)
+    assert np.all(low <= truth + 1e-12) and np.all(truth <= high + 1e-12)
+    assert np.max(high - low) < 1e-9
+    corners = mesh.triangles[faces]  # the face returned is a nearest one
+    on_face = np.linalg.norm(points - closest_on_triangles(points, corners[:, 0], corners[:, 1], corners[:, 2]), axis=1)
+    assert np.all(np.abs(on_face - truth) <= 1e-12)

@@ -1,0 +1,119 @@
+"""Mesh hygiene: what CAD exports get wrong is repaired where that is unambiguous, said in a warning, and the
+sign of the distance is used only where it can be trusted."""
+
+import igl
+import numpy as np
+import pytest
+import trimesh
+
+from fixwizard.errors import MeshError
+from fixwizard.fixture import load_fixture
+from shapes import SHAPES, as_fixture
+
+
+def _codes(fixture) -> list[str]:
+    return [code for code, _ in fixture.warnings]
+
+
+def _sign_matches_the_true_solid(fixture, truth: trimesh.Trimesh, seed: int = 0) -> None:
+    """Inside the fixture's signed distance exactly where the exact winding number of the true solid says so."""
+    rng = np.random.default_rng(seed)
+    points = truth.bounds[0] - 0.01 + rng.random((3000, 3)) * (truth.extents + 0.02)
+    winding = igl.winding_number(np.asarray(truth.vertices), np.asarray(truth.faces, np.int64), points)
+    signed = fixture.oracle.signed_distance_m(points - fixture.cad_p_center)
+    assert np.array_equal(signed < 0.0, winding > 0.5)
+
+
+@pytest.mark.parametrize("name", sorted(SHAPES))
+def test_faces_turned_inside_out_are_turned_back_and_said(name):
+    truth = SHAPES[name]()
+    rng = np.random.default_rng(1)
+    broken = truth.copy()
+    flipped = rng.choice(len(broken.faces), max(1, len(broken.faces) // 5), replace=False)
+    faces = np.asarray(broken.faces).copy()
+    faces[flipped] = faces[flipped][:, ::-1]
+    fixture = as_fixture(name, trimesh.Trimesh(broken.vertices, faces, process=False))
+    assert fixture.signed and "mesh_winding_repaired" in _codes(fixture)
+    _sign_matches_the_true_solid(fixture, truth)
+
+
+def test_a_single_flipped_triangle_is_turned_back():
+    truth = SHAPES["l_prism"]()
+    faces = np.asarray(truth.faces).copy()
+    faces[3] = faces[3][::-1]
+    fixture = as_fixture("l_prism", trimesh.Trimesh(truth.vertices, faces, process=False))
+    assert "mesh_winding_repaired" in _codes(fixture) and "1 of its" in dict(fixture.warnings)["mesh_winding_repaired"]
+    _sign_matches_the_true_solid(fixture, truth)
+
+
+def test_a_mesh_inside_out_is_turned_outward():
+    truth = SHAPES["polytope"]()
+    inverted = trimesh.Trimesh(truth.vertices, np.asarray(truth.faces)[:, ::-1], process=False)
+    fixture = as_fixture("polytope", inverted)
+    assert _codes(fixture) == ["mesh_inverted_repaired"]
+    _sign_matches_the_true_solid(fixture, truth)
+
+
+def test_two_bodies_each_oriented_outward_and_said():
+    first = trimesh.creation.box((0.05, 0.05, 0.02))
+    second = trimesh.creation.box((0.03, 0.03, 0.03)).apply_translation([0.08, 0.0, 0.0])
+    truth = trimesh.util.concatenate([first, second])
+    broken = trimesh.util.concatenate([first, trimesh.Trimesh(second.vertices, second.faces[:, ::-1])])
+    fixture = as_fixture("two_boxes", broken)
+    assert set(_codes(fixture)) == {"mesh_inverted_repaired", "mesh_several_bodies"}
+    _sign_matches_the_true_solid(fixture, truth)
+
+
+@pytest.mark.parametrize("cavity_wound", ["inward", "outward"])
+def test_a_cavity_stays_a_cavity_however_it_is_wound(cavity_wound):
+    outer = trimesh.creation.box((0.08, 0.08, 0.08))
+    inner = trimesh.creation.icosphere(subdivisions=2, radius=0.02)
+    truth = trimesh.util.concatenate([outer, trimesh.Trimesh(inner.vertices, inner.faces[:, ::-1])])
+    inner_faces = inner.faces[:, ::-1] if cavity_wound == "inward" else inner.faces
+    fixture = as_fixture("hollow", trimesh.util.concatenate([outer, trimesh.Trimesh(inner.vertices, inner_faces)]))
+    assert fixture.signed
+    assert "cavities" in dict(fixture.warnings)["mesh_several_bodies"]
+    assert fixture.oracle.signed_distance_m(np.zeros((1, 3)) - fixture.cad_p_center)[0] > 0.0  # the cavity is air
+    _sign_matches_the_true_solid(fixture, truth)
+
+
+def test_bodies_that_cut_through_each_other_are_separate_solids():
+    first = trimesh.creation.box((0.06, 0.02, 0.02))
+    second = trimesh.creation.box((0.02, 0.06, 0.02))
+    fixture = as_fixture("cross", trimesh.util.concatenate([first, trimesh.Trimesh(second.vertices,
+                                                                                   second.faces[:, ::-1])]))
+    points = np.array([[0.0, 0.0, 0.0], [0.0, 0.025, 0.0], [0.025, 0.0, 0.0], [0.025, 0.025, 0.0]])
+    assert list(fixture.oracle.signed_distance_m(points - fixture.cad_p_center) < 0.0) == [True, True, True, False]
+
+
+def test_faces_of_zero_area_are_dropped_and_said():
+    box = trimesh.creation.box((0.05, 0.04, 0.03))
+    vertices = np.vstack([box.vertices, [[0.5, 0.5, 0.5]]])
+    faces = np.vstack([box.faces, [[0, 0, 1], [8, 8, 8]]])  # a repeated corner, a single point
+    fixture = as_fixture("box", trimesh.Trimesh(vertices, faces, process=False))
+    assert fixture.signed and _codes(fixture) == ["mesh_degenerate_faces_dropped"]
+    assert len(fixture.mesh.faces) == len(box.faces) and fixture.mesh.extents == pytest.approx([0.05, 0.04, 0.03])
+
+
+def test_a_non_manifold_closed_mesh_falls_back_to_the_unsigned_distance():
+    box = trimesh.creation.box((0.05, 0.04, 0.03))
+    fin = trimesh.Trimesh(box.vertices, np.vstack([box.faces, box.faces[:2], box.faces[:2][:, ::-1]]), process=False)
+    fixture = as_fixture("box", fin)
+    assert not fixture.signed and not fixture.oracle.signed
+    assert set(_codes(fixture)) & {"mesh_not_watertight", "mesh_orientation_unknown"}
+
+
+@pytest.mark.parametrize("suffix", [".stl", ".ply", ".obj"])
+def test_a_vertex_that_is_not_a_number_is_refused_not_dropped(tmp_path, suffix):
+    box = trimesh.creation.box((0.05, 0.04, 0.03))
+    vertices = np.asarray(box.vertices).copy()
+    vertices[5] = [np.nan, 0.0, np.inf]
+    path = tmp_path / f"broken{suffix}"
+    trimesh.Trimesh(vertices, box.faces, process=False).export(path)
+    with pytest.raises(MeshError, match="not finite numbers"):
+        load_fixture(path)
+
+
+def test_a_folder_given_as_the_mesh_is_called_a_folder(tmp_path):
+    with pytest.raises(MeshError, match="is a folder"):
+        load_fixture(tmp_path)

@@ -1,0 +1,105 @@
+"""Verdicts that mean what they say: ``unique`` only for one pinned-down mode, ``undetermined`` (with why and
+what to do) for tap sets that pin nothing down, and intervals only from enough effective samples."""
+
+import numpy as np
+import pytest
+import trimesh
+from scipy.spatial.transform import Rotation
+
+from fixwizard.cli import EXIT_CODES, main
+from fixwizard.geometry.se3 import make_transform, transform_points
+from fixwizard.points import write_points
+from fixwizard.solver.estimates import Bounds
+from fixwizard.solver.solve import solve
+from fixwizard.solver.verdict import MIN_INTERVAL_SAMPLES, PINNED_FRACTION, status_of
+from fixwizard.synthetic import touching_ball_centres
+from shapes import as_fixture
+
+BALL_M = 0.003
+BOUND_M = 0.0005
+POSE = make_transform(Rotation.from_rotvec([0.2, -0.1, 0.7]), [0.4, -0.2, 0.1])
+
+
+def _bounds(displacement_m: float) -> Bounds:
+    return Bounds(np.eye(4), displacement_m, 0.0, displacement_m)
+
+
+def test_the_rule_pinned_down_means_every_point_within_a_quarter_of_the_radius():
+    radius = 0.1
+    pinned, loose = _bounds(PINNED_FRACTION * radius), _bounds(PINNED_FRACTION * radius * 1.01)
+    assert status_of([pinned], radius) == "unique"
+    assert status_of([pinned, pinned], radius) == "ambiguous"
+    assert status_of([loose], radius) == "undetermined"
+    assert status_of([pinned, loose], radius) == "undetermined"
+    assert status_of([], radius) == "inconsistent"
+
+
+@pytest.fixture(scope="module")
+def plate():
+    fixture = as_fixture("l_prism")
+    taps = transform_points(POSE, touching_ball_centres(fixture.mesh, 20, BALL_M / 2, np.random.default_rng(0)))
+    return fixture, taps
+
+
+def test_well_spread_taps_at_a_fair_budget_are_unique_with_intervals(plate):
+    fixture, taps = plate
+    solution = solve(fixture, taps, BALL_M, BOUND_M, max_cells=2e6)
+    assert solution.status == "unique"
+    assert solution.effective_samples >= MIN_INTERVAL_SAMPLES and len(solution.intervals) == 2
+    assert solution.contains(POSE)
+
+
+@pytest.mark.parametrize("case, reason", [
+    ("ten copies of one tap", "1 distinct tap"),
+    ("three taps", "3 distinct taps"),
+    ("taps in a line", "along one line"),
+    ("small budget", "larger budget"),
+])
+def test_tap_sets_that_pin_nothing_down_are_undetermined_with_the_reason(plate, case, reason):
+    fixture, taps = plate
+    max_cells = 3e5
+    if case == "ten copies of one tap":
+        taps = np.repeat(taps[:1], 10, axis=0)
+    elif case == "three taps":
+        taps = taps[:3]
+    elif case == "taps in a line":
+        cad_line = np.array([[x, 0.0005, 0.0115] for x in np.linspace(0.005, 0.115, 8)])  # along the top face's edge
+        taps = transform_points(POSE, cad_line)
+    else:
+        max_cells = 2e3
+    solution = solve(fixture, taps, BALL_M, BOUND_M, max_cells=max_cells, max_samples=2000)
+    assert solution.status == "undetermined"
+    assert solution.contains(POSE)
+    message = dict((warning.code, warning.message) for warning in solution.warnings)["undetermined"]
+    assert reason in message
+
+
+def test_an_undetermined_set_has_no_intervals_from_a_handful_of_samples(plate):
+    fixture, taps = plate
+    solution = solve(fixture, taps[:3], BALL_M, BOUND_M, max_cells=2e4, max_samples=2000)
+    assert solution.effective_samples < MIN_INTERVAL_SAMPLES
+    assert solution.intervals == []
+    assert "no_intervals" in [warning.code for warning in solution.warnings]
+
+
+def test_two_identical_bodies_tapped_on_one_are_never_unique():
+    body = trimesh.creation.box((0.06, 0.04, 0.02))
+    both = trimesh.util.concatenate([body, body.copy().apply_translation([0.1, 0.0, 0.0])])
+    fixture = as_fixture("two_blocks", both)
+    taps = touching_ball_centres(body, 12, BALL_M / 2, np.random.default_rng(2))
+    solution = solve(fixture, transform_points(POSE, taps), BALL_M, BOUND_M, max_cells=1e6, max_samples=2000)
+    assert solution.status in ("ambiguous", "undetermined")
+
+
+def test_the_cli_exit_code_says_the_status(plate, tmp_path):
+    fixture, taps = plate
+    mesh = tmp_path / "plate.stl"
+    fixture.mesh.export(mesh)
+    codes = {}
+    for name, points in (("unique", taps), ("undetermined", taps[:3])):
+        path = tmp_path / f"{name}.yaml"
+        write_points(path, points)
+        codes[name] = main(["solve", str(mesh), str(path), "--ball-diameter", "3mm", "--sample-bound", "0.5mm",
+                            "--max-cells", "2e6", "-q"])
+    assert codes == {"unique": EXIT_CODES["unique"], "undetermined": EXIT_CODES["undetermined"]}
+    assert len(set(EXIT_CODES.values())) == len(EXIT_CODES)
