@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import fill_disk
 
 from fixwizard.geometry.se3 import make_transform
 from fixwizard.points import load_points
@@ -343,31 +344,9 @@ def test_a_session_that_cannot_start_for_a_full_disk_leaves_no_half_journal(tmp_
     assert opened and not (tmp_path / "a.jsonl").exists()
 
 
-@pytest.fixture
-def small_disk(tmp_path):
-    """A 64 KiB tmpfs (root can mount one); skipped where mounting is not permitted."""
-    mount_point = tmp_path / "disk"
-    mount_point.mkdir()
-    result = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(mount_point)],
-                            capture_output=True, check=False)
-    if result.returncode != 0:
-        pytest.skip(f"cannot mount a small tmpfs here ({result.stderr.decode().strip()}); the simulated full disk "
-                    "tests cover the same path")
-    yield mount_point
-    subprocess.run(["umount", "-l", str(mount_point)], check=True)
-
-
 def test_a_real_full_disk_strands_nothing(small_disk):
     session = new_session(small_disk)
-    filler = small_disk / "filler"
-    handle = os.open(filler, os.O_WRONLY | os.O_CREAT)
-    for chunk in (b"x" * 4096, b"x"):  # fill the disk up to the last byte
-        try:
-            while True:
-                os.write(handle, chunk)
-        except OSError as error:
-            assert error.errno == errno.ENOSPC
-    os.close(handle)
+    filler = fill_disk(small_disk)
     acknowledged = []
     with pytest.raises(SessionError, match="is full"):
         for index in range(1000):
