@@ -259,7 +259,7 @@ class SamplingSession:
         try:
             handle = os.open(path, os.O_RDWR | os.O_APPEND)
         except OSError as error:
-            raise SessionError(f"cannot open the session {path}: {file_problem(error)}") from error
+            raise SessionError(f"cannot open the session: {file_problem(error)}") from error
         _lock(handle, path)
         try:
             data = path.read_bytes()
