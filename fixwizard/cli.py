@@ -12,7 +12,7 @@ from pathlib import Path
 
 from fixwizard import report
 from fixwizard.atomic import check_output
-from fixwizard.errors import FixwizardError, InputError, file_problem
+from fixwizard.errors import FixwizardError, InputError, MeshUnitsError, file_problem
 from fixwizard.points import write_points
 from fixwizard.solver.search import SearchCancelled, SearchProgress
 from fixwizard.units import parse_length_m
@@ -148,7 +148,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args) if args.command else wizard_command(args)
     except FixwizardError as error:
-        print(f"fixwizard: {error}", file=sys.stderr)
+        units_fix = f" (--mesh-units {error.likely_units})" if isinstance(error, MeshUnitsError) and \
+            error.likely_units else ""
+        print(f"fixwizard: {error}{units_fix}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except OSError as error:
         print(f"fixwizard: {file_problem(error)}", file=sys.stderr)

@@ -21,6 +21,15 @@ class MeshError(InputError):
     """The fixture mesh file cannot be used (not a mesh, empty, implausible units)."""
 
 
+class MeshUnitsError(MeshError):
+    """The mesh's size is implausible in the units it was loaded with; ``likely_units`` ('m' or 'mm') would
+    make it plausible, None when neither does. Each interface says how to choose them."""
+
+    def __init__(self, message: str, likely_units: str | None) -> None:
+        super().__init__(message)
+        self.likely_units = likely_units
+
+
 def quoted(value: object) -> str:
     """A short ``repr`` of a value read from a person's file: nested and long values are cut (``...``), so a
     message never grows with the input (an alias-expanding YAML stays a few hundred characters)."""

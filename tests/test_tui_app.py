@@ -102,7 +102,8 @@ def test_a_fixture_in_the_wrong_units_is_explained_and_switching_units_loads_it(
             await choose(pilot, "#fixture", str(tmp_path / "fixtures" / "bracket_in_metres.stl"))
             await until(pilot, lambda: "implausible" in text_of(app, "#fixture-info"))
             message = text_of(app, "#fixture-info")
-            assert "0.16 mm small fixture with units 'mm'" in message and "switch Units (m / mm)" in message
+            assert "0.16 mm small fixture with units 'mm'" in message and "Switch Units to m" in message
+            assert "--mesh-units" not in message  # the wizard has no command-line flags to offer
             assert app.context.fixture is None
             await press_button(pilot, "#continue")
             assert isinstance(app.screen, StartScreen)

@@ -11,7 +11,7 @@ from textual.screen import Screen
 from textual.widgets import Button, Input, Select, Static
 
 from fixwizard.demo import DEMO_MESH
-from fixwizard.errors import FixwizardError, MeshError
+from fixwizard.errors import FixwizardError, MeshError, MeshUnitsError
 from fixwizard.fixture import Fixture, load_fixture
 from fixwizard.tui.background import ShownError, run_in_thread
 from fixwizard.tui.choices import (
@@ -183,8 +183,10 @@ class StartScreen(Screen[bool]):
         if selected != self._selected_fixture():
             return
         self._requested = None
-        hint = "\nChoose another mesh, or switch Units (m / mm) when the size is implausible." \
-            if isinstance(error, MeshError) else ""
+        if isinstance(error, MeshUnitsError) and error.likely_units:
+            hint = f"\nSwitch Units to {error.likely_units}, or choose another mesh."
+        else:
+            hint = "\nChoose another mesh." if isinstance(error, MeshError) else ""
         self._show_fixture(f"{error}{hint}", problem=True)
 
     def _show_fixture(self, text: str, problem: bool) -> None:
