@@ -12,11 +12,13 @@ from pathlib import Path
 import pytest
 import yaml
 from conftest import fill_disk
+from tui_cell import wizard_context
 
 from fixwizard.atomic import check_output, write_text_atomic
 from fixwizard.cli import main
 from fixwizard.demo import DEMO_MESH, DEMO_TAPS
 from fixwizard.errors import InputError
+from fixwizard.workflow.wizard_report import write_session_report
 
 REPO = Path(__file__).resolve().parents[1]
 CALIBRATION = REPO / "calibrations" / "example_matlab_logo.yaml"
@@ -181,3 +183,17 @@ def test_a_write_keeps_the_mode_of_the_file_it_replaces(tmp_path):
     write_text_atomic(path, "new")
     assert stat.S_IMODE(path.stat().st_mode) == 0o640 and path.read_text() == "new"
     assert len(list(tmp_path.iterdir())) == 1
+
+
+def test_the_wizard_report_path_is_never_the_journal_or_the_mesh(tmp_path):
+    context = wizard_context(tmp_path)
+    try:
+        journal = context.session.path.read_bytes()
+        for target, what in ((context.session.path, "the session journal"),
+                             (context.fixture.path, "the fixture mesh")):
+            with pytest.raises(InputError, match=f"is {what} .*writing there would replace it: choose another "
+                                                 "report path"):
+                write_session_report(target, None, context.fixture, context.session, context.calibration, True)
+        assert context.session.path.read_bytes() == journal
+    finally:
+        context.session.release()
