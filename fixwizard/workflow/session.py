@@ -23,11 +23,7 @@ write) is skipped and the records after it are kept. A complete line that fails 
 an acknowledged record: an error naming the line, since fixwizard will not guess which taps it held.
 One writer at a time, enforced with a non-blocking ``flock``.
 
-Why JSON Lines and not SQLite: the journal must survive being copied, mailed and read by a person; one
-file of text lines does, and the handful of rules above (one write per record, fsync, cut off a failed
-write, skip a torn record) are all its safety needs. An SQLite file keeps committed records in a
-``-wal``/``-journal`` side file that is lost when only the main file is copied, and its locking is not
-safe on the network folders a cell's PC often writes to.
+Why JSON Lines and not SQLite: see the README ("Files: nothing clobbered, nothing stranded").
 """
 
 import errno
