@@ -66,7 +66,8 @@ def _check_folder(folder: Path, fix: str) -> None:
     while not existing.exists() and existing != existing.parent:
         existing = existing.parent
     if not existing.is_dir():
-        raise InputError(f"{existing} is a file, so the folder {folder} cannot be made there: {fix}")
+        where = "not a folder" if existing == folder else f"so the folder {folder} cannot be made"
+        raise InputError(f"{existing} is a file, {where}: {fix}")
     if existing != folder:
         if not os.access(existing, os.W_OK | os.X_OK):
             raise InputError(f"cannot make the folder {folder}: no permission to write in {existing}: {fix}")

@@ -196,4 +196,4 @@ def test_an_unwritable_report_path_is_a_message_not_a_traceback(bracket, capsys)
     blocker.write_text("a file where a folder should be")
     assert main(replaced(solve_args(folder), str(folder / "report.yaml"), str(blocker / "report.yaml"))) == 1
     err = capsys.readouterr().err
-    assert "is a file, so the folder" in err and "Traceback" not in err
+    assert "is a file, not a folder" in err and "Traceback" not in err

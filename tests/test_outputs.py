@@ -94,7 +94,7 @@ def test_a_symlink_output_is_written_through_to_its_target_atomically(demo, caps
 
 def test_a_folder_that_cannot_take_the_report_is_found_before_the_solve(demo, capsys):
     (demo / "blocker").write_text("a file where a folder should be")
-    refused(capsys, solve(demo, "-o", str(demo / "blocker" / "report.yaml")), "is a file, so the folder")
+    refused(capsys, solve(demo, "-o", str(demo / "blocker" / "report.yaml")), "is a file, not a folder")
 
 
 def test_a_full_disk_is_found_before_the_solve_and_named_as_such(demo, capsys, small_disk):
@@ -148,6 +148,10 @@ def test_check_output_allows_a_new_file_in_a_folder_still_to_be_made(tmp_path):
     assert not (tmp_path / "new").exists()  # checked, not made
     with pytest.raises(InputError, match="writing there would replace it: choose another path"):
         check_output(tmp_path / "x" / ".." / "in.yaml", [("input", tmp_path / "in.yaml")])
+    (tmp_path / "file").write_text("")
+    with pytest.raises(InputError, match=f"{tmp_path / 'file'} is a file, so the folder {tmp_path / 'file' / 'sub'} "
+                                         "cannot be made: choose another path"):
+        check_output(tmp_path / "file" / "sub" / "r.yaml")
 
 
 def test_a_killed_write_leaves_a_temporary_file_that_the_next_write_removes(tmp_path):
