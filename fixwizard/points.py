@@ -7,6 +7,7 @@ YAML ``{frame: base, points_m: [[x, y, z], ...]}`` or CSV with one ``x,y,z`` row
 import csv
 import io
 import re
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +21,7 @@ POINTS_FRAME = "base"
 _NUMBER_START = re.compile(r"\s*[-+]?(?:\d|\.\d|nan|inf)", re.IGNORECASE)
 
 
-def _rows_to_array(rows: list[tuple[str, object]]) -> np.ndarray:
+def _rows_to_array(rows: Sequence[tuple[str, object]]) -> np.ndarray:
     """Taps (N, 3) from ``(where, row)`` pairs; ``where`` names the row in messages ("tap 3 in taps.yaml")."""
     points = []
     for where, row in rows:

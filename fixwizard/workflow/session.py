@@ -126,13 +126,14 @@ def _decode(line: bytes) -> dict | None:
     return record if crc == f"{zlib.crc32(_canonical(record).encode()):08x}" else None
 
 
-def _after_torn(line: bytes) -> int | None:
-    """Where a complete record starts after a torn one on the same line (the rest of the line decodes), or
-    None. A torn record is the start of a line, so it holds no newline and never decodes itself."""
+def _after_torn(line: bytes) -> tuple[int, dict] | None:
+    """Where a complete record starts after a torn one on the same line (the rest of the line decodes) and
+    that record, or None. A torn record is the start of a line, so it holds no newline and never decodes."""
     start = line.find(b"{", 1)
     while start != -1:
-        if _decode(line[start:]) is not None:
-            return start
+        record = _decode(line[start:])
+        if record is not None:
+            return start, record
         start = line.find(b"{", start + 1)
     return None
 
@@ -158,13 +159,13 @@ def _read_journal(path: Path, data: bytes) -> _Journal:
     for number, line in enumerate(lines[1:], start=2):
         record = _decode(line)
         if record is None:
-            start = _after_torn(line)
-            if start is None:
+            after_torn = _after_torn(line)
+            if after_torn is None:
                 raise SessionError(f"line {number} of the session {path} is damaged (checksum or JSON); "
                                    "fixwizard will not guess which taps it held. Keep the file and "
                                    "start a new session, or repair that line by hand")
+            start, record = after_torn
             torn.append((number, line[:start]))
-            record = _decode(line[start:])
         records.append((number, record))
     return _Journal(header, records, torn, torn_tail)
 
@@ -413,5 +414,8 @@ def find_unfinished(folder: str | Path = SESSIONS_DIR) -> list[Path]:
 
 def _kind(line: bytes) -> str | None:
     """The kind of the record a line holds (after a torn one, if need be), or None."""
-    start = 0 if _decode(line) is not None else _after_torn(line)
-    return None if start is None else (_decode(line[start:]) or {}).get("kind")
+    record = _decode(line)
+    if record is None:
+        after_torn = _after_torn(line)
+        record = after_torn[1] if after_torn is not None else {}
+    return record.get("kind")
