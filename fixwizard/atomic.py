@@ -1,29 +1,102 @@
-"""Atomic file writes: a reader sees the old file or the new one, never a torn one."""
+"""Output files: where one may go, and atomic writes (a reader sees the old file or the new one, never a torn one).
+
+An output is never one of the inputs it was made from, a folder or a device; a symlink is written through
+to its target (the link stays). ``check_output`` says so before the work that leads to the output, with
+its folder's writability; the write itself goes through a flushed temporary file in the target's folder
+(``.<name>.<pid>.<random>.tmp``) and a rename. Temporary files of ours that a killed write left behind
+are removed by the next write of the same file.
+"""
 
 import os
+import re
+import stat
 import tempfile
+import time
+from collections.abc import Iterable
 from pathlib import Path
 
+from fixwizard.errors import InputError, file_problem
 
-def _file_mode(path: Path) -> int:
-    """The mode a new file would get (0666 less the umask), or the mode of the file being replaced."""
-    if path.exists():
-        return path.stat().st_mode & 0o777
-    umask = os.umask(0)
-    os.umask(umask)
-    return 0o666 & ~umask
+LEGACY_TEMPORARY_AGE_S = 3600.0  # a temporary file without a process id is stale after this long
+TEMPORARY_RANDOM = "[a-z0-9_]{8}"  # the random part of ``tempfile.mkstemp`` names
+PROBE_BYTES = 4096  # written (and removed) to check that the output's folder takes a file
+
+
+def output_target(path: str | Path) -> Path:
+    """The file a write to ``path`` replaces: ``path`` with symlinks followed. InputError when it is a folder
+    or not a regular file (a device such as /dev/null, a pipe)."""
+    target = Path(os.path.realpath(path))
+    try:
+        mode = target.stat().st_mode
+    except (FileNotFoundError, NotADirectoryError):  # a new file (its folder is checked apart)
+        return target
+    except OSError as error:
+        raise InputError(f"cannot write {path}: {file_problem(error)}") from error
+    if stat.S_ISDIR(mode):
+        raise InputError(f"{path} is a folder; give the path of a file in it, e.g. {Path(path) / 'report.yaml'}")
+    if not stat.S_ISREG(mode):
+        raise InputError(f"{path} is a device or special file, not a regular file, so fixwizard will not "
+                         "replace it; give the path of a file, e.g. report.yaml")
+    return target
+
+
+def check_output(path: str | Path, inputs: Iterable[tuple[str, str | Path | None]] = (),
+                 fix: str = "choose another path") -> Path:
+    """The target of ``output_target``, also checked against ``inputs`` (what it is, path) and for a folder
+    that can take the file (made when missing); InputError saying ``fix`` otherwise. Call it before the work."""
+    target = output_target(path)
+    for what, input_path in inputs:
+        if input_path is not None and _same_file(target, Path(input_path)):
+            raise InputError(f"{path} is the {what} ({input_path}); writing there would replace it: {fix}")
+    _check_folder(target.parent, fix)
+    return target
+
+
+def _same_file(target: Path, other: Path) -> bool:
+    try:
+        return os.path.samefile(target, other)
+    except OSError:  # one of them does not exist (yet)
+        return target == Path(os.path.realpath(other))
+
+
+def _check_folder(folder: Path, fix: str) -> None:
+    """A folder that exists takes a small probe file; for a missing one the nearest existing folder must be
+    writable (it is made at write time)."""
+    existing = folder
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        where = "not a folder" if existing == folder else f"so the folder {folder} cannot be made"
+        raise InputError(f"{existing} is a file, {where}: {fix}")
+    if existing != folder:
+        if not os.access(existing, os.W_OK | os.X_OK):
+            raise InputError(f"cannot make the folder {folder}: no permission to write in {existing}: {fix}")
+        return
+    try:
+        handle, probe = tempfile.mkstemp(prefix=f".fixwizard-probe.{os.getpid()}.", suffix=".tmp", dir=folder)
+    except OSError as error:
+        raise InputError(f"cannot write in the folder {folder}: {file_problem(error, folder)}") from error
+    try:
+        os.write(handle, b"\0" * PROBE_BYTES)
+    except OSError as error:
+        raise InputError(f"cannot write in the folder {folder}: {file_problem(error, folder)}") from error
+    finally:
+        os.close(handle)
+        os.unlink(probe)
 
 
 def write_text_atomic(path: str | Path, text: str) -> Path:
-    """Write ``text`` (UTF-8) to ``path`` through a flushed temporary file in the same folder and a rename."""
+    """Write ``text`` (UTF-8) to ``path`` atomically; see ``write_bytes_atomic``."""
     return write_bytes_atomic(path, text.encode("utf-8"))
 
 
 def write_bytes_atomic(path: str | Path, data: bytes) -> Path:
-    """Write ``data`` to ``path`` through a flushed temporary file in the same folder and a rename."""
-    path = Path(path)
+    """Write ``data`` to ``path`` (a symlink: to its target) through a flushed temporary file in the same
+    folder and a rename; returns the file written. InputError for a folder or device, OSError from the disk."""
+    path = output_target(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    _remove_stale_temporaries(path)
+    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
     try:
         os.fchmod(handle, _file_mode(path))
         with os.fdopen(handle, "wb") as stream:
@@ -40,3 +113,38 @@ def write_bytes_atomic(path: str | Path, data: bytes) -> Path:
     finally:
         os.close(directory)
     return path
+
+
+def _file_mode(path: Path) -> int:
+    """The mode a new file would get (0666 less the umask), or the mode of the file being replaced."""
+    if path.exists():
+        return path.stat().st_mode & 0o777
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
+def _remove_stale_temporaries(path: Path) -> None:
+    """Remove ``.<name>.<pid>.<random>.tmp`` files of ``path`` whose process is gone (a killed write), and
+    ``.<name>.<random>.tmp`` ones (older versions) older than an hour."""
+    ours = re.compile(rf"\.{re.escape(path.name)}\.(?:(\d+)\.)?{TEMPORARY_RANDOM}\.tmp")
+    for entry in os.scandir(path.parent):
+        match = ours.fullmatch(entry.name)
+        if match is None or not entry.is_file(follow_symlinks=False):
+            continue
+        if match.group(1) is not None:
+            stale = not _process_running(int(match.group(1)))
+        else:
+            stale = time.time() - entry.stat().st_mtime > LEGACY_TEMPORARY_AGE_S
+        if stale:
+            Path(entry.path).unlink(missing_ok=True)
+
+
+def _process_running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True

@@ -8,11 +8,13 @@ Only 0 means a pose a robot program can use.
 """
 
 import argparse
+import re
 import sys
 from pathlib import Path
 
 from fixwizard import report
-from fixwizard.errors import FixwizardError, InputError
+from fixwizard.atomic import check_output
+from fixwizard.errors import FixwizardError, InputError, MeshUnitsError, file_problem
 from fixwizard.points import write_points
 from fixwizard.solver.search import SearchCancelled, SearchProgress
 from fixwizard.units import parse_length_m
@@ -48,11 +50,24 @@ def _lengths_from(args: argparse.Namespace) -> tuple[float, float]:
     return ball, bound
 
 
+def _report_path(args: argparse.Namespace) -> Path:
+    """``-o``, or POINTS with ``.report.yaml`` (refused for a POINTS that is no file, e.g. /dev/stdin)."""
+    if args.output:
+        return Path(args.output)
+    points = Path(args.points)
+    if points.exists() and not points.is_file():
+        raise InputError(f"POINTS {points} is not a regular file, so there is no folder beside it for the report: "
+                         "give the report path with -o, e.g. -o report.yaml")
+    return points.with_suffix(".report.yaml")
+
+
 def solve_command(args: argparse.Namespace) -> int:
     ball_diameter_m, sample_bound_m = _lengths_from(args)
     request = SolveRequest(Path(args.mesh), Path(args.points), ball_diameter_m, sample_bound_m, args.mesh_units,
                            parse_length_m(args.sigma) if args.sigma else None, args.max_cells)
-    output = Path(args.output) if args.output else Path(args.points).with_suffix(".report.yaml")
+    output = _report_path(args)
+    check_output(output, [("mesh", args.mesh), ("POINTS file", args.points), ("tip calibration", args.calibration)],
+                 "give another report path with -o, e.g. -o report.yaml")
     outcome = run_solve(request, progress=None if args.quiet else _print_progress)
     print("\n".join(summary_lines(outcome)))
     report.write(output, outcome.report)
@@ -61,16 +76,23 @@ def solve_command(args: argparse.Namespace) -> int:
 
 
 def wizard_command(args: argparse.Namespace) -> int:
+    if not (sys.stdin.isatty() and sys.stdout.isatty()):
+        raise InputError("the wizard needs an interactive terminal (its input or output is not one here); run "
+                         "fixwizard in a terminal or over SSH, or use a command such as `fixwizard solve` in scripts "
+                         "(see fixwizard --help)")
     from fixwizard.tui.app import FixwizardApp
-    from fixwizard.tui.launch import session_to_resume, simulated_context, ur_context
+    from fixwizard.tui.launch import simulated_context, ur_context
 
     context = ur_context(args.robot) if args.robot else simulated_context(args.seed)
-    FixwizardApp(context, session_to_resume(context, args.resume)).run()
+    FixwizardApp(context, args.resume).run()
     context.robot.close()
     return EXIT_OK
 
 
 def import_poses_command(args: argparse.Namespace) -> int:
+    pose_files = sorted(Path(args.directory).glob("*.pose")) if Path(args.directory).is_dir() else []
+    check_output(args.output, [("tip file", args.tip), *(("recorded pose file", path) for path in pose_files)],
+                 "give another POINTS path with -o, e.g. -o points.yaml")
     paths, base_p_taps = import_pose_dir(args.directory, load_tip(args.tip))
     write_points(args.output, base_p_taps, source=[path.name for path in paths], tip=str(args.tip))
     print(f"{len(base_p_taps)} ball centres written to {args.output}")
@@ -78,7 +100,12 @@ def import_poses_command(args: argparse.Namespace) -> int:
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with bad usage exiting 1 (bad input), since exit code 2 means inconsistent taps."""
+    """argparse with bad usage exiting 1 (bad input), since exit code 2 means inconsistent taps, and with
+    negative lengths such as ``-1mm`` taken as values (so that their check can say what is wrong)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"^-(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?\s*(?:mm|m)?$")
 
     def error(self, message: str) -> None:
         self.print_usage(sys.stderr)
@@ -126,11 +153,12 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args) if args.command else wizard_command(args)
     except FixwizardError as error:
-        print(f"fixwizard: {error}", file=sys.stderr)
+        units_fix = f" (--mesh-units {error.likely_units})" if isinstance(error, MeshUnitsError) and \
+            error.likely_units else ""
+        print(f"fixwizard: {error}{units_fix}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except OSError as error:
-        print(f"fixwizard: cannot write {error.filename or 'the output'}: {error.strerror or error}; choose a "
-              "folder you can write to", file=sys.stderr)
+        print(f"fixwizard: {file_problem(error)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except (SearchCancelled, KeyboardInterrupt):
         print("fixwizard: cancelled; nothing was written", file=sys.stderr)

@@ -1,5 +1,13 @@
 """Typed errors a person can cause; each message says what happened and what to do next."""
 
+import errno
+import reprlib
+
+QUOTE_LIMIT = 200  # characters of a person's input quoted in a message, at most
+
+_QUOTER = reprlib.Repr()
+_QUOTER.maxlevel, _QUOTER.maxlist, _QUOTER.maxdict, _QUOTER.maxstring, _QUOTER.maxother = 3, 6, 6, 80, 80
+
 
 class FixwizardError(Exception):
     """Base class for errors caused by input, files or the cell, shown to the operator as is."""
@@ -11,3 +19,35 @@ class InputError(FixwizardError):
 
 class MeshError(InputError):
     """The fixture mesh file cannot be used (not a mesh, empty, implausible units)."""
+
+
+class MeshUnitsError(MeshError):
+    """The mesh's size is implausible in the units it was loaded with; ``likely_units`` ('m' or 'mm') would
+    make it plausible, None when neither does. Each interface says how to choose them."""
+
+    def __init__(self, message: str, likely_units: str | None) -> None:
+        super().__init__(message)
+        self.likely_units = likely_units
+
+
+def quoted(value: object) -> str:
+    """A short ``repr`` of a value read from a person's file: nested and long values are cut (``...``), so a
+    message never grows with the input (an alias-expanding YAML stays a few hundred characters)."""
+    text = _QUOTER.repr(value)
+    return text if len(text) <= QUOTE_LIMIT else text[:QUOTE_LIMIT - 3] + "..."
+
+
+def file_problem(error: OSError, path: object = None) -> str:
+    """What a file system error (on ``path`` when the error does not name a file) means for a person and
+    what to do about it, in one clause."""
+    name = error.filename or path
+    code = error.errno
+    if code in (errno.ENOSPC, errno.EDQUOT):
+        return f"the disk{f' holding {name}' if name else ''} is full; free some space on it"
+    if code == errno.EROFS:
+        return f"{name or 'the file'} is on a read-only disk; choose a folder on a disk you can write to"
+    if code in (errno.EACCES, errno.EPERM):
+        return f"no permission to write {name or 'there'}; choose a folder you can write to"
+    if code == errno.ENOENT:
+        return f"{name or 'the file'} does not exist; check the path"
+    return f"cannot read or write {name or 'the file'}: {error.strerror or error}; check the path and the disk"

@@ -15,7 +15,7 @@ import numpy as np
 import open3d as o3d
 import trimesh
 
-from fixwizard.errors import MeshError
+from fixwizard.errors import MeshError, MeshUnitsError
 from fixwizard.geometry.mesh_distance import MeshDistance
 from fixwizard.geometry.meb import minimum_enclosing_ball
 from fixwizard.geometry.se3 import make_transform
@@ -204,15 +204,17 @@ def _check_size(path: Path, mesh_m: trimesh.Trimesh, units: str) -> None:
     size_m = float(np.max(mesh_m.extents))
     low, high = PLAUSIBLE_SIZE_M
     if size_m > high:
-        hint = "if the file is in millimetres, use --mesh-units mm" if units == "m" else \
+        likely = "mm" if units == "m" else None
+        hint = "if the file is in millimetres, its units are mm" if likely else \
             "check that the file holds the fixture and its units"
-        raise MeshError(f"{path} would be a {size_m:.3g} m large fixture with units '{units}', which is "
-                        f"implausible; {hint}")
+        raise MeshUnitsError(f"{path} would be a {size_m:.3g} m large fixture with units '{units}', which is "
+                             f"implausible; {hint}", likely)
     if size_m < low:
-        hint = "if the file is in metres, use --mesh-units m" if units == "mm" else \
+        likely = "m" if units == "mm" else None
+        hint = "if the file is in metres, its units are m" if likely else \
             "check the units of the file (fixwizard reads m or mm)"
-        raise MeshError(f"{path} would be a {size_m * 1e3:.3g} mm small fixture with units '{units}', "
-                        f"which is implausible; {hint}")
+        raise MeshUnitsError(f"{path} would be a {size_m * 1e3:.3g} mm small fixture with units '{units}', "
+                             f"which is implausible; {hint}", likely)
 
 
 def fixture_from_mesh(mesh_m: trimesh.Trimesh, path: Path, units: str, sha256: str) -> Fixture:

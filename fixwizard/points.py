@@ -1,75 +1,84 @@
 """The POINTS file: measured ball centres in the robot base frame, metres.
 
 YAML ``{frame: base, points_m: [[x, y, z], ...]}`` or CSV with one ``x,y,z`` row per tap
-(an optional header row of names is skipped).
+(an optional header row, none of whose cells is a number, is skipped; any other first row is a tap).
 """
 
 import csv
 import io
+import re
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 import yaml
 
 from fixwizard.atomic import write_text_atomic
-from fixwizard.errors import InputError
+from fixwizard.errors import InputError, file_problem, quoted
+from fixwizard.yamlfile import yaml_problem
 
 POINTS_FRAME = "base"
+_NUMBER_START = re.compile(r"\s*[-+]?(?:\d|\.\d|nan|inf)", re.IGNORECASE)
 
 
-def _rows_to_array(rows: list, path: Path) -> np.ndarray:
+def _rows_to_array(rows: Sequence[tuple[str, object]]) -> np.ndarray:
+    """Taps (N, 3) from ``(where, row)`` pairs; ``where`` names the row in messages ("tap 3 in taps.yaml")."""
     points = []
-    for number, row in enumerate(rows, start=1):
+    for where, row in rows:
         try:
-            values = [float(value) for value in row]
+            values = [float(value) for value in row]  # type: ignore[attr-defined]
         except (TypeError, ValueError):
-            raise InputError(f"tap {number} in {path} is not three numbers: {row!r}") from None
+            raise InputError(f"{where} is not three numbers: {quoted(row)}") from None
         if len(values) != 3:
-            raise InputError(f"tap {number} in {path} has {len(values)} numbers; each tap is x, y, z in metres")
+            raise InputError(f"{where} has {len(values)} numbers; each tap is x, y, z in metres")
         if not np.all(np.isfinite(values)):
-            raise InputError(f"tap {number} in {path} has a coordinate that is not a finite number ({row!r}); "
+            raise InputError(f"{where} has a coordinate that is not a finite number ({quoted(row)}); "
                              "fix or remove that tap")
         points.append(values)
     return np.array(points, dtype=float).reshape(-1, 3)
 
 
 def _read_csv(text: str, path: Path) -> np.ndarray:
-    rows = [row for row in csv.reader(io.StringIO(text)) if row and any(cell.strip() for cell in row)]
-    if rows and not _is_number(rows[0][0]):
-        rows = rows[1:]
-    return _rows_to_array(rows, path)
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
+    """One ``x,y,z`` row per tap; a first row is a header only when none of its cells is or starts like a
+    number (a typo in a first row of numbers is an error like in any other row)."""
+    reader = csv.reader(io.StringIO(text))
+    lines = [(reader.line_num, row) for row in reader if any(cell.strip() for cell in row)]
+    if lines and not any(_NUMBER_START.match(cell) for cell in lines[0][1]):
+        lines = lines[1:]
+    rows = [(f"tap {number} (line {line} of {path})", row) for number, (line, row) in enumerate(lines, start=1)]
+    if any(";" in cell for _, row in rows[:1] for cell in row):
+        raise InputError(f"{rows[0][0]} separates the numbers with ';': save the file with commas between x, y "
+                         "and z (and '.' as the decimal point)")
+    return _rows_to_array(rows)
 
 
 def _read_yaml(text: str, path: Path) -> np.ndarray:
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as error:
-        raise InputError(f"{path} is not valid YAML: {error}") from error
+        raise InputError(f"{path} is not valid YAML: {yaml_problem(error)}") from error
     if not isinstance(data, dict) or "points_m" not in data:
         raise InputError(f"{path} must be YAML with 'frame: base' and 'points_m: [[x, y, z], ...]' in metres")
     if data.get("frame", POINTS_FRAME) != POINTS_FRAME:
-        raise InputError(f"{path} gives points in frame {data.get('frame')!r}; fixwizard needs them in the robot "
-                         "base frame ('frame: base')")
+        raise InputError(f"{path} gives points in frame {quoted(data.get('frame'))}; fixwizard needs them in the "
+                         "robot base frame ('frame: base')")
     if not isinstance(data["points_m"], list):
         raise InputError(f"points_m in {path} must be a list of [x, y, z] points in metres")
-    return _rows_to_array(data["points_m"], path)
+    return _rows_to_array([(f"tap {number} in {path}", row) for number, row in enumerate(data["points_m"], start=1)])
 
 
 def load_points(path: str | Path) -> np.ndarray:
-    """Taps (N, 3) in metres from a POINTS file (YAML or CSV by suffix)."""
+    """Taps (N, 3) in metres from a POINTS file (YAML or CSV by suffix; a UTF-8 byte-order mark is skipped)."""
     path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{path} is a folder, not a points file; give the YAML or CSV file of the taps")
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as error:
-        raise InputError(f"cannot read the points file {path}: {error}") from error
+        text = path.read_text(encoding="utf-8-sig")
+    except OSError as error:
+        raise InputError(f"cannot read the points file: {file_problem(error, path)}") from error
+    except UnicodeDecodeError as error:
+        raise InputError(f"cannot read the points file {path}: it is not UTF-8 text ({error.reason}); save it as "
+                         "UTF-8 (or plain ASCII) CSV or YAML") from error
     if path.suffix.lower() == ".csv":
         return _read_csv(text, path)
     return _read_yaml(text, path)

@@ -4,16 +4,28 @@ from pathlib import Path
 
 import yaml
 
-from fixwizard.errors import InputError
+from fixwizard.errors import InputError, file_problem, quoted
+
+
+def yaml_problem(error: yaml.YAMLError) -> str:
+    """A YAML syntax error in one line: what and where (line, column)."""
+    if isinstance(error, yaml.MarkedYAMLError) and error.problem_mark is not None:
+        mark = error.problem_mark
+        return f"{error.problem} at line {mark.line + 1}, column {mark.column + 1}"
+    return str(error).splitlines()[0]
 
 
 def load_document(path: Path, schema: str, what: str, error: type[InputError] = InputError, hint: str = "") -> dict:
     """The YAML mapping in ``path`` if its ``schema`` key matches; ``error`` names the ``what`` otherwise."""
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as problem:
-        raise error(f"cannot read the {what} {path}: {problem}") from problem
+        data = yaml.safe_load(path.read_text(encoding="utf-8-sig"))
+    except OSError as problem:
+        raise error(f"cannot read the {what}: {file_problem(problem, path)}") from problem
+    except UnicodeDecodeError as problem:
+        raise error(f"cannot read the {what} {path}: it is not UTF-8 text ({problem.reason})") from problem
+    except yaml.YAMLError as problem:
+        raise error(f"the {what} {path} is not valid YAML: {yaml_problem(problem)}") from problem
     found = data.get("schema") if isinstance(data, dict) else None
     if found != schema:
-        raise error(f"{path} is not a {what}: expected 'schema: {schema}', found {found!r}.{hint}")
+        raise error(f"{path} is not a {what}: expected 'schema: {schema}', found {quoted(found)}.{hint}")
     return data

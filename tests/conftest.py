@@ -1,8 +1,10 @@
 """Shared test helpers: where the paper's real data lives, and how to skip without it."""
 
 import atexit
+import errno
 import os
 import shutil
+import subprocess
 import tempfile
 from pathlib import Path
 
@@ -36,3 +38,31 @@ def real_taps(data: Path, run: str) -> np.ndarray:
     """Ball centres (N, 3, m, base frame) of one user-study run with the published tip."""
     tip = read_pose_file(data / "calib" / "tcp_t_tip.pose")[:3, 3]
     return ball_centres_m(read_pose_dir(data / "samples" / run)[1], tip)
+
+
+@pytest.fixture
+def small_disk(tmp_path) -> Path:
+    """A 64 KiB tmpfs to fill up (root can mount one); skipped where mounting is not permitted, where the
+    simulated full-disk tests still cover the same paths."""
+    mount_point = tmp_path / "disk"
+    mount_point.mkdir()
+    result = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(mount_point)],
+                            capture_output=True, check=False)
+    if result.returncode != 0:
+        pytest.skip(f"cannot mount a small tmpfs here: {result.stderr.decode().strip()}")
+    yield mount_point
+    subprocess.run(["umount", "-l", str(mount_point)], check=True)
+
+
+def fill_disk(folder: Path) -> Path:
+    """Fill the disk holding ``folder`` to the last byte with one file, returned (delete it to free space)."""
+    filler = folder / "filler"
+    handle = os.open(filler, os.O_WRONLY | os.O_CREAT)
+    for chunk in (b"x" * 4096, b"x"):
+        try:
+            while True:
+                os.write(handle, chunk)
+        except OSError as error:
+            assert error.errno == errno.ENOSPC
+    os.close(handle)
+    return filler

@@ -162,6 +162,26 @@ def test_a_length_without_unit_that_means_metres_is_caught(bracket, capsys):
     assert "--sample-bound 1mm" in capsys.readouterr().err
 
 
+def test_a_negative_length_is_refused_by_its_check_not_taken_for_a_flag(bracket, capsys):
+    folder, _, _ = bracket
+    assert main(replaced(solve_args(folder), "0.5mm", "-1mm")) == 1
+    err = capsys.readouterr().err
+    assert "the sample bound must be a positive length, not -0.001 m" in err and "expected one argument" not in err
+
+
+def test_a_folder_given_as_the_mesh_is_called_a_folder(bracket, capsys):
+    folder, _, _ = bracket
+    assert main(replaced(solve_args(folder), str(folder / "plate.stl"), str(folder))) == 1
+    assert "is a folder, not a mesh file" in capsys.readouterr().err
+
+
+def test_one_tap_is_counted_in_the_singular(bracket, capsys):
+    folder, taps, _ = bracket
+    write_points(folder / "one.yaml", taps[:1])
+    assert main(solve_args(folder, "one.yaml")) == 1
+    assert "1 tap is not enough" in capsys.readouterr().err
+
+
 def test_bad_usage_exits_1_not_2(bracket, capsys):
     folder, _, _ = bracket
     args = replaced(solve_args(folder), "1e6", "lots")
@@ -176,4 +196,4 @@ def test_an_unwritable_report_path_is_a_message_not_a_traceback(bracket, capsys)
     blocker.write_text("a file where a folder should be")
     assert main(replaced(solve_args(folder), str(folder / "report.yaml"), str(blocker / "report.yaml"))) == 1
     err = capsys.readouterr().err
-    assert "cannot write" in err and "Traceback" not in err
+    assert "is a file, not a folder" in err and "Traceback" not in err

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from fixwizard.errors import MeshError
+from fixwizard.errors import MeshError, MeshUnitsError
 from fixwizard.fixture import load_fixture
 from fixwizard.synthetic import closest_on_triangles, exact_distances_m, touching_ball_centres
 from shapes import SHAPES, as_fixture
@@ -13,16 +13,18 @@ from shapes import SHAPES, as_fixture
 def test_a_millimetre_mesh_loaded_as_metres_is_refused_with_the_fix(tmp_path):
     path = tmp_path / "bracket.stl"
     trimesh.creation.box((180.0, 120.0, 40.0)).export(path)
-    with pytest.raises(MeshError, match="--mesh-units mm"):
+    with pytest.raises(MeshUnitsError, match="if the file is in millimetres, its units are mm") as caught:
         load_fixture(path, "m")
+    assert caught.value.likely_units == "mm"
     assert load_fixture(path, "mm").mesh.extents == pytest.approx([0.18, 0.12, 0.04])
 
 
 def test_a_metre_mesh_loaded_as_millimetres_is_refused_with_the_fix(tmp_path):
     path = tmp_path / "bracket.stl"
     trimesh.creation.box((0.18, 0.12, 0.04)).export(path)
-    with pytest.raises(MeshError, match="--mesh-units m"):
+    with pytest.raises(MeshUnitsError, match="if the file is in metres, its units are m") as caught:
         load_fixture(path, "mm")
+    assert caught.value.likely_units == "m"
 
 
 @pytest.mark.parametrize("content, match", [(b"", "empty"), (b"hello, I am not a mesh\n" * 10, "mesh"),
@@ -37,6 +39,8 @@ def test_files_that_are_not_meshes_get_a_clear_message(tmp_path, content, match)
 def test_a_missing_file_and_a_foreign_format_are_named(tmp_path):
     with pytest.raises(MeshError, match="does not exist"):
         load_fixture(tmp_path / "nothing.stl")
+    with pytest.raises(MeshError, match="is a folder, not a mesh file"):
+        load_fixture(tmp_path)
     step = tmp_path / "fixture.step"
     step.write_text("ISO-10303-21;")
     with pytest.raises(MeshError, match="STL, PLY or OBJ"):

@@ -36,7 +36,7 @@ def test_report_round_trip_keeps_pose_and_bounds(solved, tmp_path):
 @pytest.mark.parametrize("text, match", [("just words", "not a fixwizard report"),
                                          ("schema: fixwizard.report/1\nstatus: great\n", "status"),
                                          ("schema: fixwizard.report/1\nstatus: unique\npose: null\n", "needs 'pose'"),
-                                         ("{{{", "cannot read")])
+                                         ("{{{", "is not valid YAML: .* at line 1")])
 def test_damaged_reports_are_refused_with_a_reason(tmp_path, text, match):
     path = tmp_path / "bad.yaml"
     path.write_text(text)

@@ -1,5 +1,6 @@
 """The sampling session journal: every acknowledged tap survives a crash, undo is journaled, resume works."""
 
+import errno
 import os
 import select
 import signal
@@ -9,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import fill_disk
 
 from fixwizard.geometry.se3 import make_transform
 from fixwizard.points import load_points
@@ -45,7 +47,7 @@ def test_record_undo_and_resume_round_trip(tmp_path):
         assert session.undo().id == 3
         assert session.record_tap(pose(9), base_p_ball_m=[1.0, 2.0, 3.0]).id == 5  # ids are never reused
     with SamplingSession.open(session.path) as resumed:
-        assert resumed.recovery_note is None
+        assert resumed.recovered == ()
         assert [tap.id for tap in resumed.taps] == [1, 2, 5]
         np.testing.assert_allclose(resumed.taps[1].base_T_tcp, pose(1))
         np.testing.assert_allclose(resumed.taps[2].base_p_ball_m, [1.0, 2.0, 3.0])
@@ -76,6 +78,8 @@ def test_every_acknowledged_tap_survives_sigkill(tmp_path):
             line = writer.stdout.readline() if ready else b""
             assert line, "the writer stopped or stalled before acknowledging 20 taps"
             acknowledged.append(int(line))
+        with pytest.raises(SessionError, match="open in another fixwizard"):
+            SamplingSession.open(path)  # the writer (another process) holds it
     finally:
         os.kill(writer.pid, signal.SIGKILL)
         writer.wait(timeout=10)
@@ -91,7 +95,7 @@ def test_torn_last_line_is_moved_aside_and_reported(tmp_path):
     with open(path, "ab") as stream:
         stream.write(half)
     with SamplingSession.open(path) as resumed:
-        note = resumed.recovery_note
+        (note,) = resumed.recovered
         assert (note.line_number, note.size_bytes) == (5, len(half))
         assert "line 5" in str(note)
         assert note.moved_to.name.startswith("a.jsonl.torn-") and note.moved_to.read_bytes() == half
@@ -99,7 +103,7 @@ def test_torn_last_line_is_moved_aside_and_reported(tmp_path):
         assert path.read_bytes() == complete
         resumed.record_tap(pose(7))
     with SamplingSession.open(path) as again:
-        assert again.recovery_note is None
+        assert again.recovered == ()
         assert [tap.id for tap in again.taps] == [1, 2, 3, 4]
 
 
@@ -178,3 +182,180 @@ def test_drop_removes_any_active_tap_by_journaling_it_and_survives_resume(tmp_pa
         assert session.record_tap(pose(5)).id == 5
     with SamplingSession.open(session.path) as resumed:
         assert [tap.id for tap in resumed.taps] == [1, 3, 5]
+
+
+# --- torn records and failed writes: nothing acknowledged is lost, nothing follows a partial record ---
+
+class FailingWrites:
+    """``os.write`` for one file descriptor: after ``good`` whole writes, writes ``partial`` bytes of the next
+    one and then fails with ``error`` (ENOSPC: a full disk) ``times`` times; other descriptors write as usual."""
+
+    def __init__(self, monkeypatch, handle: int, good: int = 0, partial: int = 40, times: int = 1,
+                 error: int = errno.ENOSPC) -> None:
+        self.handle, self.good, self.partial, self.times, self.error = handle, good, partial, times, error
+        self.real_write = os.write
+        self.pending_error = False
+        monkeypatch.setattr(os, "write", self)
+
+    def __call__(self, handle: int, data) -> int:
+        if handle != self.handle or self.times == 0:
+            return self.real_write(handle, data)
+        if self.good > 0:
+            self.good -= 1
+            return self.real_write(handle, data)
+        if self.pending_error or self.partial == 0:  # the rest of a short write: the disk is full now
+            self.pending_error = False
+            self.times -= 1
+            raise OSError(self.error, os.strerror(self.error))
+        self.pending_error = True
+        return self.real_write(handle, bytes(data)[:self.partial])
+
+
+def test_a_full_disk_mid_record_loses_nothing_and_the_next_tap_does_not_follow_the_partial_one(tmp_path, monkeypatch):
+    session = new_session(tmp_path)
+    for index in range(10):
+        session.record_tap(pose(index))
+    saved = session.path.read_bytes()
+    FailingWrites(monkeypatch, session._handle)
+    with pytest.raises(SessionError, match="the disk is full; free some space on it. This tap was not saved; everything saved "
+                                           "before is kept"):
+        session.record_tap(pose(10))
+    assert session.path.read_bytes() == saved  # the partial record was cut off again
+    assert len(session.taps) == 10
+    tap = session.record_tap(pose(10))  # space freed: tapping on
+    assert tap.id == 11
+    session.release()
+    with SamplingSession.open(session.path) as resumed:
+        assert resumed.recovered == ()
+        assert [tap.id for tap in resumed.taps] == list(range(1, 12))
+
+
+def test_a_failed_undo_drop_or_close_is_not_applied(tmp_path, monkeypatch):
+    with new_session(tmp_path) as session:
+        for index in range(3):
+            session.record_tap(pose(index))
+        failing = FailingWrites(monkeypatch, session._handle, times=3)
+        with pytest.raises(SessionError, match="This undo was not saved"):
+            session.undo()
+        with pytest.raises(SessionError, match="This dropped tap was not saved"):
+            session.drop(2)
+        with pytest.raises(SessionError, match="This end of the session was not saved"):
+            session.close(report="r.yaml")
+        assert failing.times == 0 and not session.closed
+        assert [tap.id for tap in session.taps] == [1, 2, 3]
+        assert session.undo().id == 3
+    with SamplingSession.open(session.path) as resumed:
+        assert [tap.id for tap in resumed.taps] == [1, 2]
+
+
+def test_a_failed_fsync_is_not_acknowledged_and_is_cut_off(tmp_path, monkeypatch):
+    with new_session(tmp_path) as session:
+        session.record_tap(pose(0))
+        saved = session.path.read_bytes()
+        real_fsync, handle = os.fsync, session._handle
+        failures = iter([OSError(errno.EIO, "Input/output error")])
+
+        def fsync(fd):
+            if fd == handle and (error := next(failures, None)) is not None:
+                raise error
+            real_fsync(fd)
+
+        monkeypatch.setattr(os, "fsync", fsync)
+        with pytest.raises(SessionError, match="This tap was not saved"):
+            session.record_tap(pose(1))
+        assert session.path.read_bytes() == saved
+        assert session.record_tap(pose(1)).id == 2
+
+
+def test_when_the_partial_record_cannot_be_cut_off_the_session_stops_and_resume_sets_it_aside(tmp_path, monkeypatch):
+    session = new_session(tmp_path)
+    for index in range(3):
+        session.record_tap(pose(index))
+    FailingWrites(monkeypatch, session._handle)
+    monkeypatch.setattr(os, "ftruncate", lambda fd, size: (_ for _ in ()).throw(OSError(errno.EIO, "I/O error")))
+    with pytest.raises(SessionError, match="quit and resume the session"):
+        session.record_tap(pose(3))
+    with pytest.raises(SessionError, match="was released"):  # writing on would follow the partial record
+        session.record_tap(pose(3))
+    monkeypatch.undo()
+    with SamplingSession.open(session.path) as resumed:
+        (note,) = resumed.recovered
+        assert note.line_number == 5 and note.moved_to is not None and note.size_bytes == 40
+        assert [tap.id for tap in resumed.taps] == [1, 2, 3]
+        assert resumed.record_tap(pose(3)).id == 4
+    with SamplingSession.open(session.path) as again:
+        assert again.recovered == () and [tap.id for tap in again.taps] == [1, 2, 3, 4]
+
+
+def test_a_torn_record_before_complete_ones_is_skipped_and_everything_after_it_kept(tmp_path):
+    """What an older fixwizard left after a full disk: a partial record, then the next records right after it."""
+    path = recorded(tmp_path, 12)
+    lines = path.read_bytes().splitlines(keepends=True)
+    torn = lines[11][:57]  # the start of tap 11's record, as written before the disk filled up
+    path.write_bytes(b"".join(lines[:11] + [torn] + lines[11:]))
+    with SamplingSession.open(path) as resumed:
+        (note,) = resumed.recovered
+        assert (note.line_number, note.size_bytes, note.moved_to) == (12, 57, None)
+        assert "line 12" in str(note) and "never acknowledged" in str(note)
+        assert [tap.id for tap in resumed.taps] == list(range(1, 13))
+        assert resumed.record_tap(pose(12)).id == 13
+    assert find_unfinished(tmp_path) == [path]
+
+
+def test_torn_records_anywhere_never_hide_a_complete_record(tmp_path):
+    """Random journals with partial records (random lengths, zero bytes) before random complete lines."""
+    rng = np.random.default_rng(18)
+    for trial in range(40):
+        folder = tmp_path / f"t{trial}"
+        path = recorded(folder, int(rng.integers(1, 15)))
+        lines = path.read_bytes().splitlines(keepends=True)
+        with SamplingSession.open(path) as original:
+            expected = [tap.id for tap in original.taps]
+        out = [lines[0]]
+        for line in lines[1:]:
+            if rng.random() < 0.3:
+                piece = line[:int(rng.integers(1, len(line) - 1))]
+                out.append(piece if rng.random() < 0.7 else b"\0" * len(piece))
+            out.append(line)
+        if rng.random() < 0.5:
+            out.append(lines[-1][:int(rng.integers(1, len(lines[-1]) - 1))])  # a torn last line too
+        path.write_bytes(b"".join(out))
+        with SamplingSession.open(path) as resumed:
+            assert [tap.id for tap in resumed.taps] == expected
+        with SamplingSession.open(path) as again:  # the torn last line was set aside; the rest stays
+            assert [tap.id for tap in again.taps] == expected
+            assert all(note.moved_to is None for note in again.recovered)
+
+
+def test_a_session_that_cannot_start_for_a_full_disk_leaves_no_half_journal(tmp_path, monkeypatch):
+    real_open = os.open
+    opened = []
+
+    def recording_open(path, flags, *args):
+        handle = real_open(path, flags, *args)
+        if str(path).endswith(".jsonl"):
+            opened.append(handle)
+            FailingWrites(monkeypatch, handle)
+        return handle
+
+    monkeypatch.setattr(os, "open", recording_open)
+    with pytest.raises(SessionError, match="the disk is full.*The session was not saved"):
+        new_session(tmp_path)
+    assert opened and not (tmp_path / "a.jsonl").exists()
+
+
+def test_a_real_full_disk_strands_nothing(small_disk):
+    session = new_session(small_disk)
+    filler = fill_disk(small_disk)
+    acknowledged = []
+    with pytest.raises(SessionError, match="is full"):
+        for index in range(1000):
+            acknowledged.append(session.record_tap(pose(index)).id)
+    saved = session.path.read_bytes()
+    assert saved.endswith(b"\n") and len(saved.splitlines()) == len(acknowledged) + 1
+    filler.unlink()  # the operator frees space and taps on
+    acknowledged += [session.record_tap(pose(index)).id for index in range(3)]
+    session.release()
+    with SamplingSession.open(session.path) as resumed:
+        assert resumed.recovered == ()
+        assert [tap.id for tap in resumed.taps] == acknowledged == list(range(1, len(acknowledged) + 1))

@@ -12,12 +12,11 @@ from textual.widgets import Button, Input, Select, Static
 
 from pilot_wait import until
 from fixwizard.calibration.store import load_calibration, save_calibration
-from fixwizard.cli import main
 from fixwizard.demo import DEMO_MESH, demo_fixture
 from fixwizard.tui.app import FixwizardApp
 from fixwizard.tui.context import WizardContext
 from fixwizard.tui.errors import ErrorModal
-from fixwizard.tui.launch import session_to_resume, simulated_context, ur_context
+from fixwizard.tui.launch import simulated_context, ur_context
 from fixwizard.tui.sessions import start_session
 from fixwizard.tui.start import NEW, StartScreen
 from fixwizard.tui.status import StatusBar
@@ -103,7 +102,8 @@ def test_a_fixture_in_the_wrong_units_is_explained_and_switching_units_loads_it(
             await choose(pilot, "#fixture", str(tmp_path / "fixtures" / "bracket_in_metres.stl"))
             await until(pilot, lambda: "implausible" in text_of(app, "#fixture-info"))
             message = text_of(app, "#fixture-info")
-            assert "0.16 mm small fixture with units 'mm'" in message and "switch Units (m / mm)" in message
+            assert "0.16 mm small fixture with units 'mm'" in message and "Switch Units to m" in message
+            assert "--mesh-units" not in message  # the wizard has no command-line flags to offer
             assert app.context.fixture is None
             await press_button(pilot, "#continue")
             assert isinstance(app.screen, StartScreen)
@@ -320,19 +320,13 @@ def test_resume_opens_the_session_with_its_fixture_and_calibration(tmp_path):
 
     async def run():
         resumed = wizard(tmp_path)
-        app = FixwizardApp(resumed, session_to_resume(resumed, ""))
+        app = FixwizardApp(resumed, "")
         async with app.run_test(size=SIZE) as pilot:
             await until(pilot, lambda: type(app.screen).__name__ == "SamplingScreen" and app.screen.query(StatusBar))
             assert resumed.session.path == path and len(resumed.session.taps) == 1
             assert resumed.fixture.path == DEMO_MESH and resumed.fixture.units == "mm"
             assert resumed.calibration.name == "example_matlab_logo"
     asyncio.run(run())
-
-
-def test_resume_without_an_unfinished_session_says_so(tmp_path, monkeypatch, capsys):
-    monkeypatch.chdir(tmp_path)
-    assert main(["--resume"]) == 1
-    assert "there is no unfinished session in sessions: start fixwizard without --resume" in capsys.readouterr().err
 
 
 def test_an_unreachable_ur_arm_is_explained_and_nothing_says_simulated(tmp_path):

@@ -115,7 +115,8 @@ async def test_the_report_path_can_be_edited_and_a_bad_one_is_explained(tapped, 
         path_input.value = ""
         await pilot.press(*str(blocked / "report.yaml"), "enter")
         assert results.query_one("#written").has_class("-problem")
-        assert text_of(results, "#written").startswith("The report was not written: cannot read or write")
+        assert text_of(results, "#written").startswith(
+            f"The report was not written: {blocked} is a file, not a folder: choose another report path")
         await pilot.press("q")
         assert "not written yet" in text_of(results, "#written") and app.results == []
         await pilot.press("e")

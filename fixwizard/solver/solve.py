@@ -112,7 +112,8 @@ def validate_inputs(base_p_taps: np.ndarray, ball_diameter_m: float, sample_boun
     if base_p_taps.ndim != 2 or base_p_taps.shape[1] != 3:
         raise InputError("taps must be a list of [x, y, z] points in metres")
     if len(base_p_taps) < MIN_TAPS:
-        raise InputError(f"{len(base_p_taps)} taps are not enough: at least {MIN_TAPS} are needed to fix a pose, "
+        count = f"{len(base_p_taps)} tap is" if len(base_p_taps) == 1 else f"{len(base_p_taps)} taps are"
+        raise InputError(f"{count} not enough: at least {MIN_TAPS} are needed to fix a pose, "
                          "and 10-20 taps spread over several faces give tight bounds")
     bad = np.flatnonzero(~np.all(np.isfinite(base_p_taps), axis=1))
     if len(bad):

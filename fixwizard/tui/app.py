@@ -5,7 +5,6 @@ thread and every ``FixwizardError`` shown as a readable message with the next st
 import asyncio
 import threading
 from collections.abc import Callable
-from pathlib import Path
 from typing import TypeVar
 
 from textual.app import App
@@ -18,10 +17,11 @@ from fixwizard.errors import FixwizardError
 from fixwizard.robot.base import RobotStatus
 from fixwizard.tui.background import ShownError, run_in_thread
 from fixwizard.tui.context import WizardContext
-from fixwizard.tui.errors import ErrorModal, Recovery
+from fixwizard.tui.errors import ErrorModal, Recovery, ResumeRefused
+from fixwizard.tui.launch import session_to_resume
 from fixwizard.tui.results import ResultsScreen
 from fixwizard.tui.sampling import SamplingScreen
-from fixwizard.tui.sessions import resume_session, start_session
+from fixwizard.tui.sessions import resume_refusal, resume_session, start_session
 from fixwizard.tui.solve_screen import SolveScreen
 from fixwizard.tui.start import StartScreen
 from fixwizard.tui.status import STOP_KEYS, StatusBar
@@ -29,10 +29,12 @@ from fixwizard.tui.tip_calibration import calibrate_tip_on_screens
 
 T = TypeVar("T")
 STATUS_INTERVAL_S = 0.5
+RESUMED_NOTICE_S = 12.0  # how long "Session resumed: ..." stays up
 
 
 class FixwizardApp(App[None]):
-    """The wizard on the context's robot; ``resume`` opens that session straight into sampling."""
+    """The wizard on the context's robot; ``resume`` (a session's path, or "" for the newest unfinished one)
+    opens that session straight into sampling, or says on the start screen why it cannot."""
 
     TITLE = "fixwizard"
     ENABLE_COMMAND_PALETTE = False
@@ -41,7 +43,7 @@ class FixwizardApp(App[None]):
 
     robot_status: var[RobotStatus | None] = var(None)
 
-    def __init__(self, context: WizardContext, resume: Path | None = None) -> None:
+    def __init__(self, context: WizardContext, resume: str | None = None) -> None:
         super().__init__()
         self.context = context
         self.resume = resume
@@ -129,14 +131,29 @@ class FixwizardApp(App[None]):
     def _run_flow(self) -> None:
         self.run_worker(self._flow(), group="flow", exclusive=True)
 
+    def notify_resumed(self, opened: str) -> None:
+        """Say which session was resumed (and any record of it that was never finished)."""
+        self.notify(opened, title="Session resumed", timeout=RESUMED_NOTICE_S, markup=False,
+                    severity="warning" if self.context.session and self.context.session.recovered else "information")
+
+    async def _resume(self, requested: str) -> ResumeRefused | None:
+        """Resume the session ``--resume`` asked for; the refusal to show on the start screen when it cannot."""
+        context = self.context
+        try:
+            opened = await asyncio.to_thread(lambda: resume_session(context, session_to_resume(context, requested)))
+        except (FixwizardError, OSError) as error:
+            return resume_refusal(requested, error)
+        self.notify_resumed(opened)
+        return None
+
     async def _flow(self) -> None:
         context = self.context
-        if self.resume is not None:
-            await self._in_thread(lambda: resume_session(context, self.resume))
-            if context.session is not None:
-                await self._sample_until_done()
+        refusal = await self._resume(self.resume) if self.resume is not None else None
+        if context.session is not None:
+            await self._sample_until_done()
         while True:
-            await self.push_screen_wait(StartScreen(context))
+            await self.push_screen_wait(StartScreen(context, refusal))
+            refusal = None
             if context.session is None:
                 if context.calibration is None:
                     calibrated = await calibrate_tip_on_screens(self, context)

@@ -7,15 +7,21 @@ from typing import Literal
 from textual.binding import Binding
 from textual.widgets import Button
 
-from fixwizard.errors import FixwizardError, InputError
+from fixwizard.errors import FixwizardError, InputError, file_problem
 from fixwizard.robot.base import ConnectionLost, ProtectiveStop, RobotError
 from fixwizard.tui.dialog import Dialog
 
 Recovery = Literal["ok", "reconnect", "unlock"]
 
 
+class ResumeRefused(InputError):
+    """A session that could not be resumed: which one, why, and what to do next."""
+
+
 def error_title(error: Exception) -> str:
     """A short heading naming what kind of problem it is."""
+    if isinstance(error, ResumeRefused):
+        return "Cannot resume the session"
     if isinstance(error, RobotError):
         return "Robot problem"
     if isinstance(error, (InputError, OSError)):
@@ -23,13 +29,14 @@ def error_title(error: Exception) -> str:
     return "Problem"
 
 
+def error_text(error: FixwizardError | OSError) -> str:
+    """The error's own text (it says what to do next), or a readable clause for a file system error."""
+    return file_problem(error) if isinstance(error, OSError) else str(error)
+
+
 def error_message(error: FixwizardError | OSError) -> str:
-    """The error's own text (it says what to do next), or a readable line for a file system error."""
-    if isinstance(error, OSError):
-        where = f" {error.filename}" if error.filename else ""
-        return (f"cannot read or write{where}: {error.strerror or error}; check the path and that the folder "
-                "is writable, then retry")
-    text = str(error)
+    """``error_text`` as a sentence."""
+    text = error_text(error)
     return text[:1].upper() + text[1:]
 
 

@@ -41,11 +41,9 @@ def use_ur_arm(context: WizardContext, host: str) -> None:
     context.simulated, context.hands = False, None
 
 
-def session_to_resume(context: WizardContext, requested: str | None) -> Path | None:
-    """The session ``--resume`` asks for: none, the newest unfinished one (empty string) or the given path."""
-    if requested is None:
-        return None
-    return newest_unfinished(context.sessions_dir) if requested == "" else Path(requested)
+def session_to_resume(context: WizardContext, requested: str) -> Path:
+    """The session ``--resume`` asks for: the newest unfinished one (empty string) or the given path."""
+    return newest_unfinished(context.sessions_dir) if requested == "" else Path(requested).expanduser()
 
 
 def _simulated_cell(seed: int, pace_s: float) -> tuple[SimulatedCell, str, SimulatedHands]:

@@ -18,7 +18,14 @@ from fixwizard.plots import rotation_map_for_solution, taps_view_for_solution
 from fixwizard.tui.context import WizardContext
 from fixwizard.tui.errors import error_message
 from fixwizard.tui.picture_view import PictureView
-from fixwizard.tui.results_text import headline, modes_lines, search_line, summary_lines, suspect_lines, warning_lines
+from fixwizard.tui.results_text import (
+    headline,
+    modes_lines,
+    search_line,
+    summary_lines,
+    suspect_lines,
+    warning_lines,
+)
 from fixwizard.workflow.advice import distinguishing_tap
 from fixwizard.workflow.wizard_report import default_report_path, write_session_report
 

@@ -39,9 +39,19 @@ from fixwizard.tui.sampling_text import (
     robot_problem_text,
 )
 from fixwizard.workflow.advice import TapAdvice
-from fixwizard.workflow.hover import HoverPlan, hover_path, next_tap_and_plan, plan_hover
+from fixwizard.workflow.hover import (
+    HoverPlan,
+    hover_path,
+    next_tap_and_plan,
+    plan_hover,
+)
 from fixwizard.workflow.identify import identify
-from fixwizard.workflow.live import LiveCheck, quick_check, refine_check, tap_surface_distances_m
+from fixwizard.workflow.live import (
+    LiveCheck,
+    quick_check,
+    refine_check,
+    tap_surface_distances_m,
+)
 from fixwizard.workflow.session import Tap
 
 SIMULATED_ACTIONS = {"simulated_move", "simulated_unlock"}

@@ -5,10 +5,18 @@ mesh loading): call from a worker thread."""
 from datetime import datetime
 from pathlib import Path
 
+from fixwizard.calibration.errors import CalibrationFileError
 from fixwizard.calibration.store import load_calibration
+from fixwizard.errors import FixwizardError
 from fixwizard.fixture import load_fixture
 from fixwizard.tui.context import WizardContext
-from fixwizard.workflow.session import SUFFIX, SamplingSession, SessionError, find_unfinished
+from fixwizard.tui.errors import ResumeRefused, error_text
+from fixwizard.workflow.session import (
+    SUFFIX,
+    SamplingSession,
+    SessionError,
+    find_unfinished,
+)
 
 
 def start_session(context: WizardContext) -> SamplingSession:
@@ -25,9 +33,9 @@ def start_session(context: WizardContext) -> SamplingSession:
     return SamplingSession.create(path, fixture_info, tip_info, robot=context.robot_name)
 
 
-def resume_session(context: WizardContext, path: Path) -> None:
-    """Open the session at ``path`` and set the context's session, fixture and tip calibration from it.
-    Refused when it was recorded on another robot or its mesh changed since."""
+def resume_session(context: WizardContext, path: Path) -> str:
+    """Open the session at ``path`` and set the context's session, fixture and tip calibration from it; returns
+    what was opened, in words. Refused when it was recorded on another robot or its mesh changed since."""
     session = SamplingSession.open(path)
     try:
         header = session.header
@@ -40,7 +48,11 @@ def resume_session(context: WizardContext, path: Path) -> None:
             raise SessionError(f"the mesh {fixture.path} changed since the session {path.name} started: put the "
                                "original mesh back, or start a new session")
         calibration_path = Path(tip_info["calibration"])
-        calibration = load_calibration(calibration_path)
+        try:
+            calibration = load_calibration(calibration_path)
+        except CalibrationFileError as error:
+            raise SessionError(f"{error}. The session was recorded with that tip calibration: put it back, or "
+                               "start a new session") from error
     except KeyError as missing:
         session.release()
         raise SessionError(f"the session {path.name} was not started by the wizard (its header has no {missing}): "
@@ -50,6 +62,24 @@ def resume_session(context: WizardContext, path: Path) -> None:
         raise
     context.session, context.fixture = session, fixture
     context.calibration, context.calibration_path = calibration, calibration_path
+    return resumed_text(session, fixture.path, calibration_path)
+
+
+def resumed_text(session: SamplingSession, mesh: Path, calibration_path: Path) -> str:
+    """Which session was opened, with how many taps, its fixture and tip calibration, and any record that was
+    never finished (skipped)."""
+    count = len(session.taps)
+    lines = [f"Resumed the session {session.path}: {count} tap{'' if count == 1 else 's'} recorded, fixture "
+             f"{mesh.name}, tip calibration {calibration_path.name}."]
+    lines += [f"Note: {note}." for note in session.recovered]
+    return "\n".join(lines)
+
+
+def resume_refusal(requested: str | Path, error: FixwizardError | OSError) -> ResumeRefused:
+    """The refusal of a resume as the operator reads it: which session, why, and what to do next."""
+    what = "the newest unfinished session" if requested == "" else Path(requested).name
+    return ResumeRefused(f"could not resume {what}: {error_text(error)}\nOn the start screen, resume another "
+                         "session or start a new one.")
 
 
 def newest_unfinished(sessions_dir: Path) -> Path:

@@ -11,7 +11,7 @@ from textual.screen import Screen
 from textual.widgets import Button, Input, Select, Static
 
 from fixwizard.demo import DEMO_MESH
-from fixwizard.errors import MeshError
+from fixwizard.errors import FixwizardError, MeshError, MeshUnitsError
 from fixwizard.fixture import Fixture, load_fixture
 from fixwizard.tui.background import ShownError, run_in_thread
 from fixwizard.tui.choices import (
@@ -23,15 +23,17 @@ from fixwizard.tui.choices import (
     session_choices,
 )
 from fixwizard.tui.context import WizardContext
+from fixwizard.tui.errors import ResumeRefused, error_message
 from fixwizard.tui.launch import use_simulated_cell, use_ur_arm
-from fixwizard.tui.sessions import resume_session
+from fixwizard.tui.sessions import resume_refusal, resume_session
 
 NEW = "new"
 UNITS = [("mm", "mm"), ("m", "m")]
 
 
 class StartScreen(Screen[bool]):
-    """Choose robot, fixture, tip calibration, or an unfinished session to resume."""
+    """Choose robot, fixture, tip calibration, or an unfinished session to resume. ``refusal`` is why a
+    requested resume (``--resume``) failed: shown in a message and kept at the top of the screen."""
 
     DEFAULT_CSS = """
     StartScreen VerticalScroll { padding: 0 1; }
@@ -40,6 +42,7 @@ class StartScreen(Screen[bool]):
     StartScreen .label { width: 12; text-style: bold; }
     StartScreen .detail { margin-left: 12; color: $text-muted; }
     StartScreen .problem { margin-left: 12; text-style: bold; color: $text-error; }
+    StartScreen .refusal { text-style: bold; color: $text-error; margin-bottom: 1; }
     StartScreen #fixture { width: 38; }
     StartScreen #units-label { width: 8; padding-left: 2; }
     StartScreen #units { width: 10; }
@@ -51,9 +54,10 @@ class StartScreen(Screen[bool]):
     StartScreen .-hidden { display: none; }
     """
 
-    def __init__(self, context: WizardContext) -> None:
+    def __init__(self, context: WizardContext, refusal: ResumeRefused | None = None) -> None:
         super().__init__()
         self.context = context
+        self.refusal = refusal
         self._fixtures = fixture_choices(context.fixtures_dir)
         self._calibrations = {str(choice.path): choice for choice in calibration_choices(context.calibrations_dir)}
         self._sessions = session_choices(context.sessions_dir)
@@ -65,6 +69,8 @@ class StartScreen(Screen[bool]):
         with VerticalScroll():
             yield Static("Start: choose the fixture and the tip calibration. Tab moves between fields, Enter "
                          "opens a list or presses a button.", classes="title")
+            if self.refusal is not None:
+                yield Static(error_message(self.refusal), id="resume-problem", classes="refusal", markup=False)
             with Horizontal(classes="row"):
                 yield Static("Robot", classes="label")
                 yield Static(f"{self.context.robot_name}{robot_note}", id="robot", markup=False)
@@ -101,6 +107,8 @@ class StartScreen(Screen[bool]):
         self.query_one("#fixture", Select).focus()
         self._show_calibration()
         self._load_fixture()
+        if self.refusal is not None:
+            self.app.show_error(self.refusal)
 
     def _preselected_calibration(self) -> str:
         """The newest calibration made on this robot (choices are newest first), else a new calibration."""
@@ -175,8 +183,10 @@ class StartScreen(Screen[bool]):
         if selected != self._selected_fixture():
             return
         self._requested = None
-        hint = "\nChoose another mesh, or switch Units (m / mm) when the size is implausible." \
-            if isinstance(error, MeshError) else ""
+        if isinstance(error, MeshUnitsError) and error.likely_units:
+            hint = f"\nSwitch Units to {error.likely_units}, or choose another mesh."
+        else:
+            hint = "\nChoose another mesh." if isinstance(error, MeshError) else ""
         self._show_fixture(f"{error}{hint}", problem=True)
 
     def _show_fixture(self, text: str, problem: bool) -> None:
@@ -226,11 +236,21 @@ class StartScreen(Screen[bool]):
         self.query_one("#use-simulated", Button).set_class(self.context.simulated, "-hidden")
         self.app.refresh_robot_status()
 
+    def _resume(self, path: Path) -> str:
+        """Resume the session chosen in the list (worker thread); what was opened, in words."""
+        try:
+            return resume_session(self.context, path)
+        except (FixwizardError, OSError) as error:
+            raise resume_refusal(path, error) from error
+
+    def _resumed(self, opened: str) -> None:
+        self.app.notify_resumed(opened)
+        self.dismiss(True)
+
     def _continue(self) -> None:
         session_value = str(self.query_one("#session", Select).value) if self._sessions else NEW
         if session_value != NEW:
-            run_in_thread(self, lambda: resume_session(self.context, Path(session_value)), lambda _: self.dismiss(True),
-                          group="session")
+            run_in_thread(self, lambda: self._resume(Path(session_value)), self._resumed, group="session")
             return
         if self.context.fixture is None or self._loaded != self._selected_fixture():
             self.notify("Choose a fixture that loads first (see the message under Fixture).", severity="warning")

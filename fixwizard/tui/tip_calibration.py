@@ -6,7 +6,10 @@ from textual.app import App
 from fixwizard.tui.context import WizardContext
 from fixwizard.tui.tip_calibration_auto import AutoTapsScreen
 from fixwizard.tui.tip_calibration_hands import PivotScreen, TablePointsScreen
-from fixwizard.tui.tip_calibration_result import DEFAULT_BALL_DIAMETER_M, CalibrationResultScreen
+from fixwizard.tui.tip_calibration_result import (
+    DEFAULT_BALL_DIAMETER_M,
+    CalibrationResultScreen,
+)
 from fixwizard.workflow.robot_calibration import RobotTipCalibration
 
 STEPS = (PivotScreen, TablePointsScreen, AutoTapsScreen, CalibrationResultScreen)

@@ -10,32 +10,43 @@ The journal is JSON Lines, appended to and never rewritten. Line 1 is the header
 - ``{"kind": "closed", "time", ...}`` once the session is finished.
 
 Every line carries ``"crc"``, the CRC32 (8 hex digits) of the line's canonical JSON without that key, so
-a damaged line is found even when it still parses. A line is written in one ``write``, then flushed and
-``fsync``-ed before the caller hears of it; a line without its newline was therefore never
-acknowledged. On resume such a torn last line (or a last line failing its checksum) is moved aside
-into ``<name>.torn-<time>`` (evidence kept) and the journal continues after the last complete record;
-damage anywhere else is an error naming the line. One writer at a time, enforced with a non-blocking ``flock``.
+a damaged line is found even when it still parses. A record is written whole (one ``write``, repeated
+only for the rest of a short write), then ``fsync``-ed before the caller hears of it. A write that fails
+(a full disk) is cut off again at once, so the next record never follows a partial one; the caller is told
+that the record was not saved.
+
+A record that never finished (a crash, or a failed write whose cut-off did not happen) is a *torn* record:
+the start of a line without its end. On resume a torn last line is moved aside into
+``<name>.torn-<time>`` (evidence kept) and the journal continues after the last complete record; a torn
+record followed on the same line by a complete one (journals of older versions appended after a failed
+write) is skipped and the records after it are kept. A complete line that fails its checksum is damage to
+an acknowledged record: an error naming the line, since fixwizard will not guess which taps it held.
+One writer at a time, enforced with a non-blocking ``flock``.
+
+Why JSON Lines and not SQLite: see the README ("Files: nothing clobbered, nothing stranded").
 """
 
+import errno
 import fcntl
 import json
 import os
 import zlib
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Self
 
 import numpy as np
 
 from fixwizard.calibration.taps import ball_centres_m
-from fixwizard.errors import InputError
+from fixwizard.errors import InputError, file_problem
 from fixwizard.geometry.se3 import from_ur_pose, to_ur_pose
 from fixwizard.points import write_points
 
 SCHEMA = "fixwizard.session/1"
 SESSIONS_DIR = Path("sessions")
 SUFFIX = ".jsonl"
+RECORD_NAMES = {"tap": "tap", "undo": "undo", "drop": "dropped tap", "closed": "end of the session"}
 
 
 class SessionError(InputError):
@@ -54,20 +65,35 @@ class Tap:
 
 
 @dataclass(frozen=True)
-class TornLine:
-    """The incomplete last line found on resume (1-based line number, size in bytes) and where it went."""
+class TornRecord:
+    """A record found incomplete on resume (1-based line, size in bytes): never acknowledged, so skipped.
+    ``moved_to`` is where a torn last line went (None for one left in place before a complete record)."""
 
     line_number: int
     size_bytes: int
-    moved_to: Path
+    moved_to: Path | None
 
     def __str__(self) -> str:
-        return (f"line {self.line_number} of the session journal was cut off by a crash ({self.size_bytes} bytes, "
-                f"never acknowledged); it was moved to {self.moved_to} and every complete tap before it is kept")
+        where = (f"it was moved to {self.moved_to}" if self.moved_to is not None
+                 else "it stays in the journal and is skipped")
+        return (f"line {self.line_number} of the session journal holds a record that was never finished (a crash "
+                f"or a full disk, {self.size_bytes} bytes, never acknowledged); {where}, and every saved record "
+                "is kept")
+
+
+@dataclass(frozen=True)
+class _Journal:
+    """A journal file read back: its header, complete records and torn records, each with its 1-based line
+    number; ``torn_tail`` is a torn last line (cut off on resume), if any."""
+
+    header: dict
+    records: list[tuple[int, dict]]
+    torn: list[tuple[int, bytes]]
+    torn_tail: tuple[int, bytes] | None
 
 
 def _now() -> str:
-    return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
+    return datetime.now(UTC).isoformat(timespec="milliseconds")
 
 
 def _plain(value):
@@ -100,6 +126,50 @@ def _decode(line: bytes) -> dict | None:
     return record if crc == f"{zlib.crc32(_canonical(record).encode()):08x}" else None
 
 
+def _after_torn(line: bytes) -> tuple[int, dict] | None:
+    """Where a complete record starts after a torn one on the same line (the rest of the line decodes) and
+    that record, or None. A torn record is the start of a line, so it holds no newline and never decodes."""
+    start = line.find(b"{", 1)
+    while start != -1:
+        record = _decode(line[start:])
+        if record is not None:
+            return start, record
+        start = line.find(b"{", start + 1)
+    return None
+
+
+def _header_of(lines: list[bytes]) -> dict | None:
+    """The session header on the first line (with its newline), or None for a file that is no journal."""
+    header = _decode(lines[0]) if lines and lines[0].endswith(b"\n") else None
+    return header if header is not None and header.get("schema") == SCHEMA else None
+
+
+def _read_journal(path: Path, data: bytes) -> _Journal:
+    """Split a journal into header, records and torn records; SessionError for a foreign or damaged file."""
+    lines = data.splitlines(keepends=True)
+    header = _header_of(lines)
+    if header is None:
+        raise SessionError(f"{path} is not a fixwizard session journal ({SCHEMA}); "
+                           "choose a session file from the sessions folder")
+    torn_tail = None
+    if len(lines) > 1 and (not lines[-1].endswith(b"\n")
+                           or (_decode(lines[-1]) is None and _after_torn(lines[-1]) is None)):
+        torn_tail = (len(lines), lines.pop())
+    records, torn = [], []
+    for number, line in enumerate(lines[1:], start=2):
+        record = _decode(line)
+        if record is None:
+            after_torn = _after_torn(line)
+            if after_torn is None:
+                raise SessionError(f"line {number} of the session {path} is damaged (checksum or JSON); "
+                                   "fixwizard will not guess which taps it held. Keep the file and "
+                                   "start a new session, or repair that line by hand")
+            start, record = after_torn
+            torn.append((number, line[:start]))
+        records.append((number, record))
+    return _Journal(header, records, torn, torn_tail)
+
+
 def _fsync_dir(directory: Path) -> None:
     handle = os.open(directory, os.O_RDONLY)
     try:
@@ -117,30 +187,35 @@ def _lock(handle: int, path: Path) -> None:
                            "(or wait for it to finish) and resume again") from None
 
 
-def _header_ok(line: bytes) -> bool:
-    """Whether a line (with its newline) is a complete session header."""
-    record = _decode(line)
-    return line.endswith(b"\n") and record is not None and record.get("schema") == SCHEMA
-
-
 def _tap_from(record: dict) -> Tap:
     return Tap(int(record["id"]), str(record["time"]), from_ur_pose(np.asarray(record["base_T_tcp_ur"], float)),
                np.asarray(record["base_p_ball_m"], float).reshape(3), record.get("force"))
 
 
+def _write_all(handle: int, line: bytes) -> None:
+    """Write every byte of ``line`` (a short write is continued; a write that writes nothing is a full disk)."""
+    view = memoryview(line)
+    while view:
+        written = os.write(handle, view)
+        if written == 0:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        view = view[written:]
+
+
 class SamplingSession:
     """An open, locked session journal and the active taps it replays to. Use ``create`` or ``open``."""
 
-    def __init__(self, path: Path, handle: int, header: dict, records: list[dict],
-                 recovery_note: TornLine | None = None) -> None:
+    def __init__(self, path: Path, handle: int, header: dict, records: list[tuple[int, dict]],
+                 recovered: tuple[TornRecord, ...] = ()) -> None:
         self.path = path
         self.header = header
-        self.recovery_note = recovery_note
+        self.recovered = recovered
         self._handle: int | None = handle
+        self._end = os.fstat(handle).st_size  # the journal's length up to its last saved record
         self._taps: dict[int, Tap] = {}
         self._next_id = 1
         self.closed = False
-        for number, record in enumerate(records, start=2):
+        for number, record in records:
             self._apply(record, number)
 
     @classmethod
@@ -153,46 +228,48 @@ class SamplingSession:
                                "calibrate the tip first")
         header = {"schema": SCHEMA, "created": _now(), "fixture": fixture_info, "tip": tip_info, "robot": robot}
         line = _encode(header)
-        path.parent.mkdir(parents=True, exist_ok=True)
         try:
+            path.parent.mkdir(parents=True, exist_ok=True)
             handle = os.open(path, os.O_RDWR | os.O_APPEND | os.O_CREAT | os.O_EXCL, 0o666)
         except FileExistsError:
             raise SessionError(f"a session {path} exists already; resume it or choose another name") from None
+        except OSError as error:
+            raise SessionError(f"cannot start the session {path}: {file_problem(error)}") from error
         _lock(handle, path)
         session = cls(path, handle, _decode(line), [])
-        session._append(line)
-        _fsync_dir(path.parent)
+        try:
+            session._append(line, "the session")
+            _fsync_dir(path.parent)
+        except BaseException:
+            session.release()
+            path.unlink(missing_ok=True)
+            raise
         return session
 
     @classmethod
     def open(cls, path: str | Path) -> Self:
-        """Resume a journal: replay it, moving a torn last line aside (see ``recovery_note``)."""
+        """Resume a journal: replay it, skipping torn records and moving a torn last line aside (see
+        ``recovered``)."""
         path = Path(path)
+        if path.is_dir():
+            raise SessionError(f"{path} is a folder, not a session journal; give a .jsonl file in it")
         try:
             handle = os.open(path, os.O_RDWR | os.O_APPEND)
         except OSError as error:
-            raise SessionError(f"cannot open the session {path}: {error.strerror}") from error
+            raise SessionError(f"cannot open the session: {file_problem(error)}") from error
         _lock(handle, path)
         try:
             data = path.read_bytes()
-            lines = data.splitlines(keepends=True)
-            if not lines or not _header_ok(lines[0]):
-                raise SessionError(f"{path} is not a fixwizard session journal ({SCHEMA}); "
-                                   "choose a session file from the sessions folder")
-            torn_line = len(lines) > 1 and (not lines[-1].endswith(b"\n") or _decode(lines[-1]) is None)
-            torn_bytes = lines.pop() if torn_line else b""
-            records = []
-            for number, line in enumerate(lines[1:], start=2):
-                record = _decode(line)
-                if record is None:
-                    raise SessionError(f"line {number} of the session {path} is damaged (checksum or JSON); "
-                                       "fixwizard will not guess which taps it held. Keep the file and "
-                                       "start a new session, or repair that line by hand")
-                records.append(record)
-            torn = None
-            if torn_line:
-                torn = _move_aside(path, handle, len(lines) + 1, len(data) - len(torn_bytes), torn_bytes)
-            return cls(path, handle, _decode(lines[0]), records, torn)
+            journal = _read_journal(path, data)
+            recovered = [TornRecord(number, len(piece), None) for number, piece in journal.torn]
+            if journal.torn_tail is not None:
+                number, piece = journal.torn_tail
+                try:
+                    recovered.append(_move_aside(path, handle, number, len(data) - len(piece), piece))
+                except OSError as error:
+                    raise SessionError(f"cannot set aside the unfinished last record of the session {path}: "
+                                       f"{file_problem(error)}; then resume again") from error
+            return cls(path, handle, journal.header, journal.records, tuple(recovered))
         except BaseException:
             os.close(handle)
             raise
@@ -262,15 +339,29 @@ class SamplingSession:
         if self._handle is None:
             raise SessionError(f"the session {self.path} was released; resume it to record more taps")
         line = _encode(record)
-        self._append(line)
+        self._append(line, f"this {RECORD_NAMES[record['kind']]}")
         return self._apply(_decode(line), None)
 
-    def _append(self, line: bytes) -> None:
-        written = os.write(self._handle, line)
-        if written != len(line):
-            raise SessionError(f"could not write the whole record to {self.path} (disk full?); "
-                               "free space and resume the session")
-        os.fsync(self._handle)
+    def _append(self, line: bytes, what: str) -> None:
+        """Write and fsync one record; on failure cut the journal back to its last saved record, so that the
+        next record never follows a partial one, and raise SessionError saying ``what`` was not saved."""
+        assert self._handle is not None
+        try:
+            _write_all(self._handle, line)
+            os.fsync(self._handle)
+        except OSError as error:
+            problem = SessionError(f"could not save to the session {self.path}: {file_problem(error)}. "
+                                   f"{what[:1].upper()}{what[1:]} was not saved; everything saved before is kept, "
+                                   "so try again once that is fixed")
+            try:
+                os.ftruncate(self._handle, self._end)
+                os.fsync(self._handle)
+            except OSError:
+                self.release()  # resume cuts the partial record off; writing on could follow it
+                problem = SessionError(f"{problem} (quit and resume the session: the partial record could not "
+                                       "be removed now)")
+            raise problem from error
+        self._end += len(line)
 
     def _apply(self, record: dict, number: int | None) -> Tap | None:
         """Replay one record; ``number`` is its journal line when replaying from the file."""
@@ -293,9 +384,9 @@ class SamplingSession:
         return None
 
 
-def _move_aside(path: Path, handle: int, line_number: int, offset: int, torn: bytes) -> TornLine:
+def _move_aside(path: Path, handle: int, line_number: int, offset: int, torn: bytes) -> TornRecord:
     """Save the torn last line next to the journal, durably, then cut it off the journal."""
-    stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%S%fZ")
+    stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%S%fZ")
     target = path.with_name(f"{path.name}.torn-{stamp}")
     with open(target, "xb") as stream:
         stream.write(torn)
@@ -304,18 +395,27 @@ def _move_aside(path: Path, handle: int, line_number: int, offset: int, torn: by
     _fsync_dir(path.parent)
     os.ftruncate(handle, offset)
     os.fsync(handle)
-    return TornLine(line_number, len(torn), target)
+    return TornRecord(line_number, len(torn), target)
 
 
 def find_unfinished(folder: str | Path = SESSIONS_DIR) -> list[Path]:
-    """Session journals (``*.jsonl``) in ``folder`` without a closed record, oldest name first."""
+    """Session journals (``*.jsonl``) in ``folder`` without a closed record, oldest name first (a damaged one
+    too: resuming it says what is wrong)."""
     unfinished = []
     for path in sorted(Path(folder).glob(f"*{SUFFIX}")):
         try:
             lines = path.read_bytes().splitlines(keepends=True)
         except OSError:
             continue
-        if lines and _header_ok(lines[0]) and not any(
-                (_decode(line) or {}).get("kind") == "closed" for line in lines[1:]):
+        if _header_of(lines) is not None and not any(_kind(line) == "closed" for line in lines[1:]):
             unfinished.append(path)
     return unfinished
+
+
+def _kind(line: bytes) -> str | None:
+    """The kind of the record a line holds (after a torn one, if need be), or None."""
+    record = _decode(line)
+    if record is None:
+        after_torn = _after_torn(line)
+        record = after_torn[1] if after_torn is not None else {}
+    return record.get("kind")

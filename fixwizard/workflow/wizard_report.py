@@ -5,6 +5,7 @@ import datetime as dt
 from pathlib import Path
 
 from fixwizard import report
+from fixwizard.atomic import check_output
 from fixwizard.calibration.store import TipCalibration
 from fixwizard.fixture import Fixture
 from fixwizard.solver.solve import Solution
@@ -32,5 +33,9 @@ def session_report(solution: Solution, fixture: Fixture, session: SamplingSessio
 
 def write_session_report(path: str | Path, solution: Solution, fixture: Fixture, session: SamplingSession,
                          calibration: TipCalibration, simulated: bool) -> Path:
-    """Write the report atomically and return its absolute path (OSError when the folder is not writable)."""
+    """Write the report atomically and return its absolute path; InputError for a path that is one of the
+    inputs (mesh, journal, tip calibration), a folder or a device, OSError when the disk refuses it."""
+    check_output(path, [("fixture mesh", fixture.path), ("session journal", session.path),
+                        ("tip calibration", session.header.get("tip", {}).get("calibration"))],
+                 "choose another report path")
     return report.write(Path(path), session_report(solution, fixture, session, calibration, simulated)).resolve()

@@ -1,0 +1,117 @@
+"""The POINTS file as spreadsheets and editors write it: byte-order marks, headers, typos in any row, and
+YAML built to blow up. Every tap counts or the file is refused naming the row; messages stay short."""
+
+import time
+
+import numpy as np
+import pytest
+
+from fixwizard.errors import QUOTE_LIMIT, InputError
+from fixwizard.points import load_points
+from fixwizard.report import load as load_report
+
+TAPS = np.random.default_rng(18).uniform(-0.5, 0.5, (20, 3))
+MESSAGE_LIMIT = 600  # characters: the path, a quoted value of at most QUOTE_LIMIT and the words around it
+
+
+def csv_text(rows: list[str]) -> str:
+    return "\r\n".join(rows) + "\r\n"
+
+
+def tap_rows(taps: np.ndarray = TAPS) -> list[str]:
+    return [",".join(f"{value:.6f}" for value in tap) for tap in taps]
+
+
+@pytest.mark.parametrize("header", [[], ["x,y,z"], ["X (m); Y (m)", ], ["ball x,ball y,ball z"]])
+def test_excel_csv_utf8_with_a_byte_order_mark_keeps_every_tap(tmp_path, header):
+    path = tmp_path / "taps.csv"
+    path.write_bytes(b"\xef\xbb\xbf" + csv_text(header + tap_rows()).encode())
+    np.testing.assert_allclose(load_points(path), TAPS, atol=1e-6)
+
+
+@pytest.mark.parametrize("row", [1, 10, 20])
+@pytest.mark.parametrize("typo", ["0.1,0.2,0.3x", "0.1,,0.3", "0.1 0.2 0.3", "O.1,0.2,0.3", "-,0.2,0.3"])
+def test_a_typo_in_any_row_is_refused_naming_its_line(tmp_path, row, typo):
+    rows = tap_rows()
+    rows[row - 1] = typo
+    path = tmp_path / "taps.csv"
+    path.write_text(csv_text(["x,y,z", *rows]))
+    with pytest.raises(InputError, match=f"tap {row} \\(line {row + 1} of {path}\\)") as caught:
+        load_points(path)
+    assert "numbers" in str(caught.value)
+    path.write_text(csv_text(rows))  # no header: the first row is a tap like any other
+    with pytest.raises(InputError, match=f"tap {row} \\(line {row} of {path}\\)"):
+        load_points(path)
+
+
+def test_a_first_row_with_any_number_is_a_tap_not_a_header(tmp_path):
+    path = tmp_path / "taps.csv"
+    path.write_text(csv_text(["x,y,0.3", *tap_rows()]))
+    with pytest.raises(InputError, match="tap 1 \\(line 1 of .*\\) is not three numbers: \\['x', 'y', '0.3'\\]"):
+        load_points(path)
+
+
+def test_blank_lines_do_not_shift_the_line_named(tmp_path):
+    path = tmp_path / "taps.csv"
+    path.write_text("x,y,z\n\n0.1,0.2,0.3\n\n0.1,0.2\n")
+    with pytest.raises(InputError, match="tap 2 \\(line 5 of .*\\) has 2 numbers"):
+        load_points(path)
+
+
+BOMB = "\n".join(["a: &a [1, 2, 3, 4, 5, 6, 7, 8, 9]"] + [
+    f"{chr(98 + level)}: &{chr(98 + level)} [{', '.join(['*' + chr(97 + level)] * 9)}]" for level in range(8)])
+
+
+@pytest.mark.parametrize("tail", ["points_m: [*i, *i]", "frame: *i\npoints_m: []", "points_m: *i"])
+def test_an_alias_expanding_yaml_gives_a_short_message_quickly(tmp_path, tail):
+    path = tmp_path / "taps.yaml"
+    path.write_text(f"{BOMB}\n{tail}\n")
+    started = time.perf_counter()
+    with pytest.raises(InputError) as caught:
+        load_points(path)
+    assert time.perf_counter() - started < 2.0
+    assert len(str(caught.value)) < MESSAGE_LIMIT
+
+
+def test_a_foreign_report_with_an_alias_bomb_as_schema_gives_a_short_message(tmp_path):
+    path = tmp_path / "report.yaml"
+    path.write_text(f"{BOMB}\nschema: *i\n")
+    with pytest.raises(InputError, match="not a fixwizard report") as caught:
+        load_report(path)
+    assert len(str(caught.value)) < MESSAGE_LIMIT
+
+
+def test_a_huge_row_is_quoted_in_part(tmp_path):
+    path = tmp_path / "taps.csv"
+    path.write_text(csv_text(["1," + "9" * 100_000 + "x,3", *tap_rows()]))
+    with pytest.raises(InputError) as caught:
+        load_points(path)
+    assert len(str(caught.value)) < MESSAGE_LIMIT and str(caught.value).count("9") <= QUOTE_LIMIT
+
+
+def test_random_garbage_is_a_short_message_or_taps(tmp_path):
+    rng = np.random.default_rng(7)
+    alphabet = list("0123456789.,-e \n\t;:[]{}&*!#'\"xyzm") + ["\ufeff", "nan", "inf", "points_m:", "frame: base"]
+    for trial in range(300):
+        text = "".join(rng.choice(alphabet, size=int(rng.integers(0, 200))))
+        for suffix in (".csv", ".yaml"):
+            path = tmp_path / f"t{trial}{suffix}"
+            path.write_text(text)
+            try:
+                taps = load_points(path)
+            except InputError as error:
+                assert len(str(error)) < MESSAGE_LIMIT
+            else:
+                assert taps.ndim == 2 and taps.shape[1] == 3 and np.all(np.isfinite(taps))
+
+
+def test_a_folder_as_points_file_is_called_a_folder(tmp_path):
+    with pytest.raises(InputError, match="is a folder, not a points file"):
+        load_points(tmp_path)
+
+
+def test_semicolons_between_numbers_are_named(tmp_path):
+    path = tmp_path / "taps.csv"
+    path.write_text(csv_text([row.replace(",", ";") for row in tap_rows()]))
+    with pytest.raises(InputError, match="tap 1 \\(line 1 of .*\\) separates the numbers with ';'"):
+        load_points(path)

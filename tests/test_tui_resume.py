@@ -1,0 +1,169 @@
+"""Resuming a session in the real wizard (Pilot, simulated demo cell): a resume that works says which session
+it opened; every refusal is explained on screen and leaves the operator on the start screen."""
+
+import asyncio
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pilot_wait import until
+from textual.widgets import Static
+
+from fixwizard.calibration.store import load_calibration
+from fixwizard.demo import demo_fixture
+from fixwizard.tui.app import FixwizardApp
+from fixwizard.tui.errors import ErrorModal
+from fixwizard.tui.launch import simulated_context
+from fixwizard.tui.sessions import start_session
+from fixwizard.tui.start import NEW, StartScreen
+from fixwizard.workflow.session import SamplingSession
+
+SIZE = (80, 24)
+REPO = Path(__file__).resolve().parents[1]
+
+
+def recorded_session(folder: Path, taps: int = 3) -> Path:
+    """A released session with ``taps`` taps on the demo bracket, with the stored example calibration."""
+    context = simulated_context(3, pace_s=0.0, folder=folder)
+    shutil.copytree(REPO / "calibrations", folder / "calibrations", dirs_exist_ok=True)
+    context.fixture = demo_fixture()
+    context.calibration_path = folder / "calibrations" / "example_matlab_logo.yaml"
+    context.calibration = load_calibration(context.calibration_path)
+    session = start_session(context)
+    for index in range(taps):
+        session.record_tap(np.diag([1.0, 1.0, 1.0, 1.0]) + np.eye(4, k=3) * 0.01 * index)
+    session.release()
+    return session.path
+
+
+def toasts(app: FixwizardApp) -> str:
+    return "\n".join(str(toast.render()) for toast in app.screen.query("Toast"))
+
+
+def damage_line(path: Path, number: int, replacement: bytes) -> None:
+    lines = path.read_bytes().splitlines(keepends=True)
+    lines[number - 1] = replacement
+    path.write_bytes(b"".join(lines))
+
+
+def test_a_resume_says_which_session_it_opened_and_shows_every_tap(tmp_path):
+    path = recorded_session(tmp_path, taps=12)
+    lines = path.read_bytes().splitlines(keepends=True)  # an older version's journal after a full disk:
+    path.write_bytes(b"".join(lines[:11] + [lines[11][:60]] + lines[11:]))  # tap 11 half written, then tap 11
+
+    async def run():
+        context = simulated_context(3, pace_s=0.0, folder=tmp_path)
+        app = FixwizardApp(context, "")
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await until(pilot, lambda: type(app.screen).__name__ == "SamplingScreen" and "Resumed" in toasts(app))
+            notice = toasts(app)
+            assert f"Resumed the session {path}: 12 taps recorded, fixture demo_bracket.stl" in notice
+            assert "tip calibration example_matlab_logo.yaml" in notice
+            assert "line 12 of the session journal holds a record that was never finished" in notice
+            assert [tap.id for tap in context.session.taps] == list(range(1, 13))
+            await until(pilot, lambda: app.screen.query_one("#taps").row_count == 12)
+    asyncio.run(run())
+
+
+def missing(path: Path) -> str:
+    return str(path.with_name("gone.jsonl"))
+
+
+def garbled_line(path: Path) -> str:
+    damage_line(path, 3, b"#### coffee ####\n")
+    return str(path)
+
+
+def checksum_mismatch(path: Path) -> str:
+    damage_line(path, 3, path.read_bytes().splitlines(keepends=True)[2].replace(b"0.0", b"0.5", 1))
+    return str(path)
+
+
+def deleted_calibration(path: Path) -> str:
+    (path.parents[1] / "calibrations" / "example_matlab_logo.yaml").unlink()
+    return str(path)
+
+
+def damaged_calibration(path: Path) -> str:
+    (path.parents[1] / "calibrations" / "example_matlab_logo.yaml").write_text("schema: fixwizard.tip/1\ntcp: [\n")
+    return str(path)
+
+
+def no_unfinished_session(path: Path) -> str:
+    with SamplingSession.open(path) as session:
+        session.close(report="done.yaml")
+    return ""
+
+
+@pytest.mark.parametrize("spoil, reason", [
+    (missing, "gone.jsonl does not exist; check the path"),
+    (garbled_line, "line 3 of the session"),
+    (checksum_mismatch, "is damaged (checksum or JSON)"),
+    (deleted_calibration, "example_matlab_logo.yaml"),
+    (damaged_calibration, "example_matlab_logo.yaml"),
+    (no_unfinished_session, "there is no unfinished session in"),
+])
+def test_every_refused_resume_is_explained_on_the_start_screen(tmp_path, spoil, reason):
+    requested = spoil(recorded_session(tmp_path))
+
+    async def run():
+        context = simulated_context(3, pace_s=0.0, folder=tmp_path)
+        app = FixwizardApp(context, requested)
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+            assert str(app.screen.query_one("#dialog-title", Static).render()).strip() == "Cannot resume the session"
+            message = str(app.screen.query_one("#dialog-message", Static).render())
+            assert message.startswith("Could not resume ") and reason in message
+            assert message.endswith("On the start screen, resume another session or start a new one.")
+            assert "Traceback" not in message
+            await pilot.press("escape")
+            await until(pilot, lambda: isinstance(app.screen, StartScreen))
+            assert reason in str(app.screen.query_one("#resume-problem", Static).render())  # it stays in view
+            assert context.session is None
+    asyncio.run(run())
+
+
+def test_a_session_open_in_another_wizard_is_refused_with_the_reason(tmp_path):
+    path = recorded_session(tmp_path)
+
+    async def run():
+        context = simulated_context(3, pace_s=0.0, folder=tmp_path)
+        app = FixwizardApp(context, str(path))
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+            message = str(app.screen.query_one("#dialog-message", Static).render())
+            assert "is open in another fixwizard; close that one first" in message
+            await pilot.press("escape")
+            await until(pilot, lambda: isinstance(app.screen, StartScreen))
+            assert app.screen.query_one("#session").value == NEW
+    with SamplingSession.open(path):  # the other wizard
+        asyncio.run(run())
+
+
+def test_the_start_screen_resume_says_which_session_it_opened(tmp_path):
+    path = recorded_session(tmp_path, taps=2)
+
+    async def run():
+        context = simulated_context(3, pace_s=0.0, folder=tmp_path)
+        app = FixwizardApp(context)
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await until(pilot, lambda: isinstance(app.screen, StartScreen) and app.context.fixture is not None)
+            app.screen.query_one("#session").value = str(path)
+            await pilot.pause()
+            app.screen.query_one("#continue").focus()
+            await pilot.press("enter")
+            await until(pilot, lambda: type(app.screen).__name__ == "SamplingScreen" and "Resumed" in toasts(app))
+            assert f"Resumed the session {path}: 2 taps recorded" in toasts(app)
+    asyncio.run(run())
+
+
+def test_the_wizard_without_a_terminal_says_it_needs_one(tmp_path):
+    result = subprocess.run([sys.executable, "-m", "fixwizard.cli"], cwd=tmp_path, stdin=subprocess.DEVNULL,
+                            capture_output=True, timeout=60, check=False, env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert result.returncode == 1
+    assert "the wizard needs an interactive terminal" in result.stderr.decode()
+    assert "Traceback" not in result.stderr.decode() and not list(tmp_path.iterdir())
