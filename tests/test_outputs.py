@@ -15,7 +15,7 @@ from conftest import fill_disk
 from tui_cell import wizard_context
 
 from fixwizard.atomic import check_output, write_text_atomic
-from fixwizard.cli import main
+from fixwizard.cli import EXIT_CODES, main
 from fixwizard.demo import DEMO_MESH, DEMO_TAPS
 from fixwizard.errors import InputError
 from fixwizard.workflow.wizard_report import write_session_report
@@ -86,7 +86,7 @@ def test_a_symlink_output_is_written_through_to_its_target_atomically(demo, caps
     target.parent.mkdir()
     target.write_text("old report\n")
     (demo / "latest.yaml").symlink_to(target)
-    assert main(solve(demo, "-o", str(demo / "latest.yaml"))) == 0
+    assert main(solve(demo, "-o", str(demo / "latest.yaml"))) == EXIT_CODES["undetermined"]  # 1e5 cells: coarse
     assert (demo / "latest.yaml").is_symlink() and os.readlink(demo / "latest.yaml") == str(target)
     assert yaml.safe_load(target.read_text())["schema"] == "fixwizard.report/1"
     assert [path.name for path in target.parent.iterdir()] == ["report.yaml"]  # no temporary file left
