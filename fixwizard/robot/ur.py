@@ -225,10 +225,11 @@ class URRobot:
                 if contact is not None and not hasattr(error, "tap_result"):
                     error.tap_result = contact
                 if isinstance(error, ConnectionLost):
-                    self._abandon(link, "")
+                    error = self._abandon(link, str(error), getattr(error, "tap_result", None))
                 raise error
             problem = None
             if ready or not link.process.is_alive():
+                link.process.join(EXIT_WAIT_S)  # its pipe closes just before it is gone: wait for its exit code
                 problem = f"fixwizard's robot link process ended unexpectedly{context} ({_exit_text(link.process)})"
             elif watch_state and self._fresh(link) is None:
                 problem = (f"no data from the robot for {LINK_STALE_S:g} s{context} (the network dropped, or this "
@@ -238,14 +239,11 @@ class URRobot:
                            f"fixwizard was waiting for {step}: check that the controller is running and that "
                            "nothing between this computer and the robot holds the connection")
             if problem is not None:
-                error = self._abandon(link, problem)
-                if contact is not None:
-                    error.tap_result = contact
-                raise error
+                raise self._abandon(link, problem, contact)
 
-    def _abandon(self, link: _LinkProcess, problem: str) -> LinkLost:
+    def _abandon(self, link: _LinkProcess, problem: str, tap_result: TapResult | None = None) -> LinkLost:
         """Kill the link process, send the dashboard's stop, wait until the watchdog has stopped the arm; the
-        error to raise for ``problem``."""
+        error to raise for ``problem`` (carrying ``tap_result``, if a tap recorded one)."""
         if self._link is link:
             self._link = None
         _, last_kick_at, _ = link.shared.read()
@@ -255,9 +253,15 @@ class URRobot:
             + WATCHDOG_MARGIN_S
         time.sleep(max(stopped_by - time.monotonic(), 0.0))
         link.process.join(EXIT_WAIT_S)
-        return LinkLost(f"{problem}. The robot's watchdog stopped the arm {1.0 / self.watchdog_hz:g} s after "
-                        "fixwizard's last message: check the network cable and switch between this computer "
-                        "and the robot, then reconnect")
+        if not last_kick_at:  # nothing was ever sent that could move the arm
+            error = LinkLost(f"{problem}: check that the robot is powered on and reachable, then reconnect")
+        else:
+            error = LinkLost(f"{problem}. The robot's watchdog stopped the arm {1.0 / self.watchdog_hz:g} s after "
+                             "fixwizard's last message: check the network cable and switch between this computer "
+                             "and the robot, then reconnect")
+        if tap_result is not None:
+            error.tap_result = tap_result
+        return error
 
     def _end_link(self) -> None:
         """Close the current link process: ask it to end its program and exit, kill it if it does not."""
@@ -358,7 +362,7 @@ def _with_tap_note(error: ConnectionLost) -> ConnectionLost:
     recorded = getattr(error, "tap_result", None)
     note = (" The tap's contact was recorded before the link went down." if recorded is not None
             else " The tap was not recorded: tap that point again after reconnecting.")
-    noted = LinkLost(f"{error}{note}")
+    noted = LinkLost(f"{error}.{note}")
     if recorded is not None:
         noted.tap_result = recorded
     return noted

@@ -57,6 +57,7 @@ from fixwizard.robot.ur_script import (
     freedrive_program,
     move_program,
     request_value,
+    setup_program,
     tap_program,
 )
 from fixwizard.robot.ur_state import ROBOT_MODE_RUNNING, ROBOT_MODE_TEXT, ControllerState, SharedState
@@ -74,6 +75,7 @@ PROGRAM_END_TIMEOUT_S = 1.0  # a program asked to stop must have ended by then
 MOVE_TOLERANCE_M = 0.001  # a finished move (and a tap's retract) must end this close to its target
 TOUCHING_FORCE_FRACTION = 0.5  # refuse a tap above this fraction of its force limit (cannot zero the sensor)
 UNLOCK_ACCEPTED = "Protective stop releasing"
+DASHBOARD = f"the dashboard server (port {DASHBOARD_PORT})"
 RECEIVE_FIELDS = ["timestamp", "actual_TCP_pose", "actual_TCP_speed", "actual_TCP_force", "robot_mode",
                   "safety_mode", "safety_status_bits", "runtime_state", "output_int_register_18",
                   "output_int_register_19", "output_double_register_17", "output_double_register_18",
@@ -132,18 +134,18 @@ class Link:
 
         for port in (DASHBOARD_PORT, RTDE_PORT, SCRIPT_PORT):
             self._check_port(port)
-        self._step(f"the dashboard server (port {DASHBOARD_PORT})")
-        self._dashboard = self._open("the dashboard server", lambda: dashboard_client.DashboardClient(self.host))
-        self._open("the dashboard server", lambda: self._dashboard.connect(int(CONNECT_TIMEOUT_S * 1000)))
-        if not self._open("the dashboard server", self._dashboard.isInRemoteControl):
+        self._step(DASHBOARD)
+        self._dashboard = self._open(DASHBOARD, lambda: dashboard_client.DashboardClient(self.host))
+        self._open(DASHBOARD, lambda: self._dashboard.connect(int(CONNECT_TIMEOUT_S * 1000)))
+        if not self._open(DASHBOARD, self._dashboard.isInRemoteControl):
             raise NotInRemoteControl()
         self._step(f"the RTDE data stream (port {RTDE_PORT})")
-        self._receive = self._open("the RTDE data stream", lambda: rtde_receive.RTDEReceiveInterface(
+        self._receive = self._open(f"the RTDE data stream (port {RTDE_PORT})", lambda: rtde_receive.RTDEReceiveInterface(
             self.host, -1.0, RECEIVE_FIELDS))
         self._step(f"the RTDE inputs (port {RTDE_PORT})")
-        self._io = self._open("the RTDE inputs", lambda: rtde_io.RTDEIOInterface(self.host))
+        self._io = self._open(f"the RTDE inputs (port {RTDE_PORT})", lambda: rtde_io.RTDEIOInterface(self.host))
         self._step(f"the script port (port {SCRIPT_PORT})")
-        self._script = self._open("the script port", lambda: socket.create_connection(
+        self._script = self._open(f"the script port ({SCRIPT_PORT})", lambda: socket.create_connection(
             (self.host, SCRIPT_PORT), timeout=CONNECT_TIMEOUT_S))
         for loop in (self._publish_loop, self._kick_loop, self._stop_loop):
             threading.Thread(target=loop, name=loop.__name__, daemon=True).start()
@@ -158,6 +160,10 @@ class Link:
             self._step("stopping the program that was running on the robot")
             self._dashboard_command("stop")
             self._wait(lambda sample: not sample.program_running, PROGRAM_END_TIMEOUT_S, " while connecting")
+        if state.ready_to_move:
+            self._step(f"fixwizard's set-up program to start (port {SCRIPT_PORT})")
+            run_id = self._start(lambda run: setup_program(run, self.watchdog_hz), " while connecting")
+            self._until_ended(run_id, PROGRAM_START_TIMEOUT_S, " while connecting", "the set-up program")
 
     def tap(self, max_travel_m: float, speed_m_s: float, force_limit_n: float) -> TapResult:
         """Run ``ur_script.tap_program``; the contact is sent as soon as it is recorded."""
@@ -242,7 +248,7 @@ class Link:
 
     def _start(self, program_for: Callable[[int], str], context: str) -> int:
         """Send the program for a new run id and wait until it runs (its watchdog is armed by then)."""
-        if not self._open("the dashboard server", self._dashboard.isInRemoteControl):
+        if not self._open(DASHBOARD, self._dashboard.isInRemoteControl):
             raise NotInRemoteControl()
         run_id = self._next_run
         self._next_run = self._next_run % (1 << 24) + 1
@@ -370,9 +376,7 @@ class Link:
 
     def _link_lost(self, context: str, reason: str) -> LinkLost:
         self._lose(reason)
-        return LinkLost(f"the link to the robot is down{context}: {reason}. The robot's watchdog stops the arm "
-                        f"{1.0 / self.watchdog_hz:g} s after fixwizard's last message; check the network cable "
-                        "and switch between this computer and the robot, then reconnect")
+        return LinkLost(f"the link to the robot is down{context}: {reason}")
 
     def _lose(self, reason: str) -> None:
         if self._lost is None:
@@ -461,14 +465,14 @@ class Link:
         def exchange() -> str:
             self._dashboard.send(f"{command}\n")
             return self._dashboard.receive().strip()
-        return self._open("the dashboard server", exchange)
+        return self._open(DASHBOARD, exchange)
 
     def _open(self, what: str, call: Callable[[], Any]) -> Any:
         """``call()``; a ur_rtde failure means the link is down."""
         try:
             return call()
         except RuntimeError as error:
-            raise self._link_lost("", f"{what} of {self.host} failed ({error})") from error
+            raise self._link_lost("", f"{what} of {self.host} did not answer ({error})") from error
 
     def _check_port(self, port: int) -> None:
         try:

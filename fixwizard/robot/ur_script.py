@@ -174,6 +174,12 @@ def freedrive_program(run_id: int, watchdog_hz: float) -> str:
 """)
 
 
+def setup_program(run_id: int, watchdog_hz: float) -> str:
+    """Nothing but the common start: the controller's TCP becomes the flange, so every pose the RTDE stream
+    reports from then on is the flange's (run once on connecting)."""
+    return _program("setup", run_id, watchdog_hz, {}, "  finish(PHASE_DONE)\n")
+
+
 def _program(name: str, run_id: int, watchdog_hz: float, parameters: dict[str, float | str], body: str) -> str:
     """One program: its parameters as globals, the watchdog armed before anything else, then the run id,
     zero TCP offset, the shared helpers and ``body`` (two-space indented URScript)."""

@@ -172,6 +172,10 @@ class FixwizardProgram:
             yield
         self._finish(PHASE_DONE)
 
+    def _setup(self) -> Iterator[None]:
+        self._finish(PHASE_DONE)
+        yield from ()
+
     def _freedrive(self) -> Iterator[None]:
         self.arm.halt()
         self.arm.freedrive = True
