@@ -46,9 +46,14 @@ from fixwizard.robot.base import (
     check_tap_request,
 )
 from fixwizard.robot.ur_errors import LinkLost, unpack_error
-from fixwizard.robot.ur_link import DASHBOARD_PORT, STALE_STATE_S, serve
+from fixwizard.robot.ur_link import DASHBOARD_PORT, serve
 from fixwizard.robot.ur_script import RETRACT_SPEED_M_S, SETTLE_TIMEOUT_S
-from fixwizard.robot.ur_state import ROBOT_MODE_RUNNING, ROBOT_MODE_TEXT, ControllerState, SharedState
+from fixwizard.robot.ur_state import (
+    ROBOT_MODE_RUNNING,
+    ROBOT_MODE_TEXT,
+    ControllerState,
+    SharedState,
+)
 
 # The arm stops when fixwizard sends nothing for 1 / WATCHDOG_HZ seconds: long enough that a busy PC does
 # not stop a tap, short enough to stop within 0.5 s.

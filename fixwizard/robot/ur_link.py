@@ -26,7 +26,6 @@ from typing import Any
 
 import numpy as np
 
-from fixwizard.geometry.se3 import to_ur_pose
 from fixwizard.robot.base import (
     EmergencyStop,
     MotionStopped,
@@ -40,10 +39,10 @@ from fixwizard.robot.ur_script import (
     FINAL_PHASES,
     KICK_REGISTER,
     PEAK_FORCE_REGISTER,
-    PHASE_REGISTER,
     PHASE_DONE,
     PHASE_NO_CONTACT,
     PHASE_NOT_SETTLED,
+    PHASE_REGISTER,
     PHASE_SETTLED,
     PHASE_STOPPED,
     REQUEST_REGISTER,
@@ -60,7 +59,12 @@ from fixwizard.robot.ur_script import (
     setup_program,
     tap_program,
 )
-from fixwizard.robot.ur_state import ROBOT_MODE_RUNNING, ROBOT_MODE_TEXT, ControllerState, SharedState
+from fixwizard.robot.ur_state import (
+    ROBOT_MODE_RUNNING,
+    ROBOT_MODE_TEXT,
+    ControllerState,
+    SharedState,
+)
 
 DASHBOARD_PORT = 29999
 RTDE_PORT = 30004
@@ -96,8 +100,9 @@ def serve(host: str, watchdog_hz: float, conn: Connection, shared: SharedState, 
         except RobotError as error:
             answer = ("error", *pack_error(error))
         except Exception as error:  # noqa: BLE001 - a bug: the wizard shows it rather than losing the link silently
-            answer = ("error", "RobotError", f"fixwizard's robot link failed while trying to {command} ({error!r}): "
-                      "reconnect; if it happens again, report it", None)
+            message = (f"fixwizard's robot link failed while trying to {command} ({error!r}): reconnect; if it "
+                       "happens again, report it")
+            answer = ("error", "RobotError", message, None)
         conn.send(answer)
         if command == "close":
             os._exit(0)
@@ -478,8 +483,8 @@ class Link:
         try:
             socket.create_connection((self.host, port), timeout=CONNECT_TIMEOUT_S).close()
         except OSError as error:
-            raise self._link_lost("", f"{self.host}:{port} does not accept connections "
-                                  f"({error.strerror or error}); check that the robot is powered on") from error
+            raise LinkLost(f"cannot connect to the robot at {self.host}: port {port} does not accept connections "
+                           f"({error.strerror or error})") from error
 
     def _step(self, what: str) -> None:
         self._conn.send(("step", what))
