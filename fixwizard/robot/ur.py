@@ -254,9 +254,9 @@ class URRobot:
         _, last_kick_at, _ = link.shared.read()
         link.kill()
         threading.Thread(target=_dashboard_stop, args=(self.host,), name="ur-dashboard-stop", daemon=True).start()
-        stopped_by = max(last_kick_at or time.monotonic(), link.started_at) + 1.0 / self.watchdog_hz \
-            + WATCHDOG_MARGIN_S
-        time.sleep(max(stopped_by - time.monotonic(), 0.0))
+        if last_kick_at:  # a program may have been running on those kicks: wait until its watchdog fired
+            stopped_by = last_kick_at + 1.0 / self.watchdog_hz + WATCHDOG_MARGIN_S
+            time.sleep(max(stopped_by - time.monotonic(), 0.0))
         link.process.join(EXIT_WAIT_S)
         if not last_kick_at:  # nothing was ever sent that could move the arm
             error = LinkLost(f"{problem}: check that the robot is powered on and reachable, then reconnect")

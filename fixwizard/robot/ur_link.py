@@ -260,6 +260,7 @@ class Link:
         self._request(run_id, 0)
         self._current_run = run_id
         try:
+            assert self._script is not None, "connect opens the script port first"
             self._script.sendall(program_for(run_id).encode())
         except OSError as error:
             raise self._link_lost(context, f"sending fixwizard's program to port {SCRIPT_PORT} failed "
