@@ -38,6 +38,7 @@ from fixwizard.robot.ur_script import (
     move_program,
     tap_program,
 )
+from fixwizard.robot.ur_state import ControllerState
 
 # any loopback address works; set UR_LOOPBACK_HOST=127.0.0.2 to test beside something holding 127.0.0.1's ports
 HOST = os.environ.get("UR_LOOPBACK_HOST", "127.0.0.1")
