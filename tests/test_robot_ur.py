@@ -1,12 +1,15 @@
-"""The UR cell (``fixwizard.robot.ur``) driving the real ur_rtde client against a loopback controller: the
-control script it uploads is the one the loopback emulates, taps record the contact the controller produced,
-and every fault (protective stop, emergency stop, remote control off, lost link) raises its typed error
-with a way out. The loopback listens on the controller's fixed ports, so these tests cannot run in parallel."""
+"""The UR cell (``fixwizard.robot.ur``) driving the real ur_rtde client, in its own link process, against a
+loopback controller that runs twins of fixwizard's URScript programs: taps record the contact the controller
+produced, every motion runs on a program whose watchdog is armed, the tap's limits hold on the controller
+when the PC stalls, and every fault (protective, emergency and safeguard stops, local control, a dropped,
+frozen or silent link, a crashed or stalled link process) raises its typed error with a way out, without
+crashing or freezing this process and without motion after the error. The loopback listens on the
+controller's fixed ports, so these tests cannot run in parallel."""
 
-import hashlib
+import contextlib
 import os
+import random
 import signal
-import subprocess
 import sys
 import threading
 import time
@@ -16,21 +19,12 @@ import pytest
 from scipy.spatial.transform import Rotation
 from ur_loopback import LoopbackProcess
 from ur_loopback.arm import SURFACE_STIFFNESS_N_M
-from ur_loopback.control_program import (
-    END_TEACH_MODE,
-    FORCE_MODE,
-    FORCE_MODE_STOP,
-    MOVEL,
-    SET_TCP,
-    SET_WATCHDOG,
-    TEACH_MODE,
-    ZERO_FT_SENSOR,
-)
 
 from fixwizard.geometry.se3 import make_transform
 from fixwizard.robot import (
     ConnectionLost,
     EmergencyStop,
+    MotionStopped,
     NoContact,
     NotInRemoteControl,
     ProtectiveStop,
@@ -38,15 +32,22 @@ from fixwizard.robot import (
     RobotError,
 )
 from fixwizard.robot.ur import URRobot
+from fixwizard.robot.ur_script import (
+    KICK_REGISTER,
+    freedrive_program,
+    move_program,
+    tap_program,
+)
+from fixwizard.robot.ur_state import ControllerState
 
 # any loopback address works; set UR_LOOPBACK_HOST=127.0.0.2 to test beside something holding 127.0.0.1's ports
 HOST = os.environ.get("UR_LOOPBACK_HOST", "127.0.0.1")
-# sha256 of the control script ur_rtde 1.6.5 uploads to a 5.15 controller; the loopback emulates its command
-# numbers, so a ur_rtde upgrade that changes the script must fail here first
-CONTROL_SCRIPT_SHA256 = "596761a93dfb175355b265245f9b94f8807528bf7ff85a654a61448f82ae8bf8"
+# drop/reconnect cycles of the acceptance test: the issue's 100 in CI (about 3 min), 20 on a developer's run
+DROP_CYCLES = int(os.environ.get("UR_DROP_CYCLES", "100" if os.environ.get("CI") else "20"))
 UNLOCK_DELAY_S = 1.0  # the loopback's "5 s after the stop" rule, shortened
 TIP_OFFSET_M = 0.1  # the loopback's ball tip on the flange z axis
 FAST_TAP = {"speed_m_s": 0.02}
+TRAVEL_SLACK_M = 0.001  # the issue's bound on travel past the limit when the PC stalls
 
 
 def flange_above_surface(hover_m: float) -> np.ndarray:
@@ -83,11 +84,24 @@ def controller(start_controller):
 
 
 @pytest.fixture
-def robot(controller):
-    robot = URRobot(HOST)
-    robot.connect()
-    yield robot
-    robot.close()
+def connect():
+    """Connect a URRobot to the loopback; every one is closed after the test."""
+    robots = []
+
+    def make(**options) -> URRobot:
+        robot = URRobot(HOST, **options)
+        robots.append(robot)
+        robot.connect()
+        return robot
+
+    yield make
+    for robot in robots:
+        robot.close()
+
+
+@pytest.fixture
+def robot(controller, connect):
+    return connect()
 
 
 def wait_until(condition, timeout_s: float = 2.0) -> bool:
@@ -99,55 +113,91 @@ def wait_until(condition, timeout_s: float = 2.0) -> bool:
     return True
 
 
-# --- connecting ---
+def assert_arm_stands(controller, for_s: float = 0.3) -> None:
+    """No program runs and the flange does not move for ``for_s`` seconds."""
+    before = controller.flange_pose()
+    assert not controller.program_running()
+    time.sleep(for_s)
+    np.testing.assert_allclose(controller.flange_pose(), before, atol=1e-9)
+
+
+class TapInThread:
+    """A tap in a worker thread, as the wizard runs it; ``outcome`` is its TapResult or RobotError and
+    ``pose_at_outcome`` the controller's flange pose the moment it came back."""
+
+    def __init__(self, robot: URRobot, controller, **tap) -> None:
+        self.outcome = self.pose_at_outcome = None
+        self._thread = threading.Thread(target=self._run, args=(robot, controller, tap))
+        self._thread.start()
+
+    def _run(self, robot, controller, tap) -> None:
+        try:
+            self.outcome = robot.tap(**tap)
+        except RobotError as error:
+            self.outcome = error
+        self.pose_at_outcome = controller.flange_pose()
+
+    def join(self, timeout_s: float):
+        self._thread.join(timeout_s)
+        assert not self._thread.is_alive(), f"the tap did not come back within {timeout_s} s"
+        return self.outcome
+
+
+# --- the process boundary and the programs ---
 
 
 def test_the_ur_cell_is_a_robot():
     assert isinstance(URRobot(HOST), Robot)
 
 
-def test_connect_uploads_the_control_script_the_loopback_emulates(robot, controller):
-    (script,) = controller.uploaded_scripts()
-    assert hashlib.sha256(script.encode()).hexdigest() == CONTROL_SCRIPT_SHA256
-    assert controller.program_running()
+def test_ur_rtde_runs_only_in_the_link_process(robot):
+    assert robot.link_pid not in (None, os.getpid())
+    assert not {"rtde_receive", "rtde_io", "rtde_control", "dashboard_client"} & set(sys.modules)
     status = robot.status()
-    assert status.connected and status.program_running and status.mode == "ready"
+    assert status.connected and not status.program_running and status.mode == "ready"
 
 
-def test_connect_zeroes_the_tcp_offset_so_poses_are_the_flange(start_controller):
-    controller = start_controller(tcp_offset=[0.0, 0.0, 0.05, 0.0, 0.0, 0.3])
-    robot = URRobot(HOST)
-    robot.connect()
-    try:
-        np.testing.assert_allclose(robot.base_T_tcp(), controller.flange_pose(), atol=1e-9)
-        assert controller.commands()[0] == SET_TCP
-    finally:
-        robot.close()
+@pytest.mark.parametrize("program", [
+    tap_program(7, 2.0, 0.02, 0.01, 10.0), move_program(7, 2.0, [0.4, -0.1, 0.2, 3.14, 0.0, 0.0], 0.05),
+    freedrive_program(7, 2.0)])
+def test_every_program_arms_its_watchdog_before_anything_else(program):
+    first_statement = program.splitlines()[2]
+    assert first_statement == f'  rtde_set_watchdog("input_int_register_{KICK_REGISTER}", 2.0, "stop")'
+    assert program.index("rtde_set_watchdog") < program.index("write_output_integer_register")
+    for motion in ("movel(", "teach_mode(", "zero_ftsensor("):
+        assert motion not in program or program.index("rtde_set_watchdog") < program.index(motion)
 
 
-def test_connect_sets_the_watchdog_and_keeps_it_fed(robot, controller):
-    assert SET_WATCHDOG in controller.commands()
+def test_every_motion_runs_on_a_program_whose_watchdog_is_armed(robot, controller):
+    robot.tap(**FAST_TAP)
+    robot.move_linear(flange_above_surface(0.02))
+    robot.freedrive(True)
     assert controller.watchdog_frequency_hz() == robot.watchdog_hz
-    time.sleep(3.0 / robot.watchdog_hz)  # three watchdog periods without any command
-    assert controller.watchdog_trips() == 0
-    assert controller.program_running()
+    robot.freedrive(False)
+    assert [name for name, _, _ in controller.programs()] == ["setup", "tap", "move", "freedrive"]
+    assert {variable for _, _, variable in controller.programs()} == {f"input_int_register_{KICK_REGISTER}"}
+    assert controller.unsafe_programs() == []
+    assert len({run_id for _, run_id, _ in controller.programs()}) == 4
 
 
-def test_the_watchdog_stops_the_robot_when_the_pc_freezes(controller):
-    """A second process connects and is then frozen (as a hung PC or a dead SSH session): its sockets stay
-    open but it sends nothing, so the controller's watchdog ends the control program."""
-    program = f"from fixwizard.robot.ur import URRobot\nURRobot({HOST!r}).connect()\nprint('connected', flush=True)\n" \
-              "import time\ntime.sleep(60)\n"
-    child = subprocess.Popen([sys.executable, "-c", program], stdout=subprocess.PIPE, text=True)
-    try:
-        assert "connected" in child.stdout.readline()
-        assert controller.program_running()
-        os.kill(child.pid, signal.SIGSTOP)
-        assert wait_until(lambda: not controller.program_running(), timeout_s=1.0)
-        assert controller.watchdog_trips() == 1
-    finally:
-        child.kill()
-        child.wait()
+def test_connect_zeroes_the_tcp_offset_so_poses_are_the_flange(start_controller, connect):
+    controller = start_controller(tcp_offset=[0.0, 0.0, 0.05, 0.0, 0.0, 0.3])
+    robot = connect()
+    np.testing.assert_allclose(robot.base_T_tcp(), controller.flange_pose(), atol=1e-9)
+
+
+def test_the_watchdog_stops_the_arm_when_the_link_process_freezes(robot, controller):
+    """The link process is stopped (as a hung PC): it sends nothing, so the controller's watchdog ends the
+    freedrive program; the wizard's process sees the link lost within a second and can reconnect."""
+    robot.freedrive(True)
+    os.kill(robot.link_pid, signal.SIGSTOP)
+    assert wait_until(lambda: not controller.program_running(), timeout_s=1.5)
+    assert controller.watchdog_trips() == 1
+    assert wait_until(lambda: not robot.status().connected, timeout_s=1.0)
+    with pytest.raises(ConnectionLost, match="no data from the robot"):
+        robot.freedrive(False)
+    robot.connect()
+    assert robot.status().mode == "ready"
 
 
 def test_connect_refuses_a_robot_in_local_control(start_controller):
@@ -158,9 +208,36 @@ def test_connect_refuses_a_robot_in_local_control(start_controller):
     assert controller.uploaded_scripts() == []
 
 
-def test_connect_to_nothing_raises_connection_lost():
-    with pytest.raises(ConnectionLost, match="check that the robot is powered on"):
+def test_connect_to_nothing_names_the_port():
+    started = time.monotonic()
+    with pytest.raises(ConnectionLost, match=f"^cannot connect to the robot at {HOST}: port 29999 does not "
+                                             "accept connections .*: check that the robot is powered on and "
+                                             "reachable, then reconnect$"):
         URRobot(HOST).connect()
+    assert time.monotonic() - started < 5.0
+
+
+@pytest.mark.parametrize("port, named", [("rtde", "the RTDE data stream \\(port 30004\\)"),
+                                         ("dashboard", "the dashboard server \\(port 29999\\)")])
+def test_connect_to_a_silent_port_fails_within_its_deadline_and_names_it(start_controller, port, named):
+    controller = start_controller()
+    controller.silence(port)
+    robot = URRobot(HOST)
+    started = time.monotonic()
+    with pytest.raises(ConnectionLost, match=f"{named}.* did not answer|did not answer within 10 s while "
+                                             f"connecting while fixwizard was waiting for {named}"):
+        robot.connect()
+    assert time.monotonic() - started < 11.0  # the 10 s deadline (nothing was sent that could move the arm)
+    assert robot.link_pid is None and not robot.status().connected
+
+
+def test_connect_to_a_silent_script_port_says_the_program_did_not_start(start_controller):
+    controller = start_controller()
+    controller.silence("script")
+    started = time.monotonic()
+    with pytest.raises(RobotError, match="took fixwizard's program on port 30003 but did not start it"):
+        URRobot(HOST).connect()
+    assert time.monotonic() - started < 10.0
 
 
 # --- freedrive ---
@@ -176,12 +253,11 @@ def test_freedrive_lets_the_operator_move_the_arm_and_blocks_motion(robot, contr
     with pytest.raises(RobotError, match="turn freedrive off"):
         robot.tap()
     robot.freedrive(False)
-    assert not controller.in_freedrive()
-    assert controller.commands()[-2:] == [TEACH_MODE, END_TEACH_MODE]
+    assert not controller.in_freedrive() and not controller.program_running()
     assert robot.status().mode == "ready"
 
 
-# --- tapping ---
+# --- tapping and moving ---
 
 
 def test_a_tap_records_the_contact_pose_the_controller_produced(robot, controller):
@@ -189,46 +265,38 @@ def test_a_tap_records_the_contact_pose_the_controller_produced(robot, controlle
     result = robot.tap(max_travel_m=0.02, speed_m_s=0.01, force_limit_n=10.0)
     (base_T_contact,) = controller.contact_poses()
     np.testing.assert_allclose(result.base_T_tcp_contact, base_T_contact, atol=2e-6)
-    # the tip started 8 mm above the surface and pressed it in until the force reached the limit
-    assert result.travel_m == pytest.approx(0.008 + 10.0 / SURFACE_STIFFNESS_N_M, abs=5e-5)
-    assert result.peak_force_n == pytest.approx(10.0, rel=0.05)
-    assert 0.0 < result.settle_s < 1.0
+    # the tip started 8 mm above the surface and pressed it in until the force reached the limit; the
+    # controller stops within a cycle of the limit (a starved loopback cycle is up to 20 ms: 0.2 mm)
+    assert 0.008 + 10.0 / SURFACE_STIFFNESS_N_M <= result.travel_m <= 0.008 + 10.0 / SURFACE_STIFFNESS_N_M + 2e-4
+    assert result.travel_m == pytest.approx(controller.tap_travels()[0], abs=1e-6)
+    assert 10.0 <= result.peak_force_n <= 10.0 + 2e-4 * SURFACE_STIFFNESS_N_M
+    assert 0.1 <= result.settle_s < 1.0
     np.testing.assert_allclose(controller.flange_pose(), base_T_start, atol=1e-6)  # retracted
-    commands = controller.commands()
-    assert commands.index(ZERO_FT_SENSOR) < commands.index(FORCE_MODE) < commands.index(FORCE_MODE_STOP) \
-        < len(commands) - 1 - commands[::-1].index(MOVEL)
     assert not controller.zeroed_in_contact()
-    assert controller.unhandled_commands() == []
+    assert_arm_stands(controller, 0.05)
 
 
-def test_a_tap_refuses_to_zero_the_sensor_while_the_tool_touches(start_controller):
+def test_a_tap_refuses_to_zero_the_sensor_while_the_tool_touches(start_controller, connect):
     start_controller(base_T_flange=flange_above_surface(-0.0004))  # pressed 0.4 mm into the surface
-    robot = URRobot(HOST)
-    robot.connect()
-    try:
-        with pytest.raises(RobotError, match="already pushes on something"):
-            robot.tap()
-    finally:
-        robot.close()
+    with pytest.raises(RobotError, match="already pushes on something"):
+        connect().tap()
 
 
-def test_a_tap_that_finds_nothing_stops_at_its_travel_and_retracts(start_controller):
+def test_a_tap_that_finds_nothing_stops_at_its_travel_and_retracts(start_controller, connect):
     controller = start_controller(base_T_flange=flange_above_surface(0.03))
-    robot = URRobot(HOST)
-    robot.connect()
-    try:
-        base_T_start = robot.base_T_tcp()
-        with pytest.raises(NoContact, match="no surface within 10 mm: move the tool closer"):
-            robot.tap(max_travel_m=0.01, **FAST_TAP)
-        assert FORCE_MODE_STOP in controller.commands()
-        np.testing.assert_allclose(controller.flange_pose(), base_T_start, atol=1e-6)
-    finally:
-        robot.close()
+    robot = connect()
+    base_T_start = robot.base_T_tcp()
+    with pytest.raises(NoContact, match="no surface within 10 mm: move the tool closer"):
+        robot.tap(max_travel_m=0.01, **FAST_TAP)
+    assert controller.tap_travels()[0] == pytest.approx(0.01, abs=1e-9)  # the movel's target is the limit
+    np.testing.assert_allclose(controller.flange_pose(), base_T_start, atol=1e-6)
 
 
 @pytest.mark.parametrize("travel, speed, force, shown", [(0.1, 0.01, 10.0, "tap travel of 100 mm"),
                                                          (0.02, 0.5, 10.0, "tap speed of 500 mm/s"),
-                                                         (0.02, 0.01, 500.0, "tap force limit of 500 N")])
+                                                         (0.02, 0.01, 500.0, "tap force limit of 500 N"),
+                                                         (float("nan"), 0.01, 10.0, "tap travel of nan mm"),
+                                                         (0.02, float("inf"), 10.0, "tap speed of inf mm/s")])
 def test_a_tap_outside_the_safe_limits_is_refused_before_anything_else(travel, speed, force, shown):
     with pytest.raises(RobotError, match=f"{shown} is outside the safe range"):
         URRobot(HOST).tap(max_travel_m=travel, speed_m_s=speed, force_limit_n=force)  # not even connected
@@ -243,35 +311,39 @@ def test_move_linear_moves_the_flange_to_the_target(robot, controller):
         robot.move_linear(target, speed_m_s=1.0)
 
 
-def test_stop_from_another_thread_ends_a_tap(start_controller):
+@pytest.mark.parametrize("spoil", [lambda pose: pose.__setitem__((0, 3), np.nan),
+                                   lambda pose: pose.__setitem__((1, 1), np.inf),
+                                   lambda pose: pose.__setitem__((slice(0, 3), slice(0, 3)), 2 * pose[:3, :3]),
+                                   lambda pose: pose.__setitem__((3, 0), 1.0)])
+def test_move_linear_refuses_a_target_that_is_not_a_finite_rigid_pose(robot, controller, spoil):
+    target = flange_above_surface(0.02)
+    spoil(target)
+    started = time.monotonic()
+    with pytest.raises(RobotError, match="target is not a (finite 4x4|rigid) pose"):
+        robot.move_linear(target)
+    assert time.monotonic() - started < 0.1
+    assert [name for name, _, _ in controller.programs()] == ["setup"]
+
+
+def test_stop_from_another_thread_ends_a_tap_at_once(start_controller, connect):
     controller = start_controller(base_T_flange=flange_above_surface(0.04))
-    robot = URRobot(HOST)
-    robot.connect()
-    errors = []
+    robot = connect()
+    tap = TapInThread(robot, controller, max_travel_m=0.05, speed_m_s=0.01)
+    assert wait_until(lambda: robot.status().mode == "moving")
+    time.sleep(0.2)
+    started = time.monotonic()
+    robot.stop()
+    assert time.monotonic() - started < 0.05  # never blocks the caller
+    assert isinstance(tap.join(2.0), MotionStopped)
+    assert time.monotonic() - started < 1.0
+    assert_arm_stands(controller)
 
-    def tap() -> None:
-        try:
-            robot.tap(max_travel_m=0.05, speed_m_s=0.01)
-        except RobotError as error:
-            errors.append(error)
 
-    tapping = threading.Thread(target=tap)
-    try:
-        tapping.start()
-        assert wait_until(lambda: robot.status().mode == "moving")
-        time.sleep(0.2)
-        started = time.monotonic()
-        robot.stop()
-        tapping.join(2.0)
-        assert time.monotonic() - started < 1.0
-        assert len(errors) == 1 and "stopped on request" in str(errors[0])
-        assert FORCE_MODE_STOP in controller.commands()
-        stopped_at = controller.flange_pose()
-        time.sleep(0.1)
-        np.testing.assert_allclose(controller.flange_pose(), stopped_at, atol=1e-9)
-    finally:
-        tapping.join()
-        robot.close()
+def test_stop_does_not_block_on_a_frozen_link(robot, controller):
+    controller.freeze_link()
+    started = time.monotonic()
+    robot.stop()
+    assert time.monotonic() - started < 0.05
 
 
 def test_status_and_pose_are_safe_from_another_thread_during_taps(robot):
@@ -294,52 +366,53 @@ def test_status_and_pose_are_safe_from_another_thread_during_taps(robot):
         done.set()
         poller.join()
     assert not errors
-    assert travels == pytest.approx([travels[0]] * 2, abs=5e-5)
+    assert travels == pytest.approx([travels[0]] * 2, abs=2e-4)
 
 
-# --- faults ---
+# --- stops ---
 
 
 def test_protective_stop_during_a_tap_blocks_until_unlocked_on_the_pendant(robot, controller):
     controller.when("contact", "protective_stop")
-    with pytest.raises(ProtectiveStop, match="unlock the protective stop on the teach pendant") as raised:
+    with pytest.raises(ProtectiveStop, match="unlock the protective stop on the teach pendant or with Unlock in "
+                                             "fixwizard") as raised:
         robot.tap(**FAST_TAP)
     assert not hasattr(raised.value, "tap_result")  # stopped before the contact was recorded
     status = robot.status()
     assert status.protective_stop and not status.program_running and status.mode == "protective stop"
-    with pytest.raises(ProtectiveStop, match="re-uploads its control script"):
+    with pytest.raises(ProtectiveStop):
         robot.tap(**FAST_TAP)
     controller.unlock_on_pendant()
-    assert wait_until(lambda: not robot.status().protective_stop)
-    result = robot.tap(**FAST_TAP)  # fixwizard re-uploaded its control script
-    assert len(controller.uploaded_scripts()) == 2
+    assert wait_until(lambda: robot.status().mode == "ready")
+    robot.move_linear(flange_above_surface(0.008))
+    result = robot.tap(**FAST_TAP)
     np.testing.assert_allclose(result.base_T_tcp_contact, controller.contact_poses()[-1], atol=2e-6)
 
 
-def test_protective_stop_while_retracting_keeps_the_recorded_contact(robot, controller):
+def test_protective_stop_after_the_contact_keeps_the_recorded_contact(robot, controller):
     base_T_start = robot.base_T_tcp()
     earlier = robot.tap(**FAST_TAP)
-    controller.when("movel", "protective_stop")
-    with pytest.raises(ProtectiveStop, match="during retracting after the tap") as raised:
+    controller.when("settled", "protective_stop")
+    with pytest.raises(ProtectiveStop, match="during the tap") as raised:
         robot.tap(**FAST_TAP)
     np.testing.assert_allclose(raised.value.tap_result.base_T_tcp_contact, controller.contact_poses()[-1],
                                atol=2e-6)
-    np.testing.assert_allclose(raised.value.tap_result.base_T_tcp_contact, earlier.base_T_tcp_contact, atol=2e-5)
+    np.testing.assert_allclose(raised.value.tap_result.base_T_tcp_contact, earlier.base_T_tcp_contact, atol=2e-4)
     with pytest.raises(RobotError, match="did not unlock the protective stop .*Cannot unlock protective stop "
                                          "until 5s after occurrence"):
         robot.unlock_protective_stop()
     time.sleep(UNLOCK_DELAY_S)
     robot.unlock_protective_stop()
     assert not robot.status().protective_stop
-    assert controller.program_running()
     with pytest.raises(RobotError, match="already pushes on something"):  # the stop left the tool pressed down
         robot.tap(**FAST_TAP)
     robot.move_linear(base_T_start)
-    assert robot.tap(**FAST_TAP).travel_m == pytest.approx(earlier.travel_m, abs=5e-5)
+    assert robot.tap(**FAST_TAP).travel_m == pytest.approx(earlier.travel_m, abs=2e-4)
 
 
-def test_emergency_stop_raises_until_released_and_powered_on(robot, controller):
-    controller.emergency_stop()
+@pytest.mark.parametrize("source", ["robot", "system"])
+def test_emergency_stop_raises_until_released_and_powered_on(robot, controller, source):
+    controller.emergency_stop(source)
     assert wait_until(lambda: robot.status().emergency_stop)
     assert robot.status().mode == "emergency stop"
     with pytest.raises(EmergencyStop, match="release the emergency stop, power on"):
@@ -349,55 +422,145 @@ def test_emergency_stop_raises_until_released_and_powered_on(robot, controller):
     with pytest.raises(RobotError, match="the arm is powered off.*: power it on and release the brakes"):
         robot.tap(**FAST_TAP)
     controller.power_on()
-    assert wait_until(lambda: robot.status().mode == "control script stopped")
+    assert wait_until(lambda: robot.status().mode == "ready")
     assert robot.tap(**FAST_TAP).travel_m > 0.008
 
 
+def test_safeguard_stop_names_the_safeguard(robot, controller):
+    controller.safeguard_stop()
+    assert wait_until(lambda: robot.status().mode == "safeguard stop")
+    with pytest.raises(RobotError, match="a safeguard stop .* stopped the arm before the tap: clear the cell"):
+        robot.tap(**FAST_TAP)
+
+
 def test_remote_control_switched_off_while_connected(robot, controller):
-    controller.set_remote_control(False)  # which also stops the program
-    assert wait_until(lambda: robot.status().mode == "control script stopped")
+    controller.set_remote_control(False)
     with pytest.raises(NotInRemoteControl, match="switch it to remote control"):
         robot.tap(**FAST_TAP)
-    assert len(controller.uploaded_scripts()) == 1  # no upload while in local control
+    assert [name for name, _, _ in controller.programs()] == ["setup"]  # nothing sent in local control
     controller.set_remote_control(True)
     assert robot.tap(**FAST_TAP).travel_m > 0.008
 
 
-def test_connection_dropped_mid_tap_raises_and_reconnect_works(robot, controller):
+# --- a lost link ---
+
+
+@pytest.mark.parametrize("fault", ["go_offline", "drop_connections"])
+def test_a_link_dropped_mid_tap_stops_the_arm_before_the_error_and_reconnect_works(robot, controller, fault):
     base_T_start = robot.base_T_tcp()
-    controller.when("force_mode", "go_offline")
+    controller.when("tap", fault)
     started = time.monotonic()
-    with pytest.raises(ConnectionLost, match="during the tap .*robot stops by itself.*check that the robot is "
-                                             "powered on and the network cable is plugged in, then reconnect"):
+    with pytest.raises(ConnectionLost, match="during the tap.*watchdog stopped the arm.*then reconnect. The tap "
+                                             "was not recorded"):
         robot.tap(**FAST_TAP)
     assert time.monotonic() - started < 3.0
+    assert_arm_stands(controller)
     assert not robot.status().connected
-    assert wait_until(lambda: controller.watchdog_trips() == 1)  # the controller stopped the arm by itself
-    with pytest.raises(ConnectionLost):
+    with pytest.raises(ConnectionLost, match="not connected"):
         robot.tap(**FAST_TAP)
-    controller.go_online()
+    if fault == "go_offline":
+        controller.go_online()
     robot.connect()
-    assert robot.status().connected
-    robot.move_linear(base_T_start)  # the arm went on in force mode until the watchdog stopped it
+    robot.move_linear(base_T_start)
     result = robot.tap(**FAST_TAP)
     np.testing.assert_allclose(result.base_T_tcp_contact, controller.contact_poses()[-1], atol=2e-6)
 
 
-# --- status ---
+def test_a_frozen_link_shows_disconnected_within_a_second_and_stops_the_arm(robot, controller):
+    assert robot.status().mode == "ready"
+    controller.freeze_link()
+    assert wait_until(lambda: not robot.status().connected, timeout_s=1.0)
+    with pytest.raises(ConnectionLost):
+        robot.tap(**FAST_TAP)
+    controller.thaw_link()
+    robot.connect()
+    robot.freedrive(True)
+    controller.freeze_link()  # the inputs are lost too: the controller's watchdog ends freedrive
+    assert wait_until(lambda: not controller.program_running(), timeout_s=1.5)
+    assert controller.watchdog_trips() == 1
 
 
-def test_status_maps_the_controller_state(robot, controller):
-    def shows(*expected) -> bool:
-        return wait_until(lambda: tuple(vars(robot.status()).values()) == expected)
+@pytest.mark.parametrize("kill", [signal.SIGSEGV, signal.SIGKILL])
+def test_a_crashed_link_process_leaves_the_wizard_running(robot, controller, kill):
+    tap = TapInThread(robot, controller, **FAST_TAP)
+    assert wait_until(lambda: robot.status().mode == "moving")
+    os.kill(robot.link_pid, kill)
+    error = tap.join(3.0)
+    assert isinstance(error, ConnectionLost)
+    assert f"link process ended unexpectedly during the tap (killed by {kill.name})" in str(error)
+    assert_arm_stands(controller)
+    robot.connect()
+    assert robot.status().mode == "ready"
 
-    assert shows(True, False, False, True, "ready")
-    controller.protective_stop()
-    assert shows(True, True, False, False, "protective stop")
-    controller.unlock_on_pendant()
-    assert shows(True, False, False, False, "control script stopped")
-    controller.emergency_stop()
-    assert shows(True, False, True, False, "emergency stop")
-    controller.release_emergency_stop()
-    assert shows(True, False, False, False, "powered off")
-    controller.go_offline()
-    assert shows(False, False, False, False, "disconnected")
+
+@pytest.mark.parametrize("stall_s", [0.2, 0.4, 1.0, 3.0])
+def test_the_tap_travel_holds_on_the_controller_when_the_pc_stalls(start_controller, connect, stall_s):
+    """A 20 mm tap at 50 mm/s into nothing; the link process is frozen (SIGSTOP) for ``stall_s`` partway."""
+    controller = start_controller(base_T_flange=flange_above_surface(0.03))
+    robot = connect()
+    tap = TapInThread(robot, controller, max_travel_m=0.02, speed_m_s=0.05)
+    assert wait_until(lambda: robot.status().mode == "moving")
+    time.sleep(random.uniform(0.0, 0.3))
+    pid = robot.link_pid
+    os.kill(pid, signal.SIGSTOP)
+    time.sleep(stall_s)
+    with contextlib.suppress(ProcessLookupError):  # the wizard's process killed the stalled link meanwhile
+        os.kill(pid, signal.SIGCONT)
+    outcome = tap.join(5.0)
+    assert max(controller.tap_travels()) <= 0.02 + TRAVEL_SLACK_M
+    assert isinstance(outcome, (NoContact, ConnectionLost))
+    if isinstance(outcome, ConnectionLost):
+        assert "no surface" not in str(outcome)
+        assert_arm_stands(controller)
+
+
+@pytest.mark.slow
+def test_drop_and_reconnect_cycles_never_crash_move_after_the_error_or_lose_a_tap(start_controller):
+    """The acceptance run: ``DROP_CYCLES`` cycles, idle and mid-tap, the link dropped (offline, or every
+    connection reset while the controller listens) at a random moment."""
+    controller = start_controller()
+    robot = URRobot(HOST)
+    rng = random.Random(17)
+    outcomes: dict[str, int] = {}
+    try:
+        for cycle in range(DROP_CYCLES):
+            robot.connect()
+            robot.move_linear(flange_above_surface(0.008))
+            fault = rng.choice(["go_offline", "drop_connections"])
+            if cycle % 2 == 0:  # idle
+                time.sleep(rng.uniform(0.0, 0.3))
+                getattr(controller, fault)()
+                with pytest.raises(ConnectionLost):
+                    robot.move_linear(flange_above_surface(0.008))
+                kind = "idle"
+            else:
+                tap = TapInThread(robot, controller, speed_m_s=0.05)
+                time.sleep(rng.uniform(0.0, 0.6))
+                getattr(controller, fault)()
+                outcome = tap.join(5.0)
+                if isinstance(outcome, ConnectionLost):
+                    recorded = hasattr(outcome, "tap_result")
+                    assert ("contact was recorded" if recorded else "tap was not recorded") in str(outcome)
+                    kind = "tap recorded, link lost" if recorded else "tap lost and reported"
+                else:
+                    assert not isinstance(outcome, RobotError), outcome
+                    kind = "tap done"
+                np.testing.assert_allclose(controller.flange_pose(), tap.pose_at_outcome, atol=1e-9)
+            assert_arm_stands(controller, 0.1)
+            outcomes[kind] = outcomes.get(kind, 0) + 1
+            if fault == "go_offline":
+                controller.go_online()
+    finally:
+        robot.close()
+    print(f"\n{DROP_CYCLES} drop/reconnect cycles: {outcomes}; watchdog trips {controller.watchdog_trips()}")
+    assert sum(outcomes.values()) == DROP_CYCLES
+
+
+@pytest.mark.parametrize("safety_mode, bits, emergency, protective", [
+    (7, 0, True, False), (6, 0, True, False),  # the safety mode alone
+    (1, 1 << 5, True, False), (1, 1 << 6, True, False), (1, 1 << 7, True, False),  # any e-stop bit alone
+    (3, 0, False, True), (1, 1 << 2, False, True), (1, 1, False, False)])
+def test_the_state_reads_stops_from_the_safety_mode_and_every_bit(safety_mode, bits, emergency, protective):
+    state = ControllerState(0.0, 0.0, np.eye(4), 0.0, 0.0, 7, safety_mode, bits, 1, 0, 0, 0.0, 0.0, 0.0)
+    assert (state.emergency_stop, state.protective_stop) == (emergency, protective)
+    assert state.ready_to_move == (not emergency and not protective)

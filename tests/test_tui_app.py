@@ -336,7 +336,7 @@ def test_an_unreachable_ur_arm_is_explained_and_nothing_says_simulated(tmp_path)
         async with app.run_test(size=SIZE) as pilot:
             await until(pilot, lambda: isinstance(app.screen, ErrorModal))
             message = text_of(app, "#dialog-message")
-            assert message.startswith("The connection to the robot is lost to ur-arm.invalid:29999")
+            assert message.startswith("Cannot connect to the robot at ur-arm.invalid: port 29999 does not accept")
             assert app.screen.query("#reconnect") and not app.screen.query("#unlock")
             await press_button(pilot, "#ok")
             await until(pilot, lambda: isinstance(app.screen, StartScreen) and context.fixture is not None)
@@ -360,7 +360,7 @@ def test_the_start_screen_switches_to_a_ur_arm_and_back_to_the_simulated_cell(tm
             app.screen.query_one("#robot-host", Input).focus()
             await pilot.press(*"127.0.0.3", "enter")  # nothing listens there
             await until(pilot, lambda: isinstance(app.screen, ErrorModal))
-            assert text_of(app, "#dialog-message").startswith("The connection to the robot is lost to 127.0.0.3:29999")
+            assert text_of(app, "#dialog-message").startswith("Cannot connect to the robot at 127.0.0.3: port 29999")
             await press_button(pilot, "#ok")
             await until(pilot, lambda: isinstance(app.screen, StartScreen))
             assert context.robot_name == "UR arm at 127.0.0.3" and not context.simulated and context.hands is None

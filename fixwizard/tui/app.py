@@ -109,7 +109,8 @@ class FixwizardApp(App[None]):
 
     def show_error(self, error: ShownError) -> None:
         """The error's message and next step in a modal; then the recovery the operator chose."""
-        self.push_screen(ErrorModal(error, self.context.simulated), self._recover)
+        can_unlock = callable(getattr(self.context.robot, "unlock_protective_stop", None))
+        self.push_screen(ErrorModal(error, self.context.simulated, can_unlock), self._recover)
 
     def _recover(self, recovery: Recovery | None) -> None:
         robot, hands = self.context.robot, self.context.hands
@@ -117,6 +118,9 @@ class FixwizardApp(App[None]):
             run_in_thread(self, robot.connect, lambda _: self.notify("Connected to the robot again."))
         elif recovery == "unlock" and hands is not None:
             run_in_thread(self, hands.cell.unlock, lambda _: self.notify("SIMULATED: protective stop unlocked."))
+        elif recovery == "unlock":
+            run_in_thread(self, robot.unlock_protective_stop,
+                          lambda _: self.notify("Protective stop unlocked. Check the cell, then retry."))
 
     async def _in_thread(self, call: Callable[[], T]) -> T | None:
         """Run a blocking call off the event loop from the flow; None (and the error shown) when it fails."""

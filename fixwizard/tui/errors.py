@@ -1,5 +1,6 @@
 """Errors as the operator sees them: a modal with what happened and the next step, and the recovery the
-wizard can do from there (reconnect; on a simulated cell, unlock the protective stop)."""
+wizard can do from there (reconnect; unlock the protective stop, on a UR arm through its dashboard and on a
+simulated cell as the teach pendant would)."""
 
 from collections.abc import Iterable
 from typing import Literal
@@ -35,8 +36,10 @@ def error_text(error: FixwizardError | OSError) -> str:
 
 
 def error_message(error: FixwizardError | OSError) -> str:
-    """``error_text`` as a sentence."""
+    """``error_text`` as a sentence, with the error's notes (e.g. that a tap's contact was kept)."""
     text = error_text(error)
+    for note in getattr(error, "__notes__", ()):
+        text = f"{text if text.endswith(('.', '!', '?')) else text + '.'} {note}"
     return text[:1].upper() + text[1:]
 
 
@@ -46,10 +49,11 @@ class ErrorModal(Dialog[Recovery]):
     DEFAULT_CSS = "ErrorModal > Vertical { border: thick $error; }"
     BINDINGS = [Binding("escape", "dismiss('ok')", "Close")]
 
-    def __init__(self, error: FixwizardError | OSError, simulated: bool) -> None:
+    def __init__(self, error: FixwizardError | OSError, simulated: bool, can_unlock: bool = False) -> None:
         super().__init__(error_title(error), error_message(error))
         self.error = error
         self.simulated = simulated
+        self.can_unlock = can_unlock  # the robot unlocks a protective stop from fixwizard (a UR arm does)
 
     def buttons(self) -> Iterable[Button]:
         yield Button("OK", id="ok", variant="primary")
@@ -57,3 +61,5 @@ class ErrorModal(Dialog[Recovery]):
             yield Button("Reconnect", id="reconnect")
         if isinstance(self.error, ProtectiveStop) and self.simulated:
             yield Button("SIMULATED: unlock (teach pendant)", id="unlock")
+        elif isinstance(self.error, ProtectiveStop) and self.can_unlock:
+            yield Button("Unlock (cell checked)", id="unlock")

@@ -259,15 +259,28 @@ class SamplingScreen(Screen[bool]):
         robot = self.context.robot
         try:
             robot.freedrive(False)
-            result: TapResult = robot.tap()
-            return self.context.session.record_tap(
-                result.base_T_tcp_contact,
-                force={"peak_n": result.peak_force_n, "travel_m": result.travel_m, "settle_s": result.settle_s})
+            try:
+                result: TapResult = robot.tap()
+            except RobotError as error:
+                recorded = getattr(error, "tap_result", None)
+                if recorded is None:
+                    raise
+                # the contact was recorded before the fault (while retracting, or the link went down): keep it
+                tap = self._record(recorded)
+                error.add_note(f"The contact was saved as tap {len(self.context.session.taps)}.")
+                error.recorded_tap = tap
+                raise
+            return self._record(result)
         finally:
             try:
                 robot.freedrive(True)
             except RobotError:
                 pass  # the tap's own error (or the next robot call) tells the operator
+
+    def _record(self, result: TapResult) -> Tap:
+        return self.context.session.record_tap(
+            result.base_T_tcp_contact,
+            force={"peak_n": result.peak_force_n, "travel_m": result.travel_m, "settle_s": result.settle_s})
 
     def _move_above(self, plan: HoverPlan) -> None:
         """Freedrive off, the three moves of ``hover_path``, freedrive on again (also after a failed move)."""
@@ -289,6 +302,8 @@ class SamplingScreen(Screen[bool]):
         self._taps_changed()
 
     def _robot_failed(self, error: ShownError) -> None:
+        if getattr(error, "recorded_tap", None) is not None:
+            self._taps_changed()
         self._stopped = self._stopped or isinstance(error, ProtectiveStop)
         self.refresh_bindings()
         self._problem(robot_problem_text(error_message(error), len(self.context.session.taps),

@@ -1,10 +1,12 @@
 """A Universal Robots e-Series controller on a loopback address that the real ur_rtde client talks to: RTDE (30004),
-dashboard (29999) and script (30003) ports, the uploaded control program emulated cycle by cycle, a simulated
-arm with a contact surface, and the faults a cell can throw at fixwizard.
+dashboard (29999) and script (30003) ports, fixwizard's programs emulated cycle by cycle (``programs``), a
+simulated arm with a contact surface, and the faults a cell can throw at fixwizard: a dropped or frozen link,
+silent ports, protective, emergency and safeguard stops, local control.
 
 Ports are fixed (ur_rtde has no way to choose them), so one controller runs at a time.
 """
 
+import socket
 import threading
 import time
 
@@ -12,9 +14,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ur_loopback.arm import COLLISION_FORCE_N, SimulatedArm, transform
-from ur_loopback.control_program import ZERO_FT_SENSOR, ControlProgram, Registers
 from ur_loopback.dashboard_server import DASHBOARD_PORT, serve_dashboard
 from ur_loopback.listener import Listener
+from ur_loopback.programs import FixwizardProgram, Registers, parse
 from ur_loopback.rtde_server import RTDE_PORT, RtdeSession
 from ur_loopback.rtde_wire import TYPE_FORMATS, field_type
 from ur_loopback.script_server import SCRIPT_PORT, serve_scripts
@@ -30,9 +32,12 @@ UNLOCK_REFUSED = ("Cannot unlock protective stop until 5s after occurrence. Alwa
 
 # robot_mode, safety_mode and runtime_state values, and bit numbers of the status words (RTDE guide)
 ROBOT_MODE = {"POWER_OFF": 3, "IDLE": 5, "RUNNING": 7}
-SAFETY_MODE = {"NORMAL": 1, "PROTECTIVE_STOP": 3, "ROBOT_EMERGENCY_STOP": 7}
-SAFETY_STATUS_BITS = {"NORMAL": 1 << 0, "PROTECTIVE_STOP": (1 << 2) | (1 << 10),
+SAFETY_MODE = {"NORMAL": 1, "PROTECTIVE_STOP": 3, "SAFEGUARD_STOP": 5, "SYSTEM_EMERGENCY_STOP": 6,
+               "ROBOT_EMERGENCY_STOP": 7}
+SAFETY_STATUS_BITS = {"NORMAL": 1 << 0, "PROTECTIVE_STOP": (1 << 2) | (1 << 10), "SAFEGUARD_STOP": (1 << 4) | (1 << 10),
+                      "SYSTEM_EMERGENCY_STOP": (1 << 5) | (1 << 7) | (1 << 10),
                       "ROBOT_EMERGENCY_STOP": (1 << 6) | (1 << 7) | (1 << 10)}
+EMERGENCY_STOPS = {"robot": "ROBOT_EMERGENCY_STOP", "system": "SYSTEM_EMERGENCY_STOP"}
 RUNTIME_STOPPED, RUNTIME_PLAYING = 1, 2
 POWER_ON_BIT, PROGRAM_RUNNING_BIT = 1 << 0, 1 << 1
 
@@ -42,8 +47,10 @@ class LoopbackController:
     the GIL while they wait for the controller, so it cannot share the test's process).
 
     Stand-ins for the cell and its operator: ``when`` (a fault on an event), ``protective_stop``,
-    ``unlock_on_pendant``, ``emergency_stop``, ``release_emergency_stop``, ``power_on``, ``set_remote_control``,
-    ``move_by_hand``, ``go_offline``, ``go_online``. Queries return copies of what the controller saw and did.
+    ``unlock_on_pendant``, ``emergency_stop``, ``safeguard_stop``, ``release_emergency_stop``, ``power_on``,
+    ``set_remote_control``, ``move_by_hand``; for the network: ``go_offline``, ``go_online``,
+    ``drop_connections``, ``freeze_link``, ``thaw_link``, ``silence``. Queries return copies of what the
+    controller saw and did.
     """
 
     def __init__(self, base_T_flange: np.ndarray | None = None, surface_z_m: float = 0.0,
@@ -57,8 +64,9 @@ class LoopbackController:
         if tcp_offset is not None:
             self._arm.flange_T_tcp = transform(tcp_offset)
         self._registers = Registers()
-        self._program: ControlProgram | None = None
-        self._programs: list[ControlProgram] = []
+        self._program: FixwizardProgram | None = None
+        self._programs: list[FixwizardProgram] = []
+        self._unsafe_programs: list[str] = []
         self._uploaded_scripts: list[str] = []
         self._dashboard_commands: list[str] = []
         self._contact_poses: list[np.ndarray] = []
@@ -70,7 +78,10 @@ class LoopbackController:
         self._unlock_delay_s = unlock_delay_s
         self._protective_stop_at = 0.0
         self._time_s = 0.0
-        self._last_watchdog_input = time.monotonic()
+        self._input_written_at: dict[str, float] = {}
+        self._program_started_at = 0.0
+        self._silent: set[str] = set()
+        self._frozen = threading.Event()
         self._was_in_contact = False
         self._triggers: dict[str, list[tuple[str, tuple]]] = {}
         self._input_owners: dict[str, object] = {}
@@ -99,6 +110,25 @@ class LoopbackController:
         for listener in self._listeners:
             listener.start()
 
+    def drop_connections(self) -> None:
+        """A switch resets: every connection drops, but the controller still listens (a client may reconnect)."""
+        for listener in self._listeners:
+            listener.drop_clients()
+
+    def freeze_link(self) -> None:
+        """The link freezes with every connection open: no RTDE data goes out, the inputs that come in are lost
+        and the dashboard does not answer."""
+        self._frozen.set()
+
+    def thaw_link(self) -> None:
+        self._frozen.clear()
+
+    def silence(self, port: str) -> None:
+        """From now on a new connection to ``port`` (``rtde``, ``dashboard`` or ``script``) is accepted and read,
+        but never answered (the RTDE and dashboard ports) or never acted on (the script port)."""
+        with self._lock:
+            self._silent.add(port)
+
     # --- the cell and its operator ---
 
     def when(self, event: str, action: str, *args) -> None:
@@ -120,10 +150,17 @@ class LoopbackController:
             if self._safety == "PROTECTIVE_STOP":
                 self._safety = "NORMAL"
 
-    def emergency_stop(self) -> None:
+    def emergency_stop(self, source: str = "robot") -> None:
+        """An emergency stop: the pendant's (``robot``) or the cell's (``system``); the arm powers off."""
         with self._lock:
-            self._safety = "ROBOT_EMERGENCY_STOP"
+            self._safety = EMERGENCY_STOPS[source]
             self._robot_mode = "POWER_OFF"
+            self._end_program()
+
+    def safeguard_stop(self) -> None:
+        """A safeguard (a door, a light curtain) stops the arm; it ends the program, power stays on."""
+        with self._lock:
+            self._safety = "SAFEGUARD_STOP"
             self._end_program()
 
     def release_emergency_stop(self) -> None:
@@ -161,19 +198,25 @@ class LoopbackController:
         with self._lock:
             return self._program is not None and self._program.running
 
-    def commands(self) -> list[int]:
-        """Command numbers every control program run so far has processed, in order."""
+    def programs(self) -> list[tuple[str, int, str | None]]:
+        """Every fixwizard program run so far: name, run id and the variable its watchdog watches."""
         with self._lock:
-            return [command for program in self._programs for command in program.commands]
-
-    def unhandled_commands(self) -> list[int]:
-        with self._lock:
-            return [command for program in self._programs for command in program.unhandled]
+            return [(program.name, program.run_id, program.watchdog_variable) for program in self._programs]
 
     def watchdog_frequency_hz(self) -> float | None:
-        """Minimum input frequency of the RTDE watchdog the current program set (None if not set)."""
+        """Minimum input frequency of the RTDE watchdog the running program armed (None if none runs)."""
         with self._lock:
             return None if self._program is None else self._program.watchdog_min_frequency_hz
+
+    def unsafe_programs(self) -> list[str]:
+        """Programs that arrived without a watchdog armed before their first motion (none should)."""
+        with self._lock:
+            return list(self._unsafe_programs)
+
+    def tap_travels(self) -> list[float]:
+        """The deepest travel (m, along the tool z axis at the start) of every tap program run so far."""
+        with self._lock:
+            return [program.max_travel_m for program in self._programs if program.name == "tap"]
 
     def watchdog_trips(self) -> int:
         with self._lock:
@@ -188,7 +231,7 @@ class LoopbackController:
             return list(self._dashboard_commands)
 
     def contact_poses(self) -> list[np.ndarray]:
-        """Flange poses (base frame, m) at which force mode ended with the tool on the surface."""
+        """Flange poses (base frame, m) at which a tap program reported its contact settled."""
         with self._lock:
             return [pose.copy() for pose in self._contact_poses]
 
@@ -209,12 +252,11 @@ class LoopbackController:
             getattr(self, action)(*args)
 
     def _on_program_event(self, event: str) -> None:
-        if event == "protective_stop":
-            self.protective_stop()
-        elif event == "force_mode_stop" and self._arm.in_contact():
+        if event == "settled":
             self._contact_poses.append(self._arm.base_T_flange.copy())
-        else:
-            self._fire(event)
+        elif event == "zero_ftsensor" and self._arm.in_contact():
+            self._zeroed_in_contact = True
+        self._fire(event)
 
     def _simulate(self) -> None:
         last = time.monotonic()
@@ -238,23 +280,32 @@ class LoopbackController:
         if program is None or not program.running:
             return
         watchdog_hz = program.watchdog_min_frequency_hz
-        if watchdog_hz and now - self._last_watchdog_input > 1.0 / watchdog_hz + SCHEDULING_GRACE_S:
+        last_input = max(self._input_written_at.get(program.watchdog_variable, 0.0), self._program_started_at)
+        if watchdog_hz and now - last_input > 1.0 / watchdog_hz + SCHEDULING_GRACE_S:
             self._watchdog_trips += 1
             self._end_program()
             return
-        before = len(program.commands)
-        program.step()
-        if len(program.commands) > before and program.commands[-1] == ZERO_FT_SENSOR and in_contact:
-            self._zeroed_in_contact = True
+        program.step(dt)
+        if not program.running:
+            self._end_program()
 
     def _run_program(self, text: str) -> None:
         with self._lock:
             self._uploaded_scripts.append(text)
+            if "script" in self._silent:
+                return
             if not self._remote_control or self._safety != "NORMAL" or self._robot_mode != "RUNNING":
                 return  # the controller does not start programs from outside in these states
+            parsed = parse(text)
+            if parsed is None:
+                return  # the loopback emulates only fixwizard's programs
+            name, parameters, watchdog, armed_first = parsed
+            if not armed_first:
+                self._unsafe_programs.append(name)
             self._end_program()
-            self._last_watchdog_input = time.monotonic()
-            self._program = ControlProgram(self._arm, self._registers, self._on_program_event)
+            self._program_started_at = time.monotonic()
+            self._program = FixwizardProgram(name, parameters, watchdog, self._arm, self._registers,
+                                             self._on_program_event)
             self._programs.append(self._program)
 
     # --- what the clients see ---
@@ -278,10 +329,11 @@ class LoopbackController:
             return [values[name] if name in values else _zero(field_type(name)) for name in names]
 
     def _write_inputs(self, values: dict) -> None:
+        if self._frozen.is_set():
+            return
         with self._lock:
             self._registers.inputs.update(values)
-            if "input_int_register_0" in values:
-                self._last_watchdog_input = time.monotonic()
+            self._input_written_at.update(dict.fromkeys(values, time.monotonic()))
 
     def _claim_inputs(self, session: object, names: list[str]) -> bool:
         with self._lock:
@@ -295,6 +347,8 @@ class LoopbackController:
             self._input_owners = {name: owner for name, owner in self._input_owners.items() if owner is not session}
 
     def _dashboard_reply(self, command: str) -> str:
+        while self._frozen.is_set():
+            time.sleep(0.01)
         with self._lock:
             self._dashboard_commands.append(command)
             running = self._program is not None and self._program.running
@@ -334,12 +388,22 @@ class LoopbackController:
                 return "Protective stop releasing"
             return f"could not understand: '{command}'"
 
-    def _serve_rtde(self, client) -> None:
-        RtdeSession(client, CONTROLLER_VERSION, self._read_outputs, self._write_inputs, self._claim_inputs,
-                    self._release_inputs).serve()
+    def _serve_rtde(self, client: socket.socket) -> None:
+        if self._answers("rtde", client):
+            RtdeSession(client, CONTROLLER_VERSION, self._read_outputs, self._write_inputs, self._claim_inputs,
+                        self._release_inputs, self._frozen.is_set).serve()
 
-    def _serve_dashboard(self, client) -> None:
-        serve_dashboard(client, self._dashboard_reply)
+    def _serve_dashboard(self, client: socket.socket) -> None:
+        if self._answers("dashboard", client):
+            serve_dashboard(client, self._dashboard_reply)
+
+    def _answers(self, port: str, client: socket.socket) -> bool:
+        """False (after reading ``client`` until it closes) if ``port`` is silenced."""
+        with self._lock:
+            silent = port in self._silent
+        while silent and client.recv(65536):
+            pass
+        return not silent
 
     def _serve_scripts(self, client) -> None:
         serve_scripts(client, self._run_program)

@@ -35,6 +35,10 @@ class Listener:
         server, self._server = self._server, None
         if server is not None:
             _close(server)
+        self.drop_clients()
+
+    def drop_clients(self) -> None:
+        """Close every client connection (and go on listening, if listening)."""
         with self._lock:
             clients, self._clients = self._clients, set()
         for client in clients:

@@ -19,13 +19,15 @@ class RtdeSession:
 
     def __init__(self, client: socket.socket, version: tuple[int, int, int, int],
                  read_outputs: Callable[[list[str]], list], write_inputs: Callable[[dict], None],
-                 claim_inputs: Callable[[object, list[str]], bool], release_inputs: Callable[[object], None]) -> None:
+                 claim_inputs: Callable[[object, list[str]], bool], release_inputs: Callable[[object], None],
+                 paused: Callable[[], bool] = lambda: False) -> None:
         self._client = client
         self._version = version
         self._read_outputs = read_outputs
         self._write_inputs = write_inputs
         self._claim_inputs = claim_inputs
         self._release_inputs = release_inputs
+        self._paused = paused  # while true no data goes out (a frozen link)
         self._send_lock = threading.Lock()
         self._outputs: tuple[int, list[str], struct.Struct, float] | None = None
         self._inputs: dict[int, tuple[list[str], list[str], struct.Struct]] = {}
@@ -83,7 +85,8 @@ class RtdeSession:
 
     def _stream(self) -> None:
         while not self._closed.is_set():
-            if not self._streaming.wait(0.05):
+            if not self._streaming.wait(0.05) or self._paused():
+                time.sleep(0.01)
                 continue
             recipe_id, names, layout, frequency = self._outputs
             started = time.monotonic()

@@ -41,6 +41,12 @@ _NAMED_TYPES = {
     "payload_inertia": "VECTOR6D", "script_control_line": "UINT32", "external_force_torque": "VECTOR6D",
     "output_bit_registers0_to_31": "UINT32", "output_bit_registers32_to_63": "UINT32",
     "input_bit_registers0_to_31": "UINT32", "input_bit_registers32_to_63": "UINT32",
+    # inputs the RTDE I/O interface sets up
+    "standard_digital_output_mask": "UINT8", "standard_digital_output": "UINT8",
+    "configurable_digital_output_mask": "UINT8", "configurable_digital_output": "UINT8",
+    "tool_digital_output_mask": "UINT8", "tool_digital_output": "UINT8", "speed_slider_mask": "UINT32",
+    "speed_slider_fraction": "DOUBLE", "standard_analog_output_mask": "UINT8", "standard_analog_output_type": "UINT8",
+    "standard_analog_output_0": "DOUBLE", "standard_analog_output_1": "DOUBLE",
 }
 
 

@@ -1,0 +1,215 @@
+"""The URScript programs fixwizard runs on a Universal Robots controller, and the RTDE registers they talk on.
+
+Every motion (tap, linear move, freedrive) is one short program sent to the script port. Its first statement
+arms the controller's RTDE watchdog on the link's kick register, so no motion can ever run on a program whose
+watchdog is not armed; only then does it publish its run id, which is how the link knows it runs. The tap's
+travel, speed and force limits live in the program: the approach is a ``movel`` whose target *is* the travel
+limit (the controller's trajectory cannot pass it, at the requested speed), stopped by the program the cycle
+the contact force reaches the limit. A PC that stalls or dies cannot take the tap further; it only stops
+feeding the watchdog, and the controller ends the program.
+
+Registers (integers unless told; the RTDE I/O interface's range 18-22, ur_rtde's receive range 12-19 for doubles):
+  input 18   kick counter the link rewrites every ``KICK_PERIOD_S``; the programs' watchdog variable
+  input 19   request: ``run_id * 8 + REQUEST_*`` (a stale request of an earlier run matches nothing)
+  output 18  run id of the program that runs or ran last
+  output 19  its phase: ``PHASE_*``
+  output double 17, 18, 19  tap: travel to contact (m, along the tool z axis), peak force (N), settle time (s)
+
+Poses are UR pose vectors ``[x, y, z, rx, ry, rz]`` of the flange (each program sets the TCP offset to zero)
+in the base frame: m and rad. Speeds m/s, accelerations m/s^2, forces N, times s.
+"""
+
+from collections.abc import Sequence
+
+KICK_REGISTER = 18
+REQUEST_REGISTER = 19
+RUN_REGISTER = 18
+PHASE_REGISTER = 19
+TRAVEL_REGISTER, PEAK_FORCE_REGISTER, SETTLE_REGISTER = 17, 18, 19
+
+REQUEST_STOP = 1  # stop the motion now and end the program
+REQUEST_RETRACT = 2  # tap: the contact is recorded, retract to the start
+
+PHASE_RUNNING = 1
+PHASE_SETTLED = 2  # tap: in contact and still; waits for REQUEST_RETRACT
+PHASE_DONE = 3
+PHASE_NO_CONTACT = 4  # tap: the travel limit reached without contact; retracted
+PHASE_STOPPED = 5  # stopped on request
+PHASE_NOT_SETTLED = 6  # tap: the contact did not settle in time; the arm stands in contact
+FINAL_PHASES = {PHASE_DONE, PHASE_NO_CONTACT, PHASE_STOPPED, PHASE_NOT_SETTLED}
+
+ACCELERATION_M_S2 = 0.5
+STOP_DECELERATION_M_S2 = 10.0
+RETRACT_SPEED_M_S = 0.05
+SETTLE_SPEED_M_S = 0.0005  # settled: the flange slower than this ...
+SETTLE_WINDOW_S = 0.1  # ... for this long
+SETTLE_TIMEOUT_S = 2.0
+
+
+def request_value(run_id: int, request: int) -> int:
+    """What the link writes to the request register to ask run ``run_id`` for ``request``."""
+    return run_id * 8 + request
+
+
+def tap_program(run_id: int, watchdog_hz: float, max_travel_m: float, speed_m_s: float,
+                force_limit_n: float) -> str:
+    """Approach along the tool z axis at ``speed_m_s`` until the contact force reaches ``force_limit_n``, at
+    most ``max_travel_m``; wait for the contact to settle, report it (``PHASE_SETTLED``), retract on request."""
+    return _program("tap", run_id, watchdog_hz, {
+        "max_travel_m": max_travel_m, "speed_m_s": speed_m_s, "force_limit_n": force_limit_n,
+        "settle_speed_m_s": SETTLE_SPEED_M_S, "settle_window_s": SETTLE_WINDOW_S,
+        "settle_timeout_s": SETTLE_TIMEOUT_S, "retract_speed_m_s": RETRACT_SPEED_M_S}, """\
+  global start = get_actual_tcp_pose()
+  global limit = pose_trans(start, p[0, 0, max_travel_m, 0, 0, 0])
+  global at_limit = False
+  global back = False
+  global peak_n = 0
+  def force_n():
+    wrench = get_tcp_force()
+    return sqrt(wrench[0] * wrench[0] + wrench[1] * wrench[1] + wrench[2] * wrench[2])
+  end
+  thread approach():
+    movel(limit, a=acceleration_m_s2, v=speed_m_s)
+    at_limit = True
+  end
+  thread retract():
+    movel(start, a=acceleration_m_s2, v=retract_speed_m_s)
+    back = True
+  end
+  def retract_and_finish(phase):
+    retracting = run retract()
+    while not back:
+      if requested(REQUEST_STOP):
+        kill retracting
+        stopl(STOP_DECELERATION_M_S2)
+        finish(PHASE_STOPPED)
+      end
+      sync()
+    end
+    finish(phase)
+  end
+  zero_ftsensor()
+  sync()
+  # approach: the movel ends at the travel limit; the loop stops it at the force limit
+  approaching = run approach()
+  while force_n() < force_limit_n:
+    peak_n = max(peak_n, force_n())
+    if requested(REQUEST_STOP):
+      kill approaching
+      stopl(STOP_DECELERATION_M_S2)
+      finish(PHASE_STOPPED)
+    end
+    if at_limit:
+      retract_and_finish(PHASE_NO_CONTACT)
+    end
+    sync()
+  end
+  kill approaching
+  stopl(STOP_DECELERATION_M_S2)
+  # settle: the arm holds its position in contact until it has stood still for settle_window_s
+  global still_s = 0
+  global waited_s = 0
+  while still_s < settle_window_s:
+    peak_n = max(peak_n, force_n())
+    if requested(REQUEST_STOP):
+      finish(PHASE_STOPPED)
+    end
+    if waited_s > settle_timeout_s:
+      finish(PHASE_NOT_SETTLED)
+    end
+    speed = get_actual_tcp_speed()
+    if sqrt(speed[0] * speed[0] + speed[1] * speed[1] + speed[2] * speed[2]) < settle_speed_m_s:
+      still_s = still_s + get_steptime()
+    else:
+      still_s = 0
+    end
+    waited_s = waited_s + get_steptime()
+    sync()
+  end
+  write_output_float_register(TRAVEL_REGISTER, pose_trans(pose_inv(start), get_actual_tcp_pose())[2])
+  write_output_float_register(PEAK_FORCE_REGISTER, peak_n)
+  write_output_float_register(SETTLE_REGISTER, waited_s)
+  write_output_integer_register(PHASE_REGISTER, PHASE_SETTLED)
+  # the link records the flange pose now, while the arm stands in contact
+  while not requested(REQUEST_RETRACT):
+    if requested(REQUEST_STOP):
+      finish(PHASE_STOPPED)
+    end
+    sync()
+  end
+  retract_and_finish(PHASE_DONE)
+""")
+
+
+def move_program(run_id: int, watchdog_hz: float, target: Sequence[float], speed_m_s: float) -> str:
+    """A straight-line move of the flange to the UR pose ``target`` at ``speed_m_s``."""
+    return _program("move", run_id, watchdog_hz, {"target": _pose(target), "speed_m_s": speed_m_s}, """\
+  global arrived = False
+  thread motion():
+    movel(target, a=acceleration_m_s2, v=speed_m_s)
+    arrived = True
+  end
+  moving = run motion()
+  while not arrived:
+    if requested(REQUEST_STOP):
+      kill moving
+      stopl(STOP_DECELERATION_M_S2)
+      finish(PHASE_STOPPED)
+    end
+    sync()
+  end
+  finish(PHASE_DONE)
+""")
+
+
+def freedrive_program(run_id: int, watchdog_hz: float) -> str:
+    """Teach mode (the operator moves the arm by hand) until the link asks to stop."""
+    return _program("freedrive", run_id, watchdog_hz, {}, """\
+  teach_mode()
+  while not requested(REQUEST_STOP):
+    sync()
+  end
+  end_teach_mode()
+  finish(PHASE_DONE)
+""")
+
+
+def setup_program(run_id: int, watchdog_hz: float) -> str:
+    """Nothing but the common start: the controller's TCP becomes the flange, so every pose the RTDE stream
+    reports from then on is the flange's (run once on connecting)."""
+    return _program("setup", run_id, watchdog_hz, {}, "  finish(PHASE_DONE)\n")
+
+
+def _program(name: str, run_id: int, watchdog_hz: float, parameters: dict[str, float | str], body: str) -> str:
+    """One program: its parameters as globals, the watchdog armed before anything else, then the run id,
+    zero TCP offset, the shared helpers and ``body`` (two-space indented URScript)."""
+    constants = {"acceleration_m_s2": ACCELERATION_M_S2, "STOP_DECELERATION_M_S2": STOP_DECELERATION_M_S2,
+                 "REQUEST_STOP": REQUEST_STOP, "REQUEST_RETRACT": REQUEST_RETRACT, "PHASE_REGISTER": PHASE_REGISTER,
+                 "TRAVEL_REGISTER": TRAVEL_REGISTER, "PEAK_FORCE_REGISTER": PEAK_FORCE_REGISTER,
+                 "SETTLE_REGISTER": SETTLE_REGISTER, "PHASE_SETTLED": PHASE_SETTLED, "PHASE_DONE": PHASE_DONE,
+                 "PHASE_NO_CONTACT": PHASE_NO_CONTACT, "PHASE_STOPPED": PHASE_STOPPED,
+                 "PHASE_NOT_SETTLED": PHASE_NOT_SETTLED}
+    lines = [f"def fixwizard_{name}():", f"  # fixwizard {name}, run {run_id}: see fixwizard/robot/ur_script.py",
+             f"  rtde_set_watchdog(\"input_int_register_{KICK_REGISTER}\", {_number(watchdog_hz)}, \"stop\")",
+             f"  global run_id = {run_id}",
+             *(f"  global {key} = {_number(value) if not isinstance(value, str) else value}"
+               for key, value in {**parameters, **constants}.items()),
+             f"  write_output_integer_register({PHASE_REGISTER}, {PHASE_RUNNING})",
+             f"  write_output_integer_register({RUN_REGISTER}, run_id)",
+             "  set_tcp(p[0, 0, 0, 0, 0, 0])",
+             "  def requested(request):",
+             f"    return read_input_integer_register({REQUEST_REGISTER}) == run_id * 8 + request",
+             "  end",
+             "  def finish(phase):",
+             f"    write_output_integer_register({PHASE_REGISTER}, phase)",
+             "    halt",
+             "  end"]
+    return "\n".join(lines) + "\n" + body + "end\n"
+
+
+def _number(value: float) -> str:
+    return repr(float(value)) if isinstance(value, float) else str(value)
+
+
+def _pose(pose: Sequence[float]) -> str:
+    return "p[" + ", ".join(repr(float(value)) for value in pose) + "]"

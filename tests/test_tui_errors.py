@@ -1,0 +1,41 @@
+"""The error modal offers the recoveries the robot can do: reconnect after a lost link, and unlock a protective
+stop on a UR arm (its dashboard) as its message promises, on the simulated cell as the pendant would."""
+
+import asyncio
+
+from pilot_wait import until
+from textual.app import App
+
+from fixwizard.robot.base import ConnectionLost, ProtectiveStop
+from fixwizard.robot.ur_errors import LinkLost, URProtectiveStop
+from fixwizard.tui.errors import ErrorModal, error_message
+
+
+def buttons_of(error: Exception, simulated: bool, can_unlock: bool) -> dict[str, str]:
+    """Button id -> label of the modal for ``error``."""
+    async def run() -> dict[str, str]:
+        app = App()
+        async with app.run_test() as pilot:
+            app.push_screen(ErrorModal(error, simulated, can_unlock))
+            await until(pilot, lambda: isinstance(app.screen, ErrorModal) and app.screen.query("#ok"))
+            return {button.id: str(button.label) for button in app.screen.query("Button")}
+    return asyncio.run(run())
+
+
+def test_a_ur_protective_stop_offers_the_unlock_its_message_promises():
+    error = URProtectiveStop(" during the tap")
+    assert "with Unlock in fixwizard" in str(error)
+    assert buttons_of(error, simulated=False, can_unlock=True) == {"ok": "OK", "unlock": "Unlock (cell checked)"}
+
+
+def test_no_unlock_without_a_robot_that_can_and_the_simulated_one_says_so():
+    assert "unlock" not in buttons_of(ProtectiveStop(), simulated=False, can_unlock=False)
+    assert buttons_of(ProtectiveStop(), simulated=True, can_unlock=False)["unlock"].startswith("SIMULATED")
+
+
+def test_a_lost_link_offers_reconnect_and_shows_what_was_kept():
+    error = LinkLost("the link to the robot is down during the tap: the controller closed the RTDE connection")
+    error.add_note("The contact was saved as tap 4.")
+    assert set(buttons_of(error, simulated=False, can_unlock=True)) == {"ok", "reconnect"}
+    assert isinstance(error, ConnectionLost)
+    assert error_message(error).endswith("RTDE connection. The contact was saved as tap 4.")

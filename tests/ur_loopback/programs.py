@@ -1,0 +1,192 @@
+"""What fixwizard's URScript programs (``fixwizard/robot/ur_script.py``) do on the controller, cycle by cycle.
+
+The loopback does not interpret URScript: it reads a program's name, its ``global NAME = VALUE`` parameters
+and its ``rtde_set_watchdog`` line from the text sent to the script port, and runs a Python twin of that
+program, one ``sync()`` per controller cycle (a generator that yields where the script calls ``sync()``).
+The twins follow the scripts statement by statement; the register numbers and phases are the scripts'.
+"""
+
+import re
+from collections.abc import Callable, Iterator
+
+import numpy as np
+
+from ur_loopback.arm import SimulatedArm, transform
+
+PROGRAM_NAME = re.compile(r"^def fixwizard_(\w+)\(\):\n", re.MULTILINE)
+PARAMETER = re.compile(r"^  global (\w+) = (p\[[^\]]*\]|[-+0-9.e]+)$", re.MULTILINE)
+WATCHDOG = re.compile(r'^  rtde_set_watchdog\("(\w+)", ([-+0-9.e]+), "stop"\)$', re.MULTILINE)
+MOTION_STATEMENTS = ("movel(", "teach_mode(")
+
+RUN_REGISTER, PHASE_REGISTER, REQUEST_REGISTER = 18, 19, 19
+TRAVEL_REGISTER, PEAK_FORCE_REGISTER, SETTLE_REGISTER = 17, 18, 19
+REQUEST_STOP, REQUEST_RETRACT = 1, 2
+PHASE_RUNNING, PHASE_SETTLED, PHASE_DONE, PHASE_NO_CONTACT, PHASE_STOPPED, PHASE_NOT_SETTLED = 1, 2, 3, 4, 5, 6
+
+
+class Registers:
+    """The RTDE input and output registers the programs and the RTDE clients share."""
+
+    def __init__(self) -> None:
+        self.inputs: dict[str, float | int] = {}
+        self.outputs: dict[str, float | int] = {}
+
+    def input_int(self, index: int) -> int:
+        return int(self.inputs.get(f"input_int_register_{index}", 0))
+
+    def write_int(self, index: int, value: int) -> None:
+        self.outputs[f"output_int_register_{index}"] = value
+
+    def write_double(self, index: int, value: float) -> None:
+        self.outputs[f"output_double_register_{index}"] = value
+
+
+def parse(text: str) -> tuple[str, dict, tuple[str, float] | None, bool] | None:
+    """A fixwizard program's name, parameters, watchdog (variable, minimum frequency) and whether the
+    watchdog is armed before the first motion statement; None for any other program."""
+    name = PROGRAM_NAME.search(text)
+    if name is None:
+        return None
+    parameters = {key: _value(value) for key, value in PARAMETER.findall(text)}
+    watchdog = WATCHDOG.search(text)
+    motions = [text.find(statement) for statement in MOTION_STATEMENTS if statement in text]
+    armed_first = watchdog is not None and all(watchdog.start() < index for index in motions)
+    return name.group(1), parameters, None if watchdog is None else (watchdog.group(1), float(watchdog.group(2))), \
+        armed_first
+
+
+class FixwizardProgram:
+    """One run of a fixwizard program: made when the program arrives, ``step`` once per controller cycle."""
+
+    def __init__(self, name: str, parameters: dict, watchdog: tuple[str, float] | None, arm: SimulatedArm,
+                 registers: Registers, on_event: Callable[[str], None]) -> None:
+        self.name = name
+        self.parameters = parameters
+        self.arm = arm
+        self.registers = registers
+        self.on_event = on_event
+        self.running = True
+        self.run_id = int(parameters["run_id"])
+        # the script's first statements: the watchdog, the phase and run id, a zero TCP offset
+        self.watchdog_variable, self.watchdog_min_frequency_hz = watchdog if watchdog else (None, None)
+        registers.write_int(PHASE_REGISTER, PHASE_RUNNING)
+        registers.write_int(RUN_REGISTER, self.run_id)
+        arm.flange_T_tcp = np.eye(4)
+        self.max_travel_m = 0.0  # a tap's deepest travel along the start's tool z axis, for the tests
+        self._dt = 0.0
+        self._steps = getattr(self, f"_{name}")()
+
+    def step(self, dt: float) -> None:
+        """One cycle; the program ends when its twin returns."""
+        self._dt = dt
+        try:
+            next(self._steps)
+        except StopIteration:
+            self.running = False
+
+    def stop(self) -> None:
+        """The program ends (dashboard stop, protective or emergency stop, watchdog, a new program)."""
+        self.running = False
+        self.watchdog_min_frequency_hz = None
+        self.arm.freedrive = False
+
+    # --- the scripts' helpers ---
+
+    def _requested(self, request: int) -> bool:
+        return self.registers.input_int(REQUEST_REGISTER) == self.run_id * 8 + request
+
+    def _finish(self, phase: int) -> None:
+        self.registers.write_int(PHASE_REGISTER, phase)
+
+    def _force_n(self) -> float:
+        return float(np.linalg.norm(self.arm.tcp_force()[:3]))
+
+    def _linear(self, base_T_target: np.ndarray, speed_m_s: float) -> None:
+        self.arm.move_linear(base_T_target, speed_m_s)
+        self.on_event("movel")
+
+    # --- the programs ---
+
+    def _tap(self) -> Iterator[None]:
+        arm, p = self.arm, self.parameters
+        start = arm.base_T_flange.copy()
+        limit = start @ transform([0.0, 0.0, p["max_travel_m"], 0.0, 0.0, 0.0])
+        peak_n = 0.0
+
+        def travel_m() -> float:
+            return float((arm.base_T_flange[:3, 3] - start[:3, 3]) @ start[:3, 2])
+
+        arm.zero_sensor()
+        self.on_event("zero_ftsensor")
+        yield
+        self._linear(limit, p["speed_m_s"])
+        self.on_event("tap")
+        while self._force_n() < p["force_limit_n"]:
+            self.max_travel_m = max(self.max_travel_m, travel_m())
+            peak_n = max(peak_n, self._force_n())
+            if self._requested(REQUEST_STOP):
+                arm.halt()
+                return self._finish(PHASE_STOPPED)
+            if not arm.moving():
+                yield from self._retract(start, PHASE_NO_CONTACT)
+                return
+            yield
+        arm.halt()
+        still_s = waited_s = 0.0
+        while still_s < p["settle_window_s"]:
+            self.max_travel_m = max(self.max_travel_m, travel_m())
+            peak_n = max(peak_n, self._force_n())
+            if self._requested(REQUEST_STOP):
+                return self._finish(PHASE_STOPPED)
+            if waited_s > p["settle_timeout_s"]:
+                return self._finish(PHASE_NOT_SETTLED)
+            still_s = still_s + self._dt if np.linalg.norm(arm.velocity_m_s) < p["settle_speed_m_s"] else 0.0
+            waited_s += self._dt
+            yield
+        self.registers.write_double(TRAVEL_REGISTER, travel_m())
+        self.registers.write_double(PEAK_FORCE_REGISTER, peak_n)
+        self.registers.write_double(SETTLE_REGISTER, waited_s)
+        self.registers.write_int(PHASE_REGISTER, PHASE_SETTLED)
+        self.on_event("settled")
+        while not self._requested(REQUEST_RETRACT):
+            if self._requested(REQUEST_STOP):
+                return self._finish(PHASE_STOPPED)
+            yield
+        yield from self._retract(start, PHASE_DONE)
+
+    def _retract(self, start: np.ndarray, phase: int) -> Iterator[None]:
+        self._linear(start, self.parameters["retract_speed_m_s"])
+        while self.arm.moving():
+            if self._requested(REQUEST_STOP):
+                self.arm.halt()
+                return self._finish(PHASE_STOPPED)
+            yield
+        self._finish(phase)
+
+    def _move(self) -> Iterator[None]:
+        self._linear(transform(self.parameters["target"]), self.parameters["speed_m_s"])
+        while self.arm.moving():
+            if self._requested(REQUEST_STOP):
+                self.arm.halt()
+                return self._finish(PHASE_STOPPED)
+            yield
+        self._finish(PHASE_DONE)
+
+    def _setup(self) -> Iterator[None]:
+        self._finish(PHASE_DONE)
+        yield from ()
+
+    def _freedrive(self) -> Iterator[None]:
+        self.arm.halt()
+        self.arm.freedrive = True
+        self.on_event("freedrive")
+        while not self._requested(REQUEST_STOP):
+            yield
+        self.arm.freedrive = False
+        self._finish(PHASE_DONE)
+
+
+def _value(text: str) -> float | list[float]:
+    if text.startswith("p["):
+        return [float(value) for value in text[2:-1].split(",")]
+    return float(text)
