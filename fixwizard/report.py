@@ -45,6 +45,18 @@ def bounds_dict(bounds: Bounds) -> dict:
             "max_point_displacement_m": float(bounds.max_point_displacement_m)}
 
 
+def _diagnosis_dict(solution: Solution) -> dict | None:
+    """Why no pose explains the taps (inconsistent only): causes most likely first, the smallest sample bound's
+    bracket (ruled out, not ruled out; m) and a ball diameter (m) that explains the taps, if one was found."""
+    diagnosis = solution.diagnosis
+    if diagnosis is None:
+        return None
+    return {"causes": [{"code": cause.code, "message": cause.message} for cause in diagnosis.causes],
+            "smallest_sample_bound_m": (None if diagnosis.smallest_bound_m is None
+                                        else [float(value) for value in diagnosis.smallest_bound_m]),
+            "ball_diameter_m": None if diagnosis.ball_diameter_m is None else float(diagnosis.ball_diameter_m)}
+
+
 def report_dict(solution: Solution, fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float,
                 sample_bound_m: float, sigma_m: float, created: dt.datetime | None = None) -> dict:
     """The report as plain data (see the module docstring for the schema)."""
@@ -65,6 +77,7 @@ def report_dict(solution: Solution, fixture: Fixture, base_p_taps: np.ndarray, b
         "warnings": [{"code": warning.code, "message": warning.message} for warning in solution.warnings],
         "suspect_tap": ({"tap": suspect.index + 1, "distance_from_surface_m": suspect.distance_m}
                         if suspect is not None else None),
+        "diagnosis": _diagnosis_dict(solution),
         "search": {"cells": solution.stats.cells, "rotation_level": solution.stats.rotation_level,
                    "position_level": solution.stats.position_level, "elapsed_s": round(solution.stats.elapsed_s, 3),
                    "max_cells": float(solution.stats.max_cells)},

@@ -151,3 +151,23 @@ def test_the_distance_to_any_one_face_bounds_the_distance_from_above_and_is_exac
     assert np.all(bound >= on_face) and np.all(bound - on_face <= 1e-12)
     surface = exact_distances_m(trimesh.Trimesh(vertices, triangles, process=False), points)
     assert np.all(bound >= surface)
+
+
+def test_locate_finds_the_cell_holding_each_pose_and_no_cell_outside_the_set():
+    from fixwizard.solver.cells import root_cells
+
+    cells = root_cells(PositionGrid(np.array([-0.1, -0.1, -0.1]), 0.2))
+    for _ in range(2):
+        cells = cells.split_rotations().split_positions()
+    rng = np.random.default_rng(0)
+    kept = rng.random(len(cells)) < 0.3
+    subset = cells.subset(kept)
+    rows = rng.integers(0, len(cells), 20_000)
+    rotations = cells.rotation_grid.sample(cells.rotation_level, cells.rotation_cells[rows], rng)
+    side = cells.position_grid.cell_side_m(cells.position_level)
+    positions = cells.positions_m(rows) + (rng.random((len(rows), 3)) - 0.5) * side
+    found = subset.locate(rotations, positions)
+    assert np.array_equal(found >= 0, kept[rows])
+    assert np.array_equal(np.flatnonzero(kept)[found[found >= 0]], rows[found >= 0])
+    outside = subset.locate(rotations[:10], positions[:10] + 1.0)  # a metre beyond the root cube
+    assert np.all(outside == -1)

@@ -239,15 +239,15 @@ async def test_which_fixture_checks_the_taps_against_every_offered_mesh(context,
         await tap(pilot, screen)
         await pilot.press("i")
         assert "Tap at least 3 points before asking which fixture this is" in text_of(screen, "#problem")
-        for _ in range(5):
+        for _ in range(11):
             await tap(pilot, screen)
         await pilot.press("i")
-        await until(pilot, lambda: isinstance(app.screen, Dialog), timeout_s=60)
+        await until(pilot, lambda: isinstance(app.screen, Dialog), timeout_s=120)
         text = str(app.screen.query_one("#dialog-message", Static).content)
         bracket_mark = " (the chosen one)" if chosen == "bracket" else ""
         plate_mark = " (the chosen one)" if chosen == "plate" else ""
-        assert f"fits       Demo bracket (bundled){bracket_mark}" in text
-        assert f"ruled out  Round plate (bundled){plate_mark}" in text
+        assert f"fits         Demo bracket (bundled){bracket_mark}: taps" in text
+        assert f"ruled out    Round plate (bundled){plate_mark}" in text
         assert conclusion in text
         await pilot.press("enter")
         await until(pilot, lambda: app.screen is screen)

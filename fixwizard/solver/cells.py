@@ -66,12 +66,26 @@ class CellSet:
         rotation = self.rotation_grid.cell_of(self.rotation_level, base_R_fix)
         position = np.floor((np.asarray(base_p_fix).reshape(-1, 3) - self.position_grid.corner_m)
                             / self.position_grid.cell_side_m(self.position_level)).astype(np.int64)
-        keys = np.column_stack([self.rotation_cells, self.position_cells.astype(np.int64)])
-        _, ids = np.unique(np.vstack([keys, np.column_stack([rotation, position])]), axis=0, return_inverse=True)
-        ids = ids.reshape(-1)
-        row_of = np.full(int(ids.max()) + 1, -1)
-        row_of[ids[:len(keys)]] = np.arange(len(keys))
-        return row_of[ids[len(keys):]]
+        side = 2**self.position_level  # at most 2^20: a key of three coordinates fits in 62 bits
+        inside = np.all((position >= 0) & (position < side), axis=1)
+        position = np.where(inside[:, None], position, 0)
+
+        def position_key(cells: np.ndarray) -> np.ndarray:
+            return (cells[:, 0] * side + cells[:, 1]) * side + cells[:, 2]
+
+        # exact ranks of the set's rotation cells and position cells, then one composite key under N^2
+        rotations, rotation_rank = np.unique(self.rotation_cells, return_inverse=True)
+        positions, position_rank = np.unique(position_key(self.position_cells.astype(np.int64)), return_inverse=True)
+        composite = rotation_rank.reshape(-1) * len(positions) + position_rank.reshape(-1)
+        order = np.argsort(composite, kind="stable")
+        wanted_rotation = np.minimum(np.searchsorted(rotations, rotation), len(rotations) - 1)
+        wanted_key = position_key(position)
+        wanted_position = np.minimum(np.searchsorted(positions, wanted_key), len(positions) - 1)
+        known = inside & (rotations[wanted_rotation] == rotation) & (positions[wanted_position] == wanted_key)
+        wanted = wanted_rotation * len(positions) + wanted_position
+        slots = np.minimum(np.searchsorted(composite[order], wanted), len(composite) - 1)
+        found = known & (composite[order][slots] == wanted)
+        return np.where(found, order[slots], -1)
 
     def subset(self, mask: np.ndarray) -> "CellSet":
         """The cells where ``mask`` is true, keeping only the rotation cells still used."""

@@ -15,7 +15,7 @@ from scipy.spatial.transform import Rotation
 from fixwizard.errors import InputError
 from fixwizard.fixture import Fixture
 from fixwizard.geometry.se3 import invert
-from fixwizard.solver.diagnose import SuspectTap, find_suspect_tap
+from fixwizard.solver.diagnose import Diagnosis, SuspectTap, diagnose
 from fixwizard.solver.estimates import (Bounds, Interval, Samples, bound_centre, bounds_from_figures,
                                         cell_bound_figures, effective_sample_size, expected_pose, intervals, mixture,
                                         rotation_center, sample_cells)
@@ -31,9 +31,8 @@ DEFAULT_MAX_CELLS = 1e7
 # Refining the hull of the set (the cells that decide the bounds) may evaluate HULL_SHARE of the cell budget.
 HULL_SHARE = 1 / 10
 MIN_MAX_CELLS = 72 * 8
-# The leave-one-out searches that look for a tap to blame only tell an empty set from a non-empty one
-# (the farthest-off tap wins among several); a smaller budget keeps the diagnosis within seconds.
-DIAGNOSIS_MAX_CELLS = 2e6
+# The searches of a diagnosis only tell an empty set from a non-empty one; a smaller budget keeps it within seconds.
+DIAGNOSIS_MAX_CELLS = 1e6
 DEFAULT_MAX_SAMPLES = 40_000
 MIN_TAPS = 3
 MAX_SAMPLE_BOUND_M = 0.02  # larger bounds are a unit mistake (1 for 1 mm), not a robot
@@ -85,6 +84,7 @@ class Solution:
     problem: SearchProblem = field(repr=False)
     fix_T_cad: np.ndarray = field(repr=False)
     effective_samples: float = 0.0
+    diagnosis: Diagnosis | None = None
 
     @property
     def cells(self) -> CellSet | None:
@@ -146,17 +146,10 @@ def _mode_separation(modes: list[Mode]) -> tuple[float, float]:
     return distance, angle
 
 
-def _inconsistent_warnings(suspect: SuspectTap | None) -> list[SolveWarning]:
-    if suspect is not None:
-        return [SolveWarning("inconsistent", "No pose of the fixture explains all taps."),
-                SolveWarning("suspect_tap",
-                             f"Tap {suspect.index + 1} is the likely culprit: without it the other taps fit, and it "
-                             f"lies about {suspect.distance_m * 1e3:.1f} mm off the surface under the poses they "
-                             "allow. It probably missed the fixture; drop it and solve again.")]
-    return [SolveWarning("inconsistent",
-                         "No pose of the fixture explains the taps, and no single tap is to blame. Usual causes: "
-                         "the wrong mesh, wrong mesh units, a wrong tool-tip calibration, or a sample bound that "
-                         "is too small for this robot.")]
+def _inconsistent_warnings(diagnosis: Diagnosis) -> list[SolveWarning]:
+    """The inconsistent verdict, then each cause the diagnosis found, most likely first."""
+    return [SolveWarning("inconsistent", "No pose of the fixture explains all taps. Most likely cause first:"),
+            *(SolveWarning(cause.code, cause.message) for cause in diagnosis.causes)]
 
 
 @dataclass(frozen=True)
@@ -215,7 +208,7 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
           sigma_m: float | None = None, max_cells: float = DEFAULT_MAX_CELLS,
           progress: Callable[[SearchProgress], None] | None = None, cancel: threading.Event | None = None,
           max_samples: int = DEFAULT_MAX_SAMPLES, seed: int = 0, previous: Solution | None = None,
-          hull_cells: float | None = None) -> Solution:
+          hull_cells: float | None = None, diagnose_inconsistent: bool = True) -> Solution:
     """All poses of ``fixture`` that explain the taps, with estimates; raises InputError for bad input.
 
     ``base_p_taps`` (N, 3): measured ball centres in the robot base frame (m). ``sigma_m``
@@ -224,7 +217,8 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
     taps, the search goes on from its surviving set instead of starting over. With the same taps its set is
     taken as it is: only the estimates and the hull refinement run again (with a larger ``hull_cells``, to
     tighten the bounds). ``hull_cells``: the cells hull
-    refinement may evaluate (default ``HULL_SHARE`` of ``max_cells``).
+    refinement may evaluate (default ``HULL_SHARE`` of ``max_cells``). ``diagnose_inconsistent``: look for why no
+    pose explains the taps (``diagnose``, seconds of searches) when none does.
     """
     base_p_taps = np.asarray(base_p_taps, dtype=float)
     sigma_m = sample_bound_m / 3.0 if sigma_m is None else sigma_m
@@ -242,11 +236,14 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
     warnings = [SolveWarning(code, message) for code, message in fixture.warnings]
     fix_T_cad = fixture.fix_T_cad
     def inconsistent() -> Solution:
-        suspect = find_suspect_tap(problem, min(max_cells, DIAGNOSIS_MAX_CELLS), cancel)
+        diagnosis = diagnose(problem, min(max_cells, DIAGNOSIS_MAX_CELLS), cancel) if diagnose_inconsistent else None
         stats = SearchStats(0, cells.rotation_level if cells else 0, cells.position_level if cells else 0,
                             time.perf_counter() - started, max_cells)
-        return Solution("inconsistent", None, None, [], [], warnings + _inconsistent_warnings(suspect), suspect,
-                        stats, None, problem, fix_T_cad)
+        said = _inconsistent_warnings(diagnosis) if diagnosis is not None else [
+            SolveWarning("inconsistent", "No pose of the fixture explains all taps.")]
+        return Solution("inconsistent", None, None, [], [], warnings + said,
+                        None if diagnosis is None else diagnosis.suspect, stats, None, problem, fix_T_cad,
+                        diagnosis=diagnosis)
 
     if cells is None or len(cells) == 0:
         return inconsistent()

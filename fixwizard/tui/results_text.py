@@ -15,7 +15,7 @@ HEADLINES = {"unique": "UNIQUE: one pose of the fixture explains the {taps} taps
              "undetermined": "UNDETERMINED: the {taps} taps do not pin the pose down.",
              "inconsistent": "INCONSISTENT: no pose of the fixture explains all {taps} taps."}
 
-SAID_BY_SUSPECT_LINES = ("inconsistent", "suspect_tap")
+SAID_BY_SUSPECT_LINES = ("inconsistent", "suspect_tap", "ball_diameter", "sample_bound", "mesh_or_units")
 
 
 def headline(solution: Solution, tap_count: int) -> str:
@@ -68,14 +68,19 @@ def modes_lines(solution: Solution, advice: TapAdvice | None) -> list[str]:
 
 
 def suspect_lines(solution: Solution) -> list[str]:
-    """What to do about an inconsistent result: drop the suspect tap, or check the inputs."""
+    """What to do about an inconsistent result: its causes, most likely first, and how to drop the suspect tap."""
+    diagnosis = solution.diagnosis
+    causes = [] if diagnosis is None else [f"  {number}. {cause.message}"
+                                           for number, cause in enumerate(diagnosis.causes, start=1)]
+    lines = ["Why, most likely cause first:", *causes] if causes else [
+        "Check the mesh and its units, the tip calibration and the sample bound."]
     suspect = solution.suspect_tap
-    if suspect is None:
-        return [("No single tap is to blame. Check the mesh and its units, the tip calibration and the sample "
-                 "bound, then press r to go back to sampling.")]
-    return [(f"Tap {suspect.index + 1} lies about {suspect.distance_m * 1e3:.1f} mm off the surface under the "
-             "poses the other taps allow: it probably missed the fixture."),
-            f"Press d to drop tap {suspect.index + 1} (the journal keeps it, marked dropped), then solve again."]
+    if suspect is not None:
+        lines.append(f"Press d to drop tap {suspect.index + 1} (the journal keeps it, marked dropped), then solve "
+                     "again.")
+    else:
+        lines.append("Press r to go back to sampling.")
+    return lines
 
 
 def warning_lines(solution: Solution) -> list[str]:

@@ -8,7 +8,7 @@ from fixwizard.solver.solve import MIN_TAPS
 from fixwizard.tui.choices import FixtureChoice
 from fixwizard.workflow.advice import TapAdvice
 from fixwizard.workflow.hover import CLEARANCE_M, HoverPlan
-from fixwizard.workflow.identify import MeshVerdict
+from fixwizard.workflow.identify import MeshVerdict, ranked
 from fixwizard.workflow.live import LIVE_MAX_CELLS, LiveCheck
 
 
@@ -28,13 +28,10 @@ def live_text(check: LiveCheck | None, tap_count: int, running: bool) -> str:
     head = f"Live check of {check.tap_count} taps{' (updating...)' if running else ''}: "
     solution = check.solution
     if check.verdict == "inconsistent":
-        suspect = solution.suspect_tap
-        if suspect is None:
-            return (head + "INCONSISTENT, no pose explains the taps and no single tap is to blame: check the mesh, "
-                    "its units and the tip calibration.")
-        return (head + f"INCONSISTENT, tap {suspect.index + 1} lies about {suspect.distance_m * 1e3:.0f} mm off "
-                "the surface the others allow; if it missed the fixture, undo it (if last) or drop it on the "
-                "results screen.")
+        diagnosis = solution.diagnosis
+        cause = diagnosis.causes[0].message if diagnosis is not None else "check the mesh, its units and the tip " \
+            "calibration."
+        return head + f"INCONSISTENT, no pose explains the taps. Most likely: {cause}"
     if check.verdict == "undetermined":
         return (head + "the pose is not pinned down yet; keep tapping, on other faces too. Guaranteed so far: "
                 f"{bounds_text(check)}.")
@@ -67,25 +64,32 @@ def hover_question(plan: HoverPlan, simulated: bool) -> str:
 
 
 def identify_text(choices: list[FixtureChoice], verdicts: list[MeshVerdict], chosen: Path) -> str:
-    """Which of the offered fixtures the taps fit, one line each, then what to do."""
-    lines, fitting = [], []
+    """Which of the offered fixtures the taps fit, best fit first, one line each, then what to do."""
+    lines, fitting, open_ones = [], [], []
     chosen_fits = False
-    for choice, verdict in zip(choices, verdicts, strict=True):
-        is_chosen = choice.path.resolve() == chosen.resolve()
+    label_of = {verdict.mesh: choice.label for choice, verdict in zip(choices, verdicts, strict=True)}
+    for verdict in ranked(verdicts):
+        is_chosen = verdict.mesh.resolve() == chosen.resolve()
         mark = " (the chosen one)" if is_chosen else ""
-        lines.append(f"{verdict.verdict:9}  {choice.label}{mark}" + (f": {verdict.message}"
-                                                                   if verdict.verdict == "unreadable" else ""))
+        detail = {"unreadable": f": {verdict.message}",
+                  "fits": f": taps {verdict.rms_mm:.2f} mm off (RMS)" if verdict.rms_mm is not None else ""}
+        lines.append(f"{verdict.verdict:11}  {label_of[verdict.mesh]}{mark}{detail.get(verdict.verdict, '')}")
         if verdict.verdict == "fits":
-            fitting.append(choice.label)
+            fitting.append(label_of[verdict.mesh])
             chosen_fits = chosen_fits or is_chosen
-    if not fitting:
+        if verdict.verdict == "not decided":
+            open_ones.append(label_of[verdict.mesh])
+    if open_ones:
+        lines.append(f"Not decided yet for {', '.join(open_ones)}: the taps neither rule them out nor pin a pose "
+                     "down; tap more points, spread over the fixture.")
+    if not fitting and not open_ones:
         lines.append("No fixture fits these taps: check the mesh units, the tip calibration and the sample bound.")
     elif len(fitting) > 1:
         lines.append(f"{len(fitting)} fixtures fit these taps: tap features that differ between them.")
-    elif chosen_fits:
+    elif fitting and chosen_fits and not open_ones:
         lines.append("Only the chosen fixture fits these taps (a fixture is ruled out when no pose of it explains "
                      "them).")
-    else:
+    elif fitting and not chosen_fits:
         lines.append(f"The taps do not fit the chosen fixture; they fit {fitting[0]}. Leave (Esc), choose it on the "
                      "start screen and tap again.")
     return "\n".join(lines)

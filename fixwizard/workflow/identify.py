@@ -1,13 +1,20 @@
-"""Which fixture is this? The same taps against several meshes: a mesh for which no pose explains the taps
-is ruled out (the search keeps every pose that could explain them, so an empty set is a proof at any cell
-budget); a mesh with surviving poses fits as far as that budget can tell.
+"""Which fixture is this? The same taps against several meshes, each searched until it is decided.
 
-``fixwizard identify POINTS MESH [MESH ...]`` prints one line per mesh and warns when more than one fits;
-the sampling screen's "Which fixture?" runs the same against every mesh the wizard offers.
+A mesh for which no pose explains the taps is *ruled out* (the search keeps every pose that could explain
+them, so an empty set is a proof at any cell budget). A mesh whose set is pinned down (``unique`` or
+``ambiguous``) *fits*, ranked by how well its most probable pose explains the taps (the residuals, in mm). In
+between, the cell budget grows tenfold (``BUDGETS``) until one of the two, the largest budget or the time limit:
+then the mesh is *not decided*, never "fits".
+
+``fixwizard identify POINTS MESH [MESH ...]`` prints one line per mesh, best fit first, and what the verdicts
+mean together; the sampling screen's "Which fixture?" runs the same against every mesh the wizard offers.
 """
 
 import argparse
+import sys
 import threading
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -17,70 +24,133 @@ import numpy as np
 from fixwizard.errors import FixwizardError
 from fixwizard.fixture import load_fixture
 from fixwizard.points import load_points
-from fixwizard.solver.search import SearchProblem, search
-from fixwizard.solver.solve import validate_inputs
+from fixwizard.solver.solve import solve, validate_inputs
 from fixwizard.units import parse_length_m
+from fixwizard.workflow.live import tap_surface_distances_m
 
-DEFAULT_MAX_CELLS = 1e6
-Verdict = Literal["fits", "ruled out", "unreadable"]
+DEFAULT_MAX_CELLS = 1e7
+BUDGETS = (1e5, 1e6, 1e7, 1e8)  # tried in turn up to the largest budget
+DEFAULT_TIME_LIMIT_S = 120.0
+# The next budget costs about this many times the last one's time; it is not started if that would pass the limit.
+GROWTH = 6.0
+IDENTIFY_SAMPLES = 2000
+Verdict = Literal["fits", "ruled out", "not decided", "unreadable"]
 
 
 @dataclass(frozen=True)
 class MeshVerdict:
-    """One mesh's verdict; ``surviving_cells`` counts the poses' cells left at the budget (0 when ruled out)."""
+    """One mesh's verdict; ``rms_mm`` and ``worst_mm``: the taps' distances from the surface at the most
+    probable pose (fits and not decided; None otherwise); ``max_cells``: the budget the verdict was reached at."""
 
     mesh: Path
     verdict: Verdict
-    surviving_cells: int
     message: str
+    rms_mm: float | None = None
+    worst_mm: float | None = None
+    max_cells: float = 0.0
+
+
+@dataclass(frozen=True)
+class IdentifyStep:
+    """Progress: a mesh searched at a budget, and what that said so far."""
+
+    mesh: Path
+    max_cells: float
+    status: str
+    elapsed_s: float
 
 
 def identify(base_p_taps: np.ndarray, meshes: list[tuple[Path, str]], ball_diameter_m: float,
-             sample_bound_m: float, max_cells: float = DEFAULT_MAX_CELLS,
-             cancel: threading.Event | None = None) -> list[MeshVerdict]:
-    """The verdict of every mesh (path and its units, "m" or "mm") for the taps (N, 3, base frame, m); lengths
-    in m. A mesh that cannot be loaded gets the verdict "unreadable" with the loader's message instead of
-    stopping the others. Raises ``SearchCancelled`` when ``cancel`` is set meanwhile."""
+             sample_bound_m: float, max_cells: float = DEFAULT_MAX_CELLS, time_limit_s: float = DEFAULT_TIME_LIMIT_S,
+             cancel: threading.Event | None = None,
+             progress: Callable[[IdentifyStep], None] | None = None) -> list[MeshVerdict]:
+    """The verdict of every mesh (path and its units, "m" or "mm") for the taps (N, 3, base frame, m), in the
+    meshes' order; lengths in m. ``time_limit_s`` is shared by all meshes: mesh ``k`` of ``n`` must be decided by
+    ``k / n`` of it (time a mesh leaves goes to the next). A mesh that cannot be loaded gets "unreadable" with the
+    loader's message instead of stopping the others. Raises ``SearchCancelled`` when ``cancel`` is set meanwhile."""
     base_p_taps = np.asarray(base_p_taps, float)
     validate_inputs(base_p_taps, ball_diameter_m, sample_bound_m, sample_bound_m / 3.0, max_cells)
-    return [_verdict(base_p_taps, Path(mesh), units, ball_diameter_m, sample_bound_m, max_cells, cancel)
-            for mesh, units in meshes]
+    started = time.monotonic()
+    return [_verdict(base_p_taps, Path(mesh), units, ball_diameter_m, sample_bound_m, max_cells,
+                     started + time_limit_s * number / len(meshes), cancel, progress)
+            for number, (mesh, units) in enumerate(meshes, start=1)]
+
+
+RANK = {"fits": 0, "not decided": 1, "ruled out": 2, "unreadable": 3}
+
+
+def ranked(verdicts: list[MeshVerdict]) -> list[MeshVerdict]:
+    """Best fit first (smallest RMS), then not decided, ruled out and unreadable."""
+    return sorted(verdicts, key=lambda verdict: (RANK[verdict.verdict], verdict.rms_mm or 0.0))
 
 
 def _verdict(base_p_taps: np.ndarray, mesh: Path, mesh_units: str, ball_diameter_m: float, sample_bound_m: float,
-             max_cells: float, cancel: threading.Event | None) -> MeshVerdict:
+             max_cells: float, deadline: float, cancel: threading.Event | None,
+             progress: Callable[[IdentifyStep], None] | None) -> MeshVerdict:
+    """One mesh, searched at growing budgets until it is ruled out or pinned down, or ``deadline`` (monotonic s)
+    or ``max_cells`` stop it."""
     try:
         fixture = load_fixture(mesh, mesh_units)
     except FixwizardError as error:
-        return MeshVerdict(mesh, "unreadable", 0, str(error))
-    problem = SearchProblem(fixture.oracle, fixture.radius_m, base_p_taps, ball_diameter_m / 2.0, sample_bound_m)
-    tree = search(problem, max_cells, cancel=cancel)
-    survivors = None if tree is None else tree.final
-    if survivors is None or len(survivors) == 0:
-        return MeshVerdict(mesh, "ruled out", 0, "no pose of this mesh explains the taps")
-    count = len(survivors)
-    return MeshVerdict(mesh, "fits", count, f"{count:,} cells of poses explain the taps at this budget")
+        return MeshVerdict(mesh, "unreadable", str(error))
+    budgets = [budget for budget in BUDGETS if budget < max_cells] + [max_cells]
+    spent_s = 0.0
+    for budget in budgets:
+        started = time.monotonic()
+        solution = solve(fixture, base_p_taps, ball_diameter_m, sample_bound_m, max_cells=budget, cancel=cancel,
+                         max_samples=IDENTIFY_SAMPLES, diagnose_inconsistent=False)
+        spent_s = time.monotonic() - started
+        if progress is not None:
+            progress(IdentifyStep(mesh, budget, solution.status, spent_s))
+        if solution.status == "inconsistent":
+            return MeshVerdict(mesh, "ruled out", "no pose of this mesh explains the taps", max_cells=budget)
+        distances_mm = 1e3 * tap_surface_distances_m(fixture, base_p_taps, ball_diameter_m, solution.base_T_cad)
+        rms_mm, worst_mm = float(np.sqrt(np.mean(distances_mm**2))), float(np.max(np.abs(distances_mm)))
+        if solution.status in ("unique", "ambiguous"):
+            poses = "one pose explains" if solution.status == "unique" else f"{len(solution.modes)} poses explain"
+            return MeshVerdict(mesh, "fits", f"{poses} the taps; at the most probable the taps lie "
+                               f"{rms_mm:.2f} mm off the surface (RMS, worst {worst_mm:.2f} mm)", rms_mm, worst_mm,
+                               budget)
+        if time.monotonic() + GROWTH * spent_s > deadline:
+            break
+    return MeshVerdict(mesh, "not decided", f"neither ruled out nor pinned down within {solution.stats.max_cells:.0e} "
+                       f"cells (RMS {rms_mm:.2f} mm off the surface at the most probable pose so far)", rms_mm,
+                       worst_mm, solution.stats.max_cells)
 
 
 def summary_lines(verdicts: list[MeshVerdict]) -> list[str]:
-    """One line per mesh, then what the verdicts mean together."""
-    lines = [f"{verdict.verdict:10} {verdict.mesh}: {verdict.message}" for verdict in verdicts]
-    fitting = [verdict.mesh.name for verdict in verdicts if verdict.verdict == "fits"]
-    if not fitting:
+    """One line per mesh, best fit first, then what the verdicts mean together."""
+    verdicts = ranked(verdicts)
+    lines = [f"{verdict.verdict:11} {verdict.mesh}: {verdict.message}" for verdict in verdicts]
+    fitting = [verdict for verdict in verdicts if verdict.verdict == "fits"]
+    open_ones = [verdict.mesh.name for verdict in verdicts if verdict.verdict == "not decided"]
+    if len(fitting) > 1:
+        lines.append(f"warning: {len(fitting)} meshes fit these taps ({', '.join(v.mesh.name for v in fitting)}), "
+                     f"best {fitting[0].mesh.name}; tap features that differ between them")
+    if open_ones:
+        lines.append(f"not decided: {', '.join(open_ones)}; tap more points spread over the fixture, or give more "
+                     "time (--time-limit) or cells (--max-cells)")
+    if not fitting and not open_ones:
         lines.append("no mesh fits: check the units (--mesh-units), the tip calibration and the sample bound, or "
                      "tap again")
-    elif len(fitting) > 1:
-        lines.append(f"warning: {len(fitting)} meshes fit these taps ({', '.join(fitting)}); tap features that "
-                     "differ between them, or solve each at a larger --max-cells")
     return lines
 
 
+def _print_step(step: IdentifyStep) -> None:
+    print(f"  {step.mesh.name}: {step.max_cells:.0e} cells: {step.status} ({step.elapsed_s:.1f} s)", file=sys.stderr)
+
+
 def identify_command(args: argparse.Namespace) -> int:
-    """Run ``fixwizard identify``: exit 0 when some mesh fits, 2 when none does."""
+    """Run ``fixwizard identify``: exit 0 when exactly one mesh fits, 2 when none fits or may fit, 3 when several
+    fit, 4 when none fits but some are not decided."""
     verdicts = identify(load_points(args.points), [(Path(mesh), args.mesh_units) for mesh in args.meshes],
-                        parse_length_m(args.ball_diameter), parse_length_m(args.sample_bound), args.max_cells)
+                        parse_length_m(args.ball_diameter), parse_length_m(args.sample_bound), args.max_cells,
+                        args.time_limit, progress=None if args.quiet else _print_step)
     print("\n".join(summary_lines(verdicts)))
-    return 0 if any(verdict.verdict == "fits" for verdict in verdicts) else 2
+    fitting = sum(verdict.verdict == "fits" for verdict in verdicts)
+    if fitting:
+        return 0 if fitting == 1 else 3
+    return 4 if any(verdict.verdict == "not decided" for verdict in verdicts) else 2
 
 
 def register_identify_parser(commands, parse_cell_budget) -> None:
@@ -92,5 +162,8 @@ def register_identify_parser(commands, parse_cell_budget) -> None:
     parser.add_argument("--ball-diameter", required=True, help="diameter of the tip ball, e.g. 3mm")
     parser.add_argument("--mesh-units", choices=("m", "mm"), default="m", help="units of the mesh files")
     parser.add_argument("--max-cells", type=parse_cell_budget, default=DEFAULT_MAX_CELLS,
-                        help=f"cell budget per mesh (default {DEFAULT_MAX_CELLS:g})")
+                        help=f"largest cell budget per mesh (default {DEFAULT_MAX_CELLS:g})")
+    parser.add_argument("--time-limit", type=float, default=DEFAULT_TIME_LIMIT_S,
+                        help=f"seconds for all meshes together (default {DEFAULT_TIME_LIMIT_S:g})")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     parser.set_defaults(func=identify_command)

@@ -1,0 +1,64 @@
+"""Why no pose explains the taps, most likely cause first, on the paper's real expert run: a tap off the fixture
+is named with its distance at the pose the others fit, a wrong ball is not blamed on a tap, a sample bound too
+small is bracketed, and taps of another size than the mesh point at the mesh or its units."""
+
+import numpy as np
+import pytest
+from conftest import real_taps
+
+from fixwizard.fixture import load_fixture
+from fixwizard.solver.solve import solve
+
+BALL_M, BOUND_M = 0.003, 0.001
+
+
+@pytest.fixture(scope="module")
+def expert(real_data):
+    return load_fixture(real_data / "meshes" / "matlab_logo.ply"), real_taps(real_data, "expert")
+
+
+def _codes(solution) -> list[str]:
+    return [cause.code for cause in solution.diagnosis.causes]
+
+
+def test_a_tap_raised_50_mm_is_named_first_with_its_distance_at_the_pose_the_others_fit(expert):
+    fixture, taps = expert
+    raised = taps.copy()
+    raised[4, 2] += 0.05
+    solution = solve(fixture, raised, BALL_M, BOUND_M)
+    assert solution.status == "inconsistent"
+    assert _codes(solution)[0] == "suspect_tap" and solution.suspect_tap.index == 4
+    assert 0.035 < solution.suspect_tap.distance_m < 0.05  # raised 50 mm along z; the surface there is sloped
+    assert "Tap 5 lies" in solution.warnings[1].message
+
+
+def test_a_wrong_ball_diameter_is_not_blamed_on_a_tap(expert):
+    fixture, taps = expert
+    solution = solve(fixture, taps, 0.006, BOUND_M)
+    assert solution.status == "inconsistent"
+    assert _codes(solution)[0] == "ball_diameter" and "suspect_tap" not in _codes(solution)
+    assert solution.diagnosis.ball_diameter_m < 0.0055
+
+
+def test_a_sample_bound_too_small_is_bracketed(expert):
+    fixture, taps = expert
+    solution = solve(fixture, taps, BALL_M, 0.0002)
+    assert solution.status == "inconsistent"
+    assert _codes(solution) == ["sample_bound"]
+    ruled_out, not_ruled_out = solution.diagnosis.smallest_bound_m
+    assert 0.0002 <= ruled_out < not_ruled_out <= 0.001
+    assert solve(fixture, taps, BALL_M, ruled_out, max_cells=3e5, diagnose_inconsistent=False).status == "inconsistent"
+
+
+def test_taps_three_times_the_fixture_point_at_the_mesh_or_its_units(expert):
+    fixture, taps = expert
+    solution = solve(fixture, 3.0 * (taps - taps.mean(axis=0)) + taps.mean(axis=0), BALL_M, BOUND_M)
+    assert _codes(solution) == ["mesh_or_units"] and solution.diagnosis.smallest_bound_m is None
+    assert "the fixture is 255 mm across" in solution.diagnosis.causes[0].message
+
+
+def test_without_a_diagnosis_an_inconsistent_solve_says_only_that(expert):
+    fixture, taps = expert
+    solution = solve(fixture, taps, BALL_M, 0.0002, max_cells=3e5, diagnose_inconsistent=False)
+    assert solution.diagnosis is None and [warning.code for warning in solution.warnings] == ["inconsistent"]
+    assert np.isfinite(solution.stats.elapsed_s)
