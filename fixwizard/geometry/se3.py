@@ -35,6 +35,14 @@ def transform_points(a_T_b: np.ndarray, b_points: np.ndarray) -> np.ndarray:
     return np.asarray(b_points, float) @ a_T_b[:3, :3].T + a_T_b[:3, 3]
 
 
+def points_in_frames(a_R_b: np.ndarray, a_p_b: np.ndarray, a_points: np.ndarray) -> np.ndarray:
+    """Points (N, 3) given in frame a, in each of K frames b with ``a_T_b = (a_R_b (K, 3, 3), a_p_b (K, 3))``:
+    ``b_points`` (K, N, 3), i.e. ``a_R_b^T (a_p - a_p_b)``."""
+    a_R_b = np.asarray(a_R_b, float).reshape(-1, 3, 3)
+    offsets = np.asarray(a_points, float).reshape(1, -1, 3) - np.asarray(a_p_b, float).reshape(-1, 1, 3)
+    return np.einsum("kji,knj->kni", a_R_b, offsets)
+
+
 def from_ur_pose(ur_pose: np.ndarray) -> np.ndarray:
     """4x4 transform from a UR pose ``[x, y, z, rx, ry, rz]`` (m, rad)."""
     ur_pose = np.asarray(ur_pose, float)

@@ -22,7 +22,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from fixwizard.geometry.se3 import invert, transform_points
+from fixwizard.geometry.se3 import points_in_frames
 from fixwizard.solver.cells import CellSet
 from fixwizard.solver.mode_mass import laplace_peak
 from fixwizard.solver.search import SearchProblem, SearchTree, search
@@ -77,7 +77,7 @@ def _fits(problem: SearchProblem, max_cells: float, cancel: threading.Event | No
 
 def _residuals_m(problem: SearchProblem, base_T_fix: np.ndarray) -> np.ndarray:
     """Each tap's signed distance less the ball radius (m) at a pose."""
-    fix_p_taps = transform_points(invert(base_T_fix), problem.base_p_taps)
+    fix_p_taps = points_in_frames(base_T_fix[:3, :3], base_T_fix[:3, 3], problem.base_p_taps)[0]
     return problem.oracle.signed_distance_m(fix_p_taps) - problem.ball_radius_m
 
 
@@ -95,9 +95,9 @@ def best_fit(problem: SearchProblem, cells: CellSet, extent_m: float) -> np.ndar
     base_R_fix, _ = cells.distinct_rotation_matrices()
     rotations = base_R_fix[cells.rotation_index[chosen]]
     positions = cells.positions_m(chosen)
-    fix_p_taps = np.einsum("nji,tnj->tni", rotations, problem.base_p_taps[:, None, :] - positions[None])
-    residuals = problem.oracle.signed_distance_m(fix_p_taps.reshape(-1, 3)).reshape(len(problem.base_p_taps), -1)
-    chi2 = np.sum((residuals - problem.ball_radius_m) ** 2, axis=0)
+    fix_p_taps = points_in_frames(rotations, positions, problem.base_p_taps)
+    residuals = problem.oracle.signed_distance_m(fix_p_taps.reshape(-1, 3)).reshape(len(chosen), -1)
+    chi2 = np.sum((residuals - problem.ball_radius_m) ** 2, axis=1)
     peaks = []
     for row in np.argsort(chi2)[:FIT_STARTS]:
         start = np.eye(4)
@@ -161,8 +161,7 @@ def _suspect(problem: SearchProblem, residuals_m: np.ndarray, extent_m: float, m
         if tree is None:
             continue
         pose = best_fit(others, tree.final.cells, extent_m)
-        fix_p_tap = transform_points(invert(pose), problem.base_p_taps[index:index + 1])
-        distance = float(problem.oracle.signed_distance_m(fix_p_tap)[0] - problem.ball_radius_m)
+        distance = float(_residuals_m(problem, pose)[index])
         return SuspectTap(int(index), distance)
     return None
 

@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 
 from fixwizard.fixture import DistanceOracle
 from fixwizard.geometry.meb import minimum_enclosing_ball
-from fixwizard.geometry.se3 import make_transform
+from fixwizard.geometry.se3 import make_transform, points_in_frames
 from fixwizard.geometry.so3_grid import chord, rotation_angles
 from fixwizard.solver.cells import CellSet
 from fixwizard.solver.distance_grid import distance_grid_for
@@ -24,6 +24,7 @@ MIN_EFFECTIVE_SAMPLES = 1000
 # PROPOSAL_INFLATION in scale, and never narrower per coordinate than a cell's own spread scaled by the previous
 # effective sample size), the rest uniform over the cells so that no part of the set goes unsampled; up to
 # FITTED_ROUNDS of them while they gain.
+QUERY_POINTS = 2_000_000  # tap points per distance query: bounded memory for any number of taps
 PROPOSAL_SHARE = 0.8
 PROPOSAL_DOF = 5.0
 PROPOSAL_INFLATION = 1.5
@@ -158,12 +159,18 @@ def _uniform_poses(cells: CellSet, cell_index: np.ndarray, rng: np.random.Genera
 
 def _log_likelihood(oracle: DistanceOracle, base_p_taps: np.ndarray, ball_radius_m: float, sigma_m: float,
                     rotations: Rotation, positions_m: np.ndarray) -> np.ndarray:
-    """Log-likelihood (up to a constant) of each pose ``base_T_fix``: Gaussian residuals of every tap."""
-    fix_R_base = rotations.inv()
-    fix_p_taps = np.concatenate([fix_R_base.apply(tap - positions_m) for tap in base_p_taps])
-    outside = distance_grid_for(oracle).interval_m(fix_p_taps)[0] > 0.0  # no inside test needed there
-    residual = oracle.signed_distance_m(fix_p_taps, ~outside) - ball_radius_m
-    return -0.5 * np.sum((residual.reshape(len(base_p_taps), -1) / sigma_m) ** 2, axis=0)
+    """Log-likelihood (up to a constant) of each pose ``base_T_fix``: Gaussian residuals of every tap; poses in
+    batches of at most ``QUERY_POINTS`` tap points."""
+    matrices = rotations.as_matrix().reshape(-1, 3, 3)
+    batch = max(1, QUERY_POINTS // len(base_p_taps))
+    log_likelihood = np.empty(len(matrices))
+    for first in range(0, len(matrices), batch):
+        rows = slice(first, first + batch)
+        fix_p_taps = points_in_frames(matrices[rows], positions_m[rows], base_p_taps).reshape(-1, 3)
+        outside = distance_grid_for(oracle).interval_m(fix_p_taps)[0] > 0.0  # no inside test needed there
+        residual = oracle.signed_distance_m(fix_p_taps, ~outside) - ball_radius_m
+        log_likelihood[rows] = -0.5 * np.sum((residual.reshape(-1, len(base_p_taps)) / sigma_m) ** 2, axis=1)
+    return log_likelihood
 
 
 def _normalised(log_weight: np.ndarray) -> np.ndarray:

@@ -21,7 +21,7 @@ from scipy.spatial.transform import Rotation
 import trimesh
 
 from fixwizard.fixture import DistanceOracle, Fixture
-from fixwizard.geometry.se3 import invert, make_transform
+from fixwizard.geometry.se3 import invert, make_transform, points_in_frames
 from fixwizard.solver.cells import CellSet
 from fixwizard.solver.estimates import Samples
 
@@ -43,11 +43,9 @@ def _residuals(oracle: DistanceOracle, base_p_taps: np.ndarray, ball_radius_m: f
     """Tap residuals ``(d(x_i) - r_ball) / sigma`` (K, N) at the pose perturbed by each of ``steps`` (K, 6), in
     one distance query (``signed``: negative inside a closed mesh)."""
     rotations = base_R_fix * Rotation.from_rotvec(steps[:, :3] / radius_m)
-    positions = base_p_fix + steps[:, 3:]
-    fix_p_taps = np.concatenate([rotations.inv().apply(tap - positions) for tap in base_p_taps])
+    fix_p_taps = points_in_frames(rotations.as_matrix(), base_p_fix + steps[:, 3:], base_p_taps).reshape(-1, 3)
     distances = oracle.signed_distance_m(fix_p_taps, np.full(len(fix_p_taps), signed))
-    distances = distances.reshape(len(base_p_taps), len(steps))
-    return ((distances - ball_radius_m) / sigma_m).T
+    return (distances.reshape(len(steps), len(base_p_taps)) - ball_radius_m) / sigma_m
 
 
 @dataclass(frozen=True)
