@@ -6,14 +6,13 @@ from pathlib import Path
 import pytest
 
 from fixwizard.calibration.store import load_calibration
-from fixwizard.workflow.tip_calibration import calibrate_tip_command, register_calibrate_tip_parser
+from fixwizard.cli import build_parser
+from fixwizard.workflow.tip_calibration import calibrate_tip_command
 from test_calibration_helpers import real_calib_dir
 
 
 def parse(argv: list[str]) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="fixwizard")
-    register_calibrate_tip_parser(parser.add_subparsers(dest="command"))
-    return parser.parse_args(argv)
+    return build_parser().parse_args(argv)
 
 
 def linked_series(calib: Path, folder: Path, *ranges: range) -> Path:
@@ -37,7 +36,7 @@ def test_the_parser_offers_the_documented_options():
                   "-o", "calibrations/bench.yaml"])
     assert (args.pivot, args.table, args.tilted, args.table_coarse, args.ball_diameter, args.output, args.robot) == \
         ("p", "t", "s", None, "3mm", "calibrations/bench.yaml", None)
-    assert args.func is calibrate_tip_command
+    assert args.handler == "fixwizard.workflow.tip_calibration:calibrate_tip_command"
 
 
 def test_real_data_gives_a_loadable_calibration_and_prints_the_figures(tmp_path, capsys):

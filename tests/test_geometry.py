@@ -125,3 +125,13 @@ def test_position_cell_bound_holds_for_points_in_the_cell():
         children = grid.children(cells).reshape(-1, 8, 3)
         finer = np.array([grid.cell_of(level + 1, point) for point in points[:500]])
         assert np.all(np.any(np.all(children == finer[:, None, :], axis=2), axis=1))
+
+
+@pytest.mark.parametrize("gap", [1e-3, 1e-5, 1e-7, 1e-9, 1e-11, 0.0])
+def test_the_start_box_of_two_nearly_tangent_balls_holds_their_touching_point(gap):
+    """cvxopt raises ValueError ('math domain error') on such problems; the box falls back to the balls' boxes."""
+    radius = 0.13
+    centres = np.array([[0.4, 0.0, 0.1], [0.4 + 2 * radius - gap, 0.0, 0.1]])
+    low, high = ball_intersection_box(centres, radius)
+    touching = centres.mean(axis=0)
+    assert np.all(low <= touching) and np.all(touching <= high)

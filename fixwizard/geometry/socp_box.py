@@ -1,7 +1,9 @@
 """Axis-aligned box around the intersection of equal balls, by six second-order cone programs (cvxopt).
 
 The fixture centre lies within ``radius`` of every tap, so it lies in the intersection of
-the balls ``|t - p_i| <= radius``; the box is that intersection's bounding box.
+the balls ``|t - p_i| <= radius``; the box is that intersection's bounding box. Where cvxopt does not
+converge or fails (it raises ``ValueError`` on a singular system when two balls barely touch), the box is
+the intersection of the balls' own boxes instead: looser, still a superset.
 """
 
 import numpy as np
@@ -25,7 +27,10 @@ def ball_intersection_box(centers_m: np.ndarray, radius_m: float) -> tuple[np.nd
         for sign, bound in ((1.0, low), (-1.0, high)):
             objective = np.zeros(3)
             objective[axis] = sign
-            solution = _quiet_socp(matrix(objective), cone_matrices, cone_offsets)
+            try:
+                solution = _quiet_socp(matrix(objective), cone_matrices, cone_offsets)
+            except (ValueError, ArithmeticError):
+                return _fallback_box(scaled, origin, radius_m)
             if solution["status"] != "optimal":
                 return _fallback_box(scaled, origin, radius_m)
             bound[axis] = solution["x"][axis]
@@ -48,6 +53,6 @@ def _fallback_box(scaled: np.ndarray, origin: np.ndarray, radius_m: float) -> tu
     """Intersection of the balls' own boxes: a looser superset used when the cone programs do not converge."""
     low = np.max(scaled - 1.0, axis=0)
     high = np.min(scaled + 1.0, axis=0)
-    if np.any(low > high):
+    if np.any(low > high + 2 * SOLVER_MARGIN):
         return None
     return origin + (low - SOLVER_MARGIN) * radius_m, origin + (high + SOLVER_MARGIN) * radius_m

@@ -37,6 +37,7 @@ from fixwizard.solver.distance_grid import DistanceGrid, distance_grid_for
 from fixwizard.solver.interval_kernel import NOT_REJECTED, cheap_pass, query_band
 
 QUERY_CHUNK = 1 << 18  # cells per batch; a multiple of 8 so batches hold whole families
+CHUNK_CELL_TAPS = 1 << 23  # at most this many cell-tap pairs per batch (~100 MB of per-tap arrays), any tap count
 RESTART_ROOT_SHRINK = 0.95
 # The uniform descent stops before a level would evaluate more than UNIFORM_SHARE of the cell budget
 # (refining the hull takes over from there), unless its cells are still coarse (a cell spans more than
@@ -240,8 +241,9 @@ def _filter(problem: SearchProblem, cells: CellSet, parents: Survivors | None, t
     grid = distance_grid_for(problem.oracle)
     if parent_index is None:
         parent_index = np.arange(len(cells)) // 8 if parents is not None else np.full(len(cells), -1)
-    starts = range(0, len(cells), QUERY_CHUNK)
-    parts = [_filter_chunk(problem, frames, first, min(QUERY_CHUNK, len(cells) - first), parents, parent_index,
+    chunk = max(8, min(QUERY_CHUNK, CHUNK_CELL_TAPS // len(problem.base_p_taps)) // 8 * 8)
+    starts = range(0, len(cells), chunk)
+    parts = [_filter_chunk(problem, frames, first, min(chunk, len(cells) - first), parents, parent_index,
                            grid, tap_order, cancel) for first in starts]
     alive, rotated_positions, low, high, faces, rejected_by = (np.concatenate([part[i] for part in parts])
                                                                for i in range(6))

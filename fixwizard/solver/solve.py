@@ -21,6 +21,7 @@ from fixwizard.solver.estimates import (Bounds, Interval, Samples, bound_centre,
                                         rotation_center, sample_cells)
 from fixwizard.solver.mode_mass import ModeLikelihood, mode_shares
 from fixwizard.solver.refine import refined_largest_figures
+from fixwizard.solver.resources import available_memory_bytes, largest_cell_budget, search_peak_bytes
 from fixwizard.solver.modes import rotation_modes
 from fixwizard.solver.cells import CellSet
 from fixwizard.solver.search import (SearchProblem, SearchProgress, SearchTree, Survivors, add_taps, search,
@@ -35,6 +36,8 @@ MIN_MAX_CELLS = 72 * 8
 DIAGNOSIS_MAX_CELLS = 1e6
 DEFAULT_MAX_SAMPLES = 40_000
 MIN_TAPS = 3
+MAX_TAPS = 1000  # more is a point cloud, not taps: this search keeps an interval per cell and tap
+MAX_TAP_DISTANCE_M = 20.0  # no robot arm reaches farther from its base: millimetres read as metres
 MAX_SAMPLE_BOUND_M = 0.02  # larger bounds are a unit mistake (1 for 1 mm), not a robot
 MAX_BALL_DIAMETER_M = 0.05
 
@@ -115,9 +118,16 @@ def validate_inputs(base_p_taps: np.ndarray, ball_diameter_m: float, sample_boun
         count = f"{len(base_p_taps)} tap is" if len(base_p_taps) == 1 else f"{len(base_p_taps)} taps are"
         raise InputError(f"{count} not enough: at least {MIN_TAPS} are needed to fix a pose, "
                          "and 10-20 taps spread over several faces give tight bounds")
+    if len(base_p_taps) > MAX_TAPS:
+        raise InputError(f"{len(base_p_taps)} taps are far more than a calibration needs (10-20 spread over the "
+                         f"fixture; at most {MAX_TAPS}): is this a point cloud? Give the tapped ball centres only")
     bad = np.flatnonzero(~np.all(np.isfinite(base_p_taps), axis=1))
     if len(bad):
         raise InputError(f"tap {bad[0] + 1} has a coordinate that is not a finite number; fix or remove it")
+    far = np.flatnonzero(np.linalg.norm(base_p_taps, axis=1) > MAX_TAP_DISTANCE_M)
+    if len(far):
+        raise InputError(f"tap {far[0] + 1} lies {np.linalg.norm(base_p_taps[far[0]]):.3g} m from the robot base, "
+                         "beyond any robot arm's reach: the points must be in metres (millimetres read as metres?)")
     if not np.isfinite(sample_bound_m) or sample_bound_m <= 0:
         raise InputError(f"the sample bound must be a positive length, not {sample_bound_m} m; take it from the "
                          "tip calibration (typically 0.5-2 mm)")
@@ -131,8 +141,8 @@ def validate_inputs(base_p_taps: np.ndarray, ball_diameter_m: float, sample_boun
                          "e.g. --ball-diameter 3mm")
     if not np.isfinite(sigma_m) or sigma_m <= 0:
         raise InputError(f"sigma must be a positive length, not {sigma_m} m")
-    if not max_cells >= MIN_MAX_CELLS:
-        raise InputError(f"the cell budget must be at least {MIN_MAX_CELLS}, not {max_cells}")
+    if not max_cells >= MIN_MAX_CELLS or not np.isfinite(max_cells):
+        raise InputError(f"the cell budget must be a number of at least {MIN_MAX_CELLS}, not {max_cells}")
 
 
 def _mode_separation(modes: list[Mode]) -> tuple[float, float]:
@@ -224,6 +234,15 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
     sigma_m = sample_bound_m / 3.0 if sigma_m is None else sigma_m
     validate_inputs(base_p_taps, ball_diameter_m, sample_bound_m, sigma_m, max_cells)
     started = time.perf_counter()
+    budget_warnings = []
+    largest = largest_cell_budget(len(base_p_taps), available_memory_bytes())
+    if max_cells > largest:
+        budget_warnings.append(SolveWarning(
+            "cell_budget_capped",
+            f"The cell budget was capped at {largest:.2g} cells (from {max_cells:.2g}): with {len(base_p_taps)} taps "
+            f"the search at {max_cells:.2g} cells could need {search_peak_bytes(max_cells, len(base_p_taps)) / 1e9:.1f}"
+            f" GB, and {available_memory_bytes() / 1e9:.1f} GB are free."))
+        max_cells = max(largest, MIN_MAX_CELLS)
     problem = SearchProblem(fixture.oracle, fixture.radius_m, base_p_taps, ball_diameter_m / 2.0, sample_bound_m)
     if previous is not None and previous.extends_to(problem) and len(base_p_taps) == len(previous.problem.base_p_taps):
         tree = previous.tree
@@ -233,7 +252,7 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
         tree = search(problem, max_cells, progress, cancel)
     survivors = None if tree is None else tree.final
     cells = None if survivors is None else survivors.cells
-    warnings = [SolveWarning(code, message) for code, message in fixture.warnings]
+    warnings = [SolveWarning(code, message) for code, message in fixture.warnings] + budget_warnings
     fix_T_cad = fixture.fix_T_cad
     def inconsistent() -> Solution:
         diagnosis = diagnose(problem, min(max_cells, DIAGNOSIS_MAX_CELLS), cancel) if diagnose_inconsistent else None

@@ -23,14 +23,15 @@ import numpy as np
 
 from fixwizard.errors import FixwizardError
 from fixwizard.fixture import load_fixture
+from fixwizard.interrupt import run_interruptibly
 from fixwizard.points import load_points
 from fixwizard.solver.solve import solve, validate_inputs
 from fixwizard.units import parse_length_m
 from fixwizard.workflow.live import tap_surface_distances_m
 
 DEFAULT_MAX_CELLS = 1e7
-BUDGETS = (1e5, 1e6, 1e7, 1e8)  # tried in turn up to the largest budget
 DEFAULT_TIME_LIMIT_S = 120.0
+BUDGETS = (1e5, 1e6, 1e7, 1e8)  # tried in turn up to the largest budget
 # The next budget costs about this many times the last one's time; it is not started if that would pass the limit.
 GROWTH = 6.0
 IDENTIFY_SAMPLES = 2000
@@ -143,27 +144,13 @@ def _print_step(step: IdentifyStep) -> None:
 def identify_command(args: argparse.Namespace) -> int:
     """Run ``fixwizard identify``: exit 0 when exactly one mesh fits, 2 when none fits or may fit, 3 when several
     fit, 4 when none fits but some are not decided."""
-    verdicts = identify(load_points(args.points), [(Path(mesh), args.mesh_units) for mesh in args.meshes],
-                        parse_length_m(args.ball_diameter), parse_length_m(args.sample_bound), args.max_cells,
-                        args.time_limit, progress=None if args.quiet else _print_step)
+    base_p_taps = load_points(args.points)
+    meshes = [(Path(mesh), args.mesh_units) for mesh in args.meshes]
+    verdicts = run_interruptibly(lambda cancel: identify(
+        base_p_taps, meshes, parse_length_m(args.ball_diameter), parse_length_m(args.sample_bound), args.max_cells,
+        args.time_limit, cancel, None if args.quiet else _print_step))
     print("\n".join(summary_lines(verdicts)))
     fitting = sum(verdict.verdict == "fits" for verdict in verdicts)
     if fitting:
         return 0 if fitting == 1 else 3
     return 4 if any(verdict.verdict == "not decided" for verdict in verdicts) else 2
-
-
-def register_identify_parser(commands, parse_cell_budget) -> None:
-    """Add the ``identify`` sub-command to the CLI's sub-parsers."""
-    parser = commands.add_parser("identify", help="which of several meshes can the taps belong to?")
-    parser.add_argument("points", metavar="POINTS", help="taps: YAML {frame: base, points_m: [...]} or CSV x,y,z")
-    parser.add_argument("meshes", metavar="MESH", nargs="+", help="candidate fixture meshes (STL, PLY or OBJ)")
-    parser.add_argument("--sample-bound", required=True, help="bound on each tap's error, e.g. 1mm")
-    parser.add_argument("--ball-diameter", required=True, help="diameter of the tip ball, e.g. 3mm")
-    parser.add_argument("--mesh-units", choices=("m", "mm"), default="m", help="units of the mesh files")
-    parser.add_argument("--max-cells", type=parse_cell_budget, default=DEFAULT_MAX_CELLS,
-                        help=f"largest cell budget per mesh (default {DEFAULT_MAX_CELLS:g})")
-    parser.add_argument("--time-limit", type=float, default=DEFAULT_TIME_LIMIT_S,
-                        help=f"seconds for all meshes together (default {DEFAULT_TIME_LIMIT_S:g})")
-    parser.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
-    parser.set_defaults(func=identify_command)

@@ -81,20 +81,3 @@ def calibrate_tip_command(args: argparse.Namespace) -> int:
     print("\n".join(summary_lines(calibration)))
     print(f"tip calibration written to {output}")
     return 0
-
-
-def register_calibrate_tip_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    """Add the ``calibrate-tip`` sub-command to the ``fixwizard`` command's sub-parsers."""
-    parser = subparsers.add_parser(
-        "calibrate-tip", help="calibrate the ball tip from recorded flange poses; write calibrations/NAME.yaml",
-        description="Calibrate the tool tip (ball centre in the flange frame) from folders of UR flange *.pose "
-                    "files (x y z rx ry rz, m and rad), and propose the sample error bound.")
-    parser.add_argument("--pivot", required=True, metavar="DIR", help="poses turning the tool about one point (3+)")
-    parser.add_argument("--table", required=True, metavar="DIR", help="table taps with one fixed tool orientation")
-    parser.add_argument("--tilted", required=True, metavar="DIR", help="table taps at tilts of 10 to 30 degrees")
-    parser.add_argument("--table-coarse", metavar="DIR", help="three table taps A, B (corner), C for the table frame")
-    parser.add_argument("--ball-diameter", required=True, help="diameter of the tip ball, e.g. 3mm")
-    parser.add_argument("-o", "--output", required=True, help="calibration file to write, e.g. calibrations/NAME.yaml")
-    parser.add_argument("--robot", help="robot identity to record, e.g. its serial number")
-    parser.set_defaults(func=calibrate_tip_command)
-    return parser

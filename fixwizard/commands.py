@@ -1,0 +1,82 @@
+"""The ``fixwizard`` sub-commands' work: each takes the parsed arguments and returns the exit code. Imported only
+once a command has been chosen (the heavy libraries load here, not for ``--help``)."""
+
+import argparse
+import sys
+from pathlib import Path
+
+from fixwizard import report
+from fixwizard.atomic import check_output
+from fixwizard.errors import InputError
+from fixwizard.interrupt import run_interruptibly
+from fixwizard.points import write_points
+from fixwizard.solver.search import SearchProgress
+from fixwizard.units import parse_length_m
+from fixwizard.workflow.import_poses import import_pose_dir, load_tip
+from fixwizard.workflow.solve_run import SolveRequest, run_solve, summary_lines
+from fixwizard.exit_codes import EXIT_CODES, EXIT_OK
+
+
+def _print_progress(step: SearchProgress) -> None:
+    print(f"  level rotation {step.rotation_level} / position {step.position_level}: {step.survivors} of "
+          f"{step.evaluated} cells survive ({step.elapsed_s:.1f} s)", file=sys.stderr)
+
+
+def _lengths_from(args: argparse.Namespace) -> tuple[float, float]:
+    """Ball diameter and sample bound (m) from the flags, else from the tip calibration."""
+    tip = load_tip(args.calibration) if args.calibration else None
+    ball = parse_length_m(args.ball_diameter) if args.ball_diameter else (tip.ball_diameter_m if tip else None)
+    bound = parse_length_m(args.sample_bound) if args.sample_bound else (tip.sample_bound_m if tip else None)
+    if ball is None or bound is None:
+        raise InputError("give --ball-diameter and --sample-bound (e.g. --ball-diameter 3mm --sample-bound 1mm), "
+                         "or --calibration with a tip calibration that holds them")
+    return ball, bound
+
+
+def _report_path(args: argparse.Namespace) -> Path:
+    """``-o``, or POINTS with ``.report.yaml`` (refused for a POINTS that is no file, e.g. /dev/stdin)."""
+    if args.output:
+        return Path(args.output)
+    points = Path(args.points)
+    if points.exists() and not points.is_file():
+        raise InputError(f"POINTS {points} is not a regular file, so there is no folder beside it for the report: "
+                         "give the report path with -o, e.g. -o report.yaml")
+    return points.with_suffix(".report.yaml")
+
+
+def solve_command(args: argparse.Namespace) -> int:
+    ball_diameter_m, sample_bound_m = _lengths_from(args)
+    request = SolveRequest(Path(args.mesh), Path(args.points), ball_diameter_m, sample_bound_m, args.mesh_units,
+                           parse_length_m(args.sigma) if args.sigma else None, args.max_cells)
+    output = _report_path(args)
+    check_output(output, [("mesh", args.mesh), ("POINTS file", args.points), ("tip calibration", args.calibration)],
+                 "give another report path with -o, e.g. -o report.yaml")
+    outcome = run_interruptibly(lambda cancel: run_solve(request, None if args.quiet else _print_progress, cancel))
+    print("\n".join(summary_lines(outcome)))
+    report.write(output, outcome.report)
+    print(f"report written to {output}")
+    return EXIT_CODES[outcome.solution.status]
+
+
+def wizard_command(args: argparse.Namespace) -> int:
+    if not (sys.stdin.isatty() and sys.stdout.isatty()):
+        raise InputError("the wizard needs an interactive terminal (its input or output is not one here); run "
+                         "fixwizard in a terminal or over SSH, or use a command such as `fixwizard solve` in scripts "
+                         "(see fixwizard --help)")
+    from fixwizard.tui.app import FixwizardApp
+    from fixwizard.tui.launch import simulated_context, ur_context
+
+    context = ur_context(args.robot) if args.robot else simulated_context(args.seed)
+    FixwizardApp(context, args.resume).run()
+    context.robot.close()
+    return EXIT_OK
+
+
+def import_poses_command(args: argparse.Namespace) -> int:
+    pose_files = sorted(Path(args.directory).glob("*.pose")) if Path(args.directory).is_dir() else []
+    check_output(args.output, [("tip file", args.tip), *(("recorded pose file", path) for path in pose_files)],
+                 "give another POINTS path with -o, e.g. -o points.yaml")
+    paths, base_p_taps = import_pose_dir(args.directory, load_tip(args.tip))
+    write_points(args.output, base_p_taps, source=[path.name for path in paths], tip=str(args.tip))
+    print(f"{len(base_p_taps)} ball centres written to {args.output}")
+    return EXIT_OK
