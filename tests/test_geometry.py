@@ -135,3 +135,19 @@ def test_the_start_box_of_two_nearly_tangent_balls_holds_their_touching_point(ga
     low, high = ball_intersection_box(centres, radius)
     touching = centres.mean(axis=0)
     assert np.all(low <= touching) and np.all(touching <= high)
+
+
+def test_the_finest_rotation_level_still_holds_each_rotation_within_gamma_of_its_cell_centre():
+    """Cell ids are int64: level 19 would overflow (and did place rotations in cells 130 degrees away), so the
+    grid stops at level 18 and the search then splits positions only."""
+    from fixwizard.geometry.so3_grid import MAX_LEVEL, RotationGrid
+
+    grid = RotationGrid()
+    rotations = Rotation.random(2000, random_state=3)
+    for level in (MAX_LEVEL - 2, MAX_LEVEL):
+        cells = grid.cell_of(level, rotations)
+        assert np.all(cells >= 0) and np.all(cells < grid.n_cells(level))
+        angles = (grid.centers(level, cells).inv() * rotations).magnitude()
+        assert np.all(angles <= grid.gamma(level, cells))
+    with pytest.raises(ValueError):
+        grid.children(MAX_LEVEL, cells[:1])

@@ -4,6 +4,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+# Cells are int32 coordinates: below 2^31 per axis. Level 30 cells of a 1 m cube are 1 nm across.
+MAX_LEVEL = 30
 CHILD_OFFSETS = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=np.int32)
 
 

@@ -30,6 +30,8 @@ from scipy.spatial.transform import Rotation
 BASE_TILTS = 6
 BASE_PIXELS = 12
 CELLS_PER_LEVEL0 = BASE_PIXELS * BASE_TILTS
+# Cell ids ``pixel * n_tilts + tilt`` are int64: 72 * 8^18 < 2^63 < 72 * 8^19. Level 18 cells are 2e-6 rad across.
+MAX_LEVEL = 18
 BOUNDARY_STEPS = 32
 LIPSCHITZ_G = 2.0
 _EZ = np.array([0.0, 0.0, 1.0])
@@ -117,7 +119,9 @@ class RotationGrid:
         return 2.0 * np.pi / RotationGrid.n_tilts(level)
 
     def children(self, level: int, cells: np.ndarray) -> np.ndarray:
-        """The 8 children at ``level + 1`` of each cell, (8N,), grouped per parent."""
+        """The 8 children at ``level + 1`` of each cell, (8N,), grouped per parent (``level < MAX_LEVEL``)."""
+        if level >= MAX_LEVEL:
+            raise ValueError(f"rotation cells go no finer than level {MAX_LEVEL}")
         pixels, tilts = np.divmod(cells, self.n_tilts(level))
         child_pixels = 4 * pixels[:, None, None] + np.arange(4)[None, :, None]
         child_tilts = 2 * tilts[:, None, None] + np.arange(2)[None, None, :]

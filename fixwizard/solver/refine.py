@@ -15,7 +15,7 @@ import threading
 import numpy as np
 
 from fixwizard.solver.estimates import BoundCentre, cell_bound_figures
-from fixwizard.solver.search import SearchProblem, Survivors, filter_cells, split
+from fixwizard.solver.search import SearchProblem, Survivors, filter_cells, split, splittable
 
 OUTER_FRACTION = 0.97
 MAX_ROUNDS = 40
@@ -33,8 +33,8 @@ def refined_largest_figures(problem: SearchProblem, survivors: Survivors, centre
     pools = [pool_of(survivors)]
     largest = pools[0][1].max(axis=1)
     for _ in range(MAX_ROUNDS):
-        outer = [np.max(figures / np.maximum(largest[:, None], 1e-300), axis=0) > OUTER_FRACTION
-                 for _, figures in pools]
+        outer = [(np.max(figures / np.maximum(largest[:, None], 1e-300), axis=0) > OUTER_FRACTION)
+                 & splittable(cells.cells) for cells, figures in pools]
         wanted = 8 * sum(int(np.count_nonzero(mask)) for mask in outer)
         if wanted == 0 or wanted > budget:
             break

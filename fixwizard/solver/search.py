@@ -29,7 +29,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from fixwizard.fixture import DistanceOracle
+from fixwizard.geometry.octree import MAX_LEVEL as POSITION_MAX_LEVEL
 from fixwizard.geometry.octree import PositionGrid
+from fixwizard.geometry.so3_grid import MAX_LEVEL as ROTATION_MAX_LEVEL
 from fixwizard.geometry.so3_grid import chord
 from fixwizard.geometry.socp_box import ball_intersection_box
 from fixwizard.solver.cells import CellSet, root_cells
@@ -253,10 +255,20 @@ def _filter(problem: SearchProblem, cells: CellSet, parents: Survivors | None, t
 
 
 def rotation_splits_first(cells: CellSet, problem: SearchProblem) -> bool:
-    """Split rotations when their largest displacement at the fixture radius exceeds the position bound."""
+    """Split rotations when their largest displacement at the fixture radius exceeds the position bound (and they
+    are not at the grid's finest level)."""
+    if cells.rotation_level >= ROTATION_MAX_LEVEL:
+        return False
+    if cells.position_level >= POSITION_MAX_LEVEL:
+        return True
     gamma = float(np.max(cells.rotation_grid.gamma(cells.rotation_level, cells.rotation_ids)))
     rotation_bound = problem.fixture_radius_m * chord(gamma)
     return rotation_bound >= cells.position_bound_m
+
+
+def splittable(cells: CellSet) -> bool:
+    """Whether the cells can be split once more (both grids have a finest level)."""
+    return cells.rotation_level < ROTATION_MAX_LEVEL or cells.position_level < POSITION_MAX_LEVEL
 
 
 def split(survivors: Survivors, problem: SearchProblem) -> CellSet:
@@ -294,7 +306,7 @@ def search_budget(max_cells: float) -> float:
 def _descends(problem: SearchProblem, tree: SearchTree, max_cells: float) -> bool:
     """Whether the uniform descent splits the finest survivors once more within the cell budget."""
     cells = tree.final.cells
-    if len(cells) == 0 or 8 * len(cells) > max_cells:
+    if len(cells) == 0 or 8 * len(cells) > max_cells or not splittable(cells):
         return False
     if 8 * len(cells) <= search_budget(max_cells):
         return True
