@@ -12,7 +12,6 @@ from pathlib import Path
 
 import igl
 import numpy as np
-import open3d as o3d
 import trimesh
 
 from fixwizard.errors import MeshError, MeshUnitsError
@@ -22,6 +21,9 @@ from fixwizard.geometry.se3 import make_transform
 from fixwizard.mesh_hygiene import clean_mesh, refuse_non_finite
 
 METRES_PER_UNIT = {"m": 1.0, "mm": 1e-3}
+# Rays for the parity cross-check of inside tests run along this direction: off every axis and diagonal, so that
+# rays graze the edges of axis-aligned CAD faces as rarely as possible.
+PARITY_DIRECTION = np.array([0.5773, 0.5775, 0.5771]) / np.linalg.norm([0.5773, 0.5775, 0.5771])
 MESH_SUFFIXES = (".stl", ".ply", ".obj")
 PLAUSIBLE_SIZE_M = (0.005, 2.5)
 
@@ -66,7 +68,7 @@ class DistanceOracle:
     Distances are guaranteed intervals from the float64 hierarchy of ``geometry.mesh_distance`` (any triangle
     shape). Signs (closed, consistently oriented meshes only) come from the angle-weighted pseudonormal of the
     closest feature (face, edge or vertex; Baerentzen and Aanaes 2005), which is exact for a closed manifold
-    mesh; Open3D's ray-parity occupancy cross-checks it, and the exact generalised winding number (libigl)
+    mesh; the parity of a ray's crossings cross-checks it, and the exact generalised winding number (libigl)
     settles every disagreement. A point closer to the surface than ``SIGN_FREE_M`` gets an interval of both
     signs: there the sign is not worth trusting and does not matter.
     """
@@ -83,9 +85,6 @@ class DistanceOracle:
         self._vertices = np.asarray(mesh_m.vertices, np.float64)
         self._faces = np.asarray(mesh_m.faces, np.int64)
         self._distance = MeshDistance(self._vertices, self._faces)
-        self._scene = o3d.t.geometry.RaycastingScene()
-        self._scene.add_triangles(o3d.core.Tensor(self._vertices.astype(np.float32)),
-                                  o3d.core.Tensor(self._faces.astype(np.uint32)))
         if signed:
             self._face_normals = np.asarray(mesh_m.face_normals, np.float64)
             edge_normals = np.zeros((len(mesh_m.edges_unique), 3))
@@ -100,6 +99,12 @@ class DistanceOracle:
     def triangle_rows(self) -> np.ndarray:
         """Each triangle's data for ``mesh_distance.triangle_row_high_m`` (the compiled search's face bounds)."""
         return self._distance.rows
+
+    @cached_property
+    def hull_vertices_m(self) -> np.ndarray:
+        """Vertices (H, 3) of the mesh's convex hull (m, the mesh's frame): where a rigid motion moves a point of
+        the fixture farthest."""
+        return np.asarray(trimesh.convex.convex_hull(self._vertices).vertices, np.float64)
 
     @property
     def triangle_count(self) -> int:
@@ -139,23 +144,24 @@ class DistanceOracle:
         closest = (corners[:, 0] + weights[:, :1] * (corners[:, 1] - corners[:, 0])
                    + weights[:, 1:] * (corners[:, 2] - corners[:, 0]))
         inside = self._pseudonormal_inside(points_m, closest, weights, faces)
-        occupancy = self._scene.compute_occupancy(o3d.core.Tensor(points_m.astype(np.float32))).numpy() > 0.5
-        disagree = inside != occupancy
+        parity = self._distance.rays(points_m, PARITY_DIRECTION)[1] % 2 == 1
+        disagree = inside != parity
         if np.any(disagree):
             winding = igl.winding_number(self._vertices, self._faces, points_m[disagree])
             inside[disagree] = winding > 0.5
         return inside
 
-    def distance_interval_m(self, points_m: np.ndarray,
-                            signed: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def distance_interval_m(self, points_m: np.ndarray, signed: np.ndarray | None = None,
+                            hint_faces: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """An interval (low, high; m) holding the distance from each (N, 3) point to the surface, and the face
         of the nearest point found (its distance bounds the unsigned distance from above).
 
         The distance is negative inside the closed surface, for the points where ``signed`` is true (all by
-        default); it is unsigned for the others and everywhere on an open mesh.
+        default); it is unsigned for the others and everywhere on an open mesh. ``hint_faces``: a face likely
+        near each point (-1 for none), for speed only.
         """
         points_m = np.asarray(points_m, np.float64).reshape(-1, 3)
-        low, high, faces, weights = self._distance.query(points_m)
+        low, high, faces, weights = self._distance.query(points_m, hint_faces)
         if self.signed:
             rows = np.arange(len(points_m)) if signed is None else np.flatnonzero(signed)
             touching = rows[low[rows] <= self.SIGN_FREE_M]
@@ -174,8 +180,7 @@ class DistanceOracle:
     def ray_hit_distance_m(self, origins_m: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """Distance (m) along each ray (origins (N, 3) m, unit directions (N, 3)) to the first surface it hits;
         inf where it hits none."""
-        rays = np.hstack([np.asarray(origins_m, np.float32).reshape(-1, 3), np.asarray(directions, np.float32)])
-        return self._scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy().astype(np.float64)
+        return self._distance.rays(origins_m, directions)[0]
 
 
 def _load_trimesh(path: Path) -> trimesh.Trimesh:

@@ -160,3 +160,37 @@ def test_the_hierarchy_finds_the_nearest_triangle_of_a_whole_mesh(seed):
     corners = mesh.triangles[faces]  # the face returned is a nearest one
     on_face = np.linalg.norm(points - closest_on_triangles(points, corners[:, 0], corners[:, 1], corners[:, 2]), axis=1)
     assert np.all(np.abs(on_face - truth) <= 1e-12)
+
+
+def test_a_hint_face_only_speeds_the_search_up():
+    rng = np.random.default_rng(5)
+    mesh = trimesh.creation.icosphere(subdivisions=3, radius=0.05)
+    distance = MeshDistance(mesh.vertices, mesh.faces)
+    points = rng.uniform(-0.08, 0.08, (3000, 3))
+    truth = exact_distances_m(mesh, points)
+    for hints in (rng.integers(0, len(mesh.faces), len(points)), np.full(len(points), -1)):
+        low, high, faces, _ = distance.query(points, hints)
+        assert np.all(low <= truth + 1e-12) and np.all(truth <= high + 1e-12) and np.max(high - low) < 1e-9
+    with pytest.raises(ValueError):
+        distance.query(points[:2], np.array([0, len(mesh.faces)]))
+
+
+def test_rays_find_the_first_hit_and_cross_a_closed_mesh_an_odd_number_of_times_from_inside():
+    rng = np.random.default_rng(8)
+    mesh = trimesh.creation.icosphere(subdivisions=2, radius=0.05)
+    mesh.vertices += rng.normal(size=mesh.vertices.shape) * 0.004
+    distance = MeshDistance(mesh.vertices, mesh.faces)
+    origins = rng.uniform(-0.08, 0.08, (2000, 3))
+    directions = rng.normal(size=(2000, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    first, crossings = distance.rays(origins, directions)
+    expected = trimesh.ray.ray_triangle.RayMeshIntersector(mesh)
+    locations, rays, _ = expected.intersects_location(origins, directions, multiple_hits=True)
+    travelled = np.einsum("ij,ij->i", locations - origins[rays], directions[rays])
+    for ray in range(len(origins)):
+        hits = travelled[(rays == ray) & (travelled > 0)]
+        assert crossings[ray] == len(hits)
+        assert (first[ray] == np.inf) if len(hits) == 0 else first[ray] == pytest.approx(hits.min(), abs=1e-12)
+    import igl
+    inside = igl.winding_number(np.asarray(mesh.vertices), np.asarray(mesh.faces, np.int64), origins) > 0.5
+    assert np.mean((crossings % 2 == 1) == inside) > 0.999

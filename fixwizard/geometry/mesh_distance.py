@@ -1,4 +1,5 @@
-"""Distance from points to a triangle mesh in float64, as a guaranteed interval, for any triangle shape.
+"""Distance from points to a triangle mesh in float64, as a guaranteed interval, for any triangle shape; and rays
+cast against the same hierarchy (first hits, crossings for inside tests).
 
 Open3D answers closest-point queries in float32 with an error that grows with the triangle's shape (up to
 0.6 mm on 1 m long, 1 mm wide triangles), so the search's exact stage runs here instead: a bounding-volume
@@ -320,14 +321,20 @@ def _box_low_m(x: np.ndarray, low: np.ndarray, high: np.ndarray) -> float:
 
 
 @numba.njit(nogil=True, cache=True)
-def _query_point(x: np.ndarray, rows: np.ndarray, hierarchy: tuple) -> tuple[float, float, int, float, float]:
-    """The mesh's distance interval at ``x`` (m), the triangle of the smallest ``high`` and its weights."""
+def _query_point(x: np.ndarray, rows: np.ndarray, hierarchy: tuple,
+                 hint: int) -> tuple[float, float, int, float, float]:
+    """The mesh's distance interval at ``x`` (m), the triangle of the smallest ``high`` and its weights. ``hint``:
+    a triangle likely to be near (-1: none); its interval starts the search, so that far nodes are pruned at once
+    (the result is the same: every triangle nearer than its ``high`` is still visited)."""
     node_low, node_high, children, ranges, order = hierarchy
     stack = np.empty(STACK_DEPTH, np.int64)
     reach = np.empty(STACK_DEPTH)  # each stacked node's box distance bound
     stack[0], reach[0] = 0, 0.0
     depth = 1
     best_low, best_high, best_face, best_v, best_w = np.inf, np.inf, -1, 0.0, 0.0
+    if hint >= 0:
+        best_low, best_high, best_v, best_w = triangle_row_interval_m(x[0], x[1], x[2], rows[hint])
+        best_face = hint
     while depth > 0:
         depth -= 1
         node = stack[depth]
@@ -355,15 +362,86 @@ def _query_point(x: np.ndarray, rows: np.ndarray, hierarchy: tuple) -> tuple[flo
 
 
 @numba.njit(nogil=True, cache=True, parallel=True)
-def _query(points: np.ndarray, rows: np.ndarray, hierarchy: tuple, out: tuple) -> None:
+def _query(points: np.ndarray, rows: np.ndarray, hierarchy: tuple, hints: np.ndarray, out: tuple) -> None:
     low_out, high_out, face_out, weights_out = out
     count = len(points)
     blocks = (count + BLOCK_POINTS - 1) // BLOCK_POINTS
     for block in numba.prange(blocks):
         for point in range(block * BLOCK_POINTS, min(count, (block + 1) * BLOCK_POINTS)):
-            low, high, face, v, w = _query_point(points[point], rows, hierarchy)
+            low, high, face, v, w = _query_point(points[point], rows, hierarchy, hints[point])
             low_out[point], high_out[point], face_out[point] = low, high, face
             weights_out[point, 0], weights_out[point, 1] = v, w
+
+
+@numba.njit(nogil=True, cache=True, inline="always")
+def _ray_box_entry(origin: np.ndarray, inverse: np.ndarray, low: np.ndarray, high: np.ndarray) -> float:
+    """Where a ray (origin, inverse direction) enters a box, as its parameter t >= 0; inf when it misses."""
+    near, far = 0.0, np.inf
+    for axis in range(3):
+        first = (low[axis] - origin[axis]) * inverse[axis]
+        second = (high[axis] - origin[axis]) * inverse[axis]
+        if first != first or second != second:  # 0 * inf: the ray runs in the slab's plane
+            if origin[axis] < low[axis] or origin[axis] > high[axis]:
+                return np.inf
+            continue
+        near = max(near, min(first, second))
+        far = min(far, max(first, second))
+    return near if near <= far * (1.0 + 8.0 * UNIT_ROUNDOFF) else np.inf
+
+
+@numba.njit(nogil=True, cache=True, inline="always")
+def _ray_triangle_t(origin: np.ndarray, direction: np.ndarray, row: np.ndarray) -> float:
+    """Parameter t > 0 where the ray crosses the row's triangle (Moeller-Trumbore), inf when it does not."""
+    ab0, ab1, ab2 = row[_AB], row[_AB + 1], row[_AB + 2]
+    ac0, ac1, ac2 = row[_AC], row[_AC + 1], row[_AC + 2]
+    p0 = direction[1] * ac2 - direction[2] * ac1
+    p1 = direction[2] * ac0 - direction[0] * ac2
+    p2 = direction[0] * ac1 - direction[1] * ac0
+    determinant = _dot(ab0, ab1, ab2, p0, p1, p2)
+    if determinant == 0.0:
+        return np.inf
+    inverse = 1.0 / determinant
+    t0, t1, t2 = origin[0] - row[_A], origin[1] - row[_A + 1], origin[2] - row[_A + 2]
+    u = _dot(t0, t1, t2, p0, p1, p2) * inverse
+    if u < 0.0 or u > 1.0:
+        return np.inf
+    q0, q1, q2 = t1 * ab2 - t2 * ab1, t2 * ab0 - t0 * ab2, t0 * ab1 - t1 * ab0
+    v = _dot(direction[0], direction[1], direction[2], q0, q1, q2) * inverse
+    if v < 0.0 or u + v > 1.0:
+        return np.inf
+    t = _dot(ac0, ac1, ac2, q0, q1, q2) * inverse
+    return t if t > 0.0 else np.inf
+
+
+@numba.njit(nogil=True, cache=True, parallel=True)
+def _rays(origins: np.ndarray, directions: np.ndarray, rows: np.ndarray, hierarchy: tuple, first_out: np.ndarray,
+          crossings_out: np.ndarray) -> None:
+    """Per ray: the parameter of its first hit (inf: none) and how many triangles it crosses."""
+    node_low, node_high, children, ranges, order = hierarchy
+    for ray in numba.prange(len(origins)):
+        origin, direction = origins[ray], directions[ray]
+        inverse = np.empty(3)
+        for axis in range(3):
+            inverse[axis] = 1.0 / direction[axis] if direction[axis] != 0.0 else np.inf
+        stack = np.empty(STACK_DEPTH, np.int64)
+        stack[0] = 0
+        depth = 1
+        first, crossings = np.inf, 0
+        while depth > 0:
+            depth -= 1
+            node = stack[depth]
+            if _ray_box_entry(origin, inverse, node_low[node], node_high[node]) == np.inf:
+                continue
+            if children[node, 0] < 0:
+                for slot in range(ranges[node, 0], ranges[node, 1]):
+                    t = _ray_triangle_t(origin, direction, rows[order[slot]])
+                    if t < np.inf:
+                        crossings += 1
+                        first = min(first, t)
+                continue
+            stack[depth], stack[depth + 1] = children[node, 0], children[node, 1]
+            depth += 2
+        first_out[ray], crossings_out[ray] = first, crossings
 
 
 class MeshDistance:
@@ -378,11 +456,26 @@ class MeshDistance:
         self.rows = _triangle_rows(vertices, triangles)
         self._hierarchy = _build_hierarchy(corners.min(axis=1), corners.max(axis=1))
 
-    def query(self, points_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def query(self, points_m: np.ndarray,
+              hint_faces: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """For each (N, 3) point: the interval's low and high ends (m), the triangle of the nearest point found,
-        and that point's barycentric weights ``(N, 2)`` (of the triangle's second and third vertex)."""
+        and that point's barycentric weights ``(N, 2)`` (of the triangle's second and third vertex).
+        ``hint_faces`` (N,): a triangle likely near each point (-1 for none), which only makes the search faster."""
         points = np.ascontiguousarray(points_m, np.float64).reshape(-1, 3)
         count = len(points)
+        hints = np.full(count, -1, np.int64) if hint_faces is None else np.ascontiguousarray(hint_faces, np.int64)
+        if len(hints) != count or (count and (hints.min() < -1 or hints.max() >= len(self.rows))):
+            raise ValueError("one hint face (or -1) per point, within the mesh")
         out = (np.empty(count), np.empty(count), np.empty(count, np.int64), np.empty((count, 2)))
-        _query(points, self.rows, self._hierarchy, out)
+        _query(points, self.rows, self._hierarchy, hints, out)
         return out
+
+    def rays(self, origins_m: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For each ray (origins (N, 3) m, directions (N, 3), any length): the parameter of its first hit along
+        the direction (m for unit directions; inf when it hits nothing) and how many triangles it crosses (a ray
+        grazing an edge may count a crossing twice or not at all)."""
+        origins = np.ascontiguousarray(origins_m, np.float64).reshape(-1, 3)
+        directions = np.ascontiguousarray(np.broadcast_to(directions, origins.shape), np.float64)
+        first, crossings = np.empty(len(origins)), np.empty(len(origins), np.int64)
+        _rays(origins, directions, self.rows, self._hierarchy, first, crossings)
+        return first, crossings

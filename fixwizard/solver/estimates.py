@@ -4,8 +4,10 @@ Frames: cells hold ``base_T_fix`` (internal frame); everything returned is of th
 ``base_T_cad = base_T_fix @ fix_T_cad``. ``fix_p_origin`` is the CAD origin in the internal frame.
 """
 
+import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from scipy.special import gammaln, logsumexp
 from scipy.spatial.transform import Rotation
@@ -91,10 +93,50 @@ def bound_centre(cells: CellSet, fix_p_origin: np.ndarray, rotation_centre: Rota
     return BoundCentre(rotation_centre, minimum_enclosing_ball(cad_origins).center)
 
 
+# Cells whose ball bound lies below this fraction of the largest displacement found keep the ball bound: they
+# neither set the maximum nor come within refinement's reach of it (refine.OUTER_FRACTION is larger).
+HULL_SCREEN_FRACTION = 0.9
+
+
+@numba.njit(nogil=True, cache=True)
+def _hull_displacements_m(base_R_fix: np.ndarray, rotation_index: np.ndarray, positions_m: np.ndarray,
+                          centre_R: np.ndarray, centre_p_m: np.ndarray, fix_p_hull: np.ndarray,
+                          chords: np.ndarray, ball_m: np.ndarray) -> np.ndarray:
+    """For each cell (centre rotation ``base_R_fix[rotation_index]``, position), an upper bound (m) on the largest
+    displacement of a fixture point between the centre pose and any pose of the cell: the smaller of its ball
+    bound ``ball_m`` and ``max_p |(R_c - C) p + t_c - t_C| + |p| chord`` over the hull vertices ``p`` (the
+    displacement is convex in ``p``, so the hull's vertices hold its maximum over the fixture). The hull bound is
+    computed from the largest ball bound down, and no more once the ball bounds fall below
+    ``HULL_SCREEN_FRACTION`` of the largest bound found (those cells keep their ball bound)."""
+    count = len(rotation_index)
+    out = ball_m.copy()
+    norms = np.sqrt(np.sum(fix_p_hull**2, axis=1))
+    largest = 0.0
+    for cell in np.argsort(-ball_m):
+        if ball_m[cell] < HULL_SCREEN_FRACTION * largest:
+            break
+        rotation = base_R_fix[rotation_index[cell]]
+        chord_cell = chords[rotation_index[cell]]
+        best = 0.0
+        for vertex in range(len(fix_p_hull)):
+            total = 0.0
+            for axis in range(3):
+                value = positions_m[cell, axis] - centre_p_m[axis]
+                for k in range(3):
+                    value += (rotation[axis, k] - centre_R[axis, k]) * fix_p_hull[vertex, k]
+                total += value * value
+            best = max(best, math.sqrt(total) + norms[vertex] * chord_cell)
+        out[cell] = min(ball_m[cell], best * (1.0 + 1e-12))
+        largest = max(largest, out[cell])
+    return out
+
+
 def cell_bound_figures(cells: CellSet, centre: BoundCentre, fix_p_origin: np.ndarray,
-                       fixture_radius_m: float) -> np.ndarray:
+                       fix_p_hull: np.ndarray) -> np.ndarray:
     """(3, N): for each cell, the largest CAD-origin distance (m), rotation angle (rad) and fixture-point
-    displacement (m) between the centre and any pose in the cell."""
+    displacement (m) between the centre and any pose in the cell. ``fix_p_hull``: the fixture's convex hull
+    vertices (m, internal frame); the displacement is the smaller of the hull-vertex bound and the fixture
+    ball's (``|t_c - t_C| + r chord(angle)``), both upper bounds."""
     base_R_fix, gammas = cells.distinct_rotation_matrices()
     rotation_index = cells.rotation_index
     positions = cells.positions_m()
@@ -105,9 +147,12 @@ def cell_bound_figures(cells: CellSet, centre: BoundCentre, fix_p_origin: np.nda
                 + origin_lever * chord(gammas[rotation_index]))
     angles = np.minimum(rotation_angles(centre.rotation.as_matrix(), base_R_fix) + gammas, np.pi)
     center_fix = centre.cad_origin_m - centre.rotation.apply(fix_p_origin)
-    displacement = (np.linalg.norm(positions - center_fix, axis=1) + position_bound
-                    + fixture_radius_m * chord(angles[rotation_index]))
-    return np.vstack([position, angles[rotation_index], displacement])
+    fixture_radius_m = float(np.max(np.linalg.norm(fix_p_hull, axis=1)))
+    ball = (np.linalg.norm(positions - center_fix, axis=1) + fixture_radius_m * chord(angles[rotation_index]))
+    displacement = _hull_displacements_m(np.ascontiguousarray(base_R_fix), rotation_index,
+                                         np.ascontiguousarray(positions), centre.rotation.as_matrix(), center_fix,
+                                         np.ascontiguousarray(fix_p_hull, float), chord(gammas), ball)
+    return np.vstack([position, angles[rotation_index], displacement + position_bound])
 
 
 def bounds_from_figures(centre: BoundCentre, largest: np.ndarray) -> Bounds:

@@ -28,7 +28,7 @@ def refined_largest_figures(problem: SearchProblem, survivors: Survivors, centre
     None when refinement rejects every pose of the set."""
     def pool_of(cells: Survivors) -> tuple[Survivors, np.ndarray]:
         """Cells and their figures (3, N); a refined cell's figures are set to zero (its children hold it)."""
-        return cells, cell_bound_figures(cells.cells, centre, fix_p_origin, problem.fixture_radius_m)
+        return cells, cell_bound_figures(cells.cells, centre, fix_p_origin, problem.oracle.hull_vertices_m)
 
     pools = [pool_of(survivors)]
     largest = pools[0][1].max(axis=1)

@@ -101,12 +101,12 @@ def _round_up_f32(values: np.ndarray) -> np.ndarray:
     return (values + np.abs(values) * 2.0**-23).astype(np.float32)
 
 
-def exact_distance_interval_m(oracle: DistanceOracle, fix_p_query: np.ndarray,
-                              outside: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def exact_distance_interval_m(oracle: DistanceOracle, fix_p_query: np.ndarray, outside: np.ndarray | None = None,
+                              hint_faces: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Interval (m) holding the signed distance of each query point (unsigned for open meshes), and the face
     closest to each point. ``outside``: points already known to lie outside the solid, whose signed distance is
-    the unsigned one (no inside test needed)."""
-    return oracle.distance_interval_m(fix_p_query, None if outside is None else ~outside)
+    the unsigned one (no inside test needed). ``hint_faces``: a face near each point (-1 for none), for speed."""
+    return oracle.distance_interval_m(fix_p_query, None if outside is None else ~outside, hint_faces)
 
 
 class _Frames:
@@ -223,7 +223,8 @@ def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: in
         queries, band_low, band_high = query_band(cells, rotated_positions, rows, np.full(len(rows), tap_index),
                                                   problem.base_p_taps, band_figures)
         interval_low, interval_high, closest_faces = exact_distance_interval_m(problem.oracle, queries,
-                                                                               low[rows, tap_index] > 0.0)
+                                                                               low[rows, tap_index] > 0.0,
+                                                                               faces[rows, tap_index])
         keep = (interval_high >= band_low) & (interval_low <= band_high)
         rejected_by[rows[~keep]] = tap_index
         rows = rows[keep]
