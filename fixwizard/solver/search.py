@@ -43,10 +43,14 @@ CHUNK_CELL_TAPS = 1 << 23  # at most this many cell-tap pairs per batch (~100 MB
 RESTART_ROOT_SHRINK = 0.95
 # The uniform descent stops before a level would evaluate more than UNIFORM_SHARE of the cell budget
 # (refining the hull takes over from there), unless its cells are still coarse (a cell spans more than
-# COARSE_FRACTION of the fixture radius): such a level may use the whole budget, since stopping there would
-# leave bounds of centimetres (or a set that spans every rotation) that the next few levels shrink to millimetres.
+# COARSE_FRACTION of the fixture radius) while the taps still prune hard (under PRUNING_RATIO of the level's
+# cells survived): such a bottleneck level may use what is left of the budget, since stopping there would leave
+# bounds of centimetres that the next few levels shrink to millimetres. A set the taps do not prune is
+# undetermined whatever the budget: descending further only costs time. All levels together evaluate at most the
+# budget.
 UNIFORM_SHARE = 1 / 12
 COARSE_FRACTION = 0.05
+PRUNING_RATIO = 0.25
 _KERNEL_LOCK = threading.Lock()  # one parallel kernel at a time, whichever thread searches
 
 
@@ -289,10 +293,12 @@ def filter_cells(problem: SearchProblem, cells: CellSet, parents: Survivors | No
 @dataclass
 class SearchTree:
     """The survivors of every level of a search, coarse to fine; only the finest keep their intervals.
-    ``evaluated``: the cells the finest level was chosen from (the children of the level above)."""
+    ``evaluated``: the cells the finest level was chosen from (the children of the level above); ``spent``: the
+    cells evaluated by all levels so far."""
 
     levels: list[Survivors]
     evaluated: int
+    spent: int = 0
 
     @property
     def final(self) -> Survivors:
@@ -307,13 +313,14 @@ def search_budget(max_cells: float) -> float:
 def _descends(problem: SearchProblem, tree: SearchTree, max_cells: float) -> bool:
     """Whether the uniform descent splits the finest survivors once more within the cell budget."""
     cells = tree.final.cells
-    if len(cells) == 0 or 8 * len(cells) > max_cells or not splittable(cells):
+    if len(cells) == 0 or tree.spent + 8 * len(cells) > max_cells or not splittable(cells):
         return False
     if 8 * len(cells) <= search_budget(max_cells):
         return True
     gamma = float(np.max(cells.rotation_grid.gamma(cells.rotation_level, cells.rotation_ids)))
     span_m = cells.position_bound_m + problem.fixture_radius_m * chord(gamma)
-    return span_m > COARSE_FRACTION * problem.fixture_radius_m
+    coarse = span_m > COARSE_FRACTION * problem.fixture_radius_m
+    return coarse and len(cells) < PRUNING_RATIO * tree.evaluated
 
 
 def _descend(problem: SearchProblem, tree: SearchTree, max_cells: float, started: float,
@@ -329,6 +336,7 @@ def _descend(problem: SearchProblem, tree: SearchTree, max_cells: float, started
         tree.levels[-1] = tree.final.without_intervals()
         tree.levels.append(survivors)
         tree.evaluated = len(cells)
+        tree.spent += len(cells)
 
 
 def _report(progress: Callable[[SearchProgress], None] | None, evaluated: int, survivors: Survivors,
@@ -352,7 +360,7 @@ def search(problem: SearchProblem, max_cells: float = 1e7,
         return None
     cells = root_cells(position_grid)
     survivors = filter_cells(problem, cells, cancel=cancel)
-    return _descend(problem, SearchTree([survivors], len(cells)), max_cells, started, progress, cancel)
+    return _descend(problem, SearchTree([survivors], len(cells), len(cells)), max_cells, started, progress, cancel)
 
 
 def worth_extending(problem: SearchProblem, previous: SearchTree) -> bool:
@@ -399,4 +407,5 @@ def add_taps(problem: SearchProblem, previous: SearchTree, max_cells: float = 1e
     final.faces[:, :known] = previous.final.faces[level_alive]
     final.tap_order = np.concatenate([final.tap_order, previous.final.tap_order])
     evaluated = 8 * len(levels[-2]) if len(levels) > 1 else len(levels[0])  # the children a search tests
-    return _descend(problem, SearchTree(levels, evaluated), max_cells, started, progress, cancel)
+    spent = sum(len(level) for level in previous.levels[1:]) * 8 + len(previous.levels[0])  # as a search would have
+    return _descend(problem, SearchTree(levels, evaluated, spent), max_cells, started, progress, cancel)
