@@ -1,100 +1,134 @@
-"""The four real user-study runs of the paper: wall time, peak memory, cells, bounds and intervals.
+"""The four real user-study runs of the paper, as a user runs them: whole-process wall time of `fixwizard solve`,
+peak memory, guaranteed bounds, their reach and the tightness ratio bound / reach.
 
 Usage (from the repository root, with ../shared beside it):
-    .venv/bin/python benchmarks/user_study.py [--max-cells 1e7] [--repeat 3]
+    .venv/bin/python benchmarks/user_study.py [--repeat 3] [--max-cells 1e7] [--compare ../base]
 
-Each run is solved in a fresh subprocess so its peak memory (max RSS) is its own. The
-reference columns are the paper's reference implementation on this machine type with the
-same inputs (1e7 cells, 1.0 mm bound, 3 mm ball).
+Every solve is a fresh `python -m fixwizard.cli solve ...` process (imports, mesh, cached lattice, solve, report),
+timed from start to exit; its peak memory is its own max RSS. ``--compare DIR`` runs another checkout (with its
+own ``.venv``) on the same inputs, alternating solve by solve, since these machines drift; medians are printed.
+
+The reach is a lower bound on how far the set of poses that explain the taps really extends: the farthest
+certified poses (every tap's distance interval within the bound) found by pushing outward from the expected pose
+(``fixwizard.solver.reach``), measured from each report's bound centre. The true extent lies between reach and
+bound; ``bound / reach`` is how much looser than necessary the bound can at most be.
 """
 
 import argparse
-import json
-import resource
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data" / "matlab-logo"
 RUNS = ("student_1", "student_2", "student_3", "expert")
-REFERENCE = {"student_1": (3.30, 2.65, 108, 276), "student_2": (2.71, 1.61, 108, 276),
-             "student_3": (3.01, 4.05, 108, 276), "expert": (1.59, 1.16, 108, 276)}
+REFERENCE = {"student_1": (3.30, 2.65), "student_2": (2.71, 1.61), "student_3": (3.01, 4.05), "expert": (1.59, 1.16)}
+# runs the CLI and reports its own peak memory on the last line of stderr
+WRAPPER = ("import resource, sys\nfrom fixwizard.cli import main\ncode = main(sys.argv[1:])\n"
+           "print('MAXRSS_KB', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)\nsys.exit(code)")
 
 
-def solve_once(run: str, max_cells: float) -> dict:
-    """Solve one run in this process and return its figures."""
-    import numpy as np
-
-    from fixwizard.fixture import load_fixture
+def write_points(folder: Path) -> dict[str, Path]:
+    """Each run's ball centres as a POINTS file (the published tip)."""
     from fixwizard.geometry.se3 import read_pose_dir, read_pose_file
-    from fixwizard.solver.solve import solve
+    from fixwizard.points import write_points as write
     from fixwizard.workflow.import_poses import ball_centres_m
 
     tip = read_pose_file(DATA / "calib" / "tcp_t_tip.pose")[:3, 3]
-    taps = ball_centres_m(read_pose_dir(DATA / "samples" / run)[1], tip)
-    fixture = load_fixture(DATA / "meshes" / "matlab_logo.ply")
+    paths = {}
+    for run in RUNS:
+        paths[run] = folder / f"{run}.yaml"
+        write(paths[run], ball_centres_m(read_pose_dir(DATA / "samples" / run)[1], tip))
+    return paths
+
+
+def solve_process(checkout: Path, points: Path, report: Path, max_cells: float) -> tuple[float, float]:
+    """Wall time (s) and peak memory (MB) of one whole `fixwizard solve` process of ``checkout``."""
+    command = [str(checkout / ".venv" / "bin" / "python"), "-c", WRAPPER, "solve", str(DATA / "meshes" / "matlab_logo.ply"),
+               str(points), "--sample-bound", "1mm", "--ball-diameter", "3mm", "--max-cells", f"{max_cells:g}", "-q",
+               "-o", str(report)]
     started = time.perf_counter()
-    solution = solve(fixture, taps, 0.003, 0.001, max_cells=max_cells)
-    elapsed = time.perf_counter() - started
-    interval = {f"{i.level:.2f}": [i.position_m * 1e3, float(np.degrees(i.rotation_rad))] for i in solution.intervals}
-    return {"run": run, "status": solution.status, "seconds": elapsed, "cells": solution.stats.cells,
-            "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-            "position_mm": solution.bounds.position_m * 1e3,
-            "rotation_deg": float(np.degrees(solution.bounds.rotation_rad)),
-            "displacement_mm": solution.bounds.max_point_displacement_m * 1e3, "intervals": interval,
-            "base_T_cad": solution.base_T_cad.tolist(), "cad_p_center": fixture.cad_p_center.tolist()}
+    result = subprocess.run(command, cwd=checkout, capture_output=True, text=True)
+    seconds = time.perf_counter() - started
+    if result.returncode not in (0, 3, 4):
+        sys.exit(f"{checkout}: solve failed ({result.returncode}):\n{result.stderr[-2000:]}")
+    peak_kb = float(result.stderr.strip().splitlines()[-1].split()[-1])
+    return seconds, peak_kb / 1024.0
+
+
+def report_figures(report: Path) -> dict:
+    """Status, bounds (mm, deg, mm) and the poses of a report of either schema version."""
+    import yaml
+
+    data = yaml.safe_load(report.read_text())
+    bounds = data["bounds"]
+    return {"status": data["status"], "bounds": (1e3 * bounds["position_m"], bounds["rotation_deg"],
+                                                 1e3 * bounds["max_point_displacement_m"]),
+            "centre": bounds["center"], "pose": data["pose"]}
+
+
+def reach_of(run_points: Path, figures: dict) -> tuple[float, float, float]:
+    """The certified reach (mm, deg, mm) from the report's bound centre, pushed outward from its expected pose."""
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    from fixwizard.fixture import load_fixture
+    from fixwizard.geometry.se3 import invert, make_transform
+    from fixwizard.points import load_points
+    from fixwizard.solver.estimates import BoundCentre
+    from fixwizard.solver.reach import reach
+    from fixwizard.solver.search import SearchProblem
+
+    fixture = load_fixture(DATA / "meshes" / "matlab_logo.ply")
+    problem = SearchProblem(fixture.oracle, fixture.radius_m, load_points(run_points), 0.0015, 0.001)
+    centre = figures["centre"]
+    bound_centre = BoundCentre(Rotation.from_rotvec(centre["rotvec_rad"]), np.array(centre["position_m"]))
+    pose = figures["pose"]
+    start = make_transform(Rotation.from_rotvec(pose["rotvec_rad"]), pose["position_m"]) @ invert(fixture.fix_T_cad)
+    found = reach(problem, [start], bound_centre, -fixture.cad_p_center, fixture.oracle.hull_vertices_m,
+                  figures["bounds"][2] * 1e-3)
+    if found is None:
+        return (float("nan"),) * 3
+    position_m, rotation_rad, displacement_m = found.figures
+    return 1e3 * position_m, float(np.degrees(rotation_rad)), 1e3 * displacement_m
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--max-cells", type=float, default=1e7)
-    parser.add_argument("--repeat", type=int, default=1, help="solves per run; the median time is printed")
-    parser.add_argument("--one", help=argparse.SUPPRESS)
+    parser.add_argument("--repeat", type=int, default=3, help="solves per run and checkout; medians are printed")
+    parser.add_argument("--compare", type=Path, help="another checkout with its own .venv, run alternately")
     args = parser.parse_args()
-    if args.one:
-        print(json.dumps(solve_once(args.one, args.max_cells)))
-        return
     if not DATA.is_dir():
         sys.exit(f"the real data is not at {DATA}")
-    print(f"{'run':10} {'status':8} {'median s':>8} {'peak MB':>8} {'cells':>9} {'pos mm':>7} {'rot deg':>7} "
-          f"{'disp mm':>7} {'99% mm':>7} {'99% deg':>7} | {'ref pos':>7} {'ref rot':>7}")
-    expected = []
+    checkouts = {"this": REPO} | ({"compare": args.compare.resolve()} if args.compare else {})
+    folder = Path(tempfile.mkdtemp(prefix="fixwizard-user-study-"))
+    points = write_points(folder)
+    print(f"{'run':10} {'version':8} {'status':8} {'wall s':>6} {'peak MB':>7} {'pos mm':>6} {'rot deg':>7} "
+          f"{'disp mm':>7} | {'reach mm/deg/mm':>17} | {'bound/reach':>17} | ref mm / deg")
+    walls: dict[str, list[float]] = {name: [] for name in checkouts}
     for run in RUNS:
-        results = [json.loads(subprocess.run([sys.executable, __file__, "--one", run, "--max-cells",
-                                              str(args.max_cells)], check=True, capture_output=True,
-                                             text=True).stdout) for _ in range(args.repeat)]
-        figures = results[0]
-        expected.append(figures)
-        seconds = statistics.median(result["seconds"] for result in results)
-        peak = max(result["peak_mb"] for result in results)
-        interval_99 = figures["intervals"]["0.99"]
-        ref_position, ref_rotation, _, _ = REFERENCE[run]
-        print(f"{run:10} {figures['status']:8} {seconds:8.1f} {peak:8.0f} {figures['cells']:9d} "
-              f"{figures['position_mm']:7.2f} {figures['rotation_deg']:7.2f} {figures['displacement_mm']:7.2f} "
-              f"{interval_99[0]:7.2f} {interval_99[1]:7.2f} | {ref_position:7.2f} {ref_rotation:7.2f}")
-    print("reference implementation on this machine type: 108-276 s and 5.4-7.9 GB per run")
-    position_mm, rotation_deg = agreement(expected)
-    print(f"expected poses agree within {position_mm:.2f} mm, {rotation_deg:.2f} deg (radii of the smallest balls "
-          "enclosing the fixture centres and the rotations, as the paper measures; the paper: 0.87 mm, 0.74 deg)")
-
-
-def agreement(poses: list[dict]) -> tuple[float, float]:
-    """Radii (mm, deg) of the smallest balls enclosing the runs' expected fixture centres and rotations."""
-    import numpy as np
-    from scipy.spatial.transform import Rotation
-
-    from fixwizard.geometry.meb import minimum_enclosing_ball
-    from fixwizard.solver.estimates import rotation_center
-
-    base_T_cads = np.array([pose["base_T_cad"] for pose in poses])
-    cad_p_center = np.array(poses[0]["cad_p_center"])
-    base_p_centres = base_T_cads[:, :3, :3] @ cad_p_center + base_T_cads[:, :3, 3]
-    rotations = Rotation.from_matrix(base_T_cads[:, :3, :3])
-    rotation_rad = (rotation_center(rotations).inv() * rotations).magnitude().max()
-    return minimum_enclosing_ball(base_p_centres).radius * 1e3, float(np.degrees(rotation_rad))
+        timings: dict[str, list[tuple[float, float]]] = {name: [] for name in checkouts}
+        for repeat in range(args.repeat):
+            for name, checkout in checkouts.items():
+                timings[name].append(solve_process(checkout, points[run], folder / f"{run}-{name}.yaml",
+                                                   args.max_cells))
+        for name in checkouts:
+            figures = report_figures(folder / f"{run}-{name}.yaml")
+            reach = reach_of(points[run], figures)
+            wall = statistics.median(seconds for seconds, _ in timings[name])
+            walls[name].append(wall)
+            peak = max(megabytes for _, megabytes in timings[name])
+            ratios = [bound / reached for bound, reached in zip(figures["bounds"], reach)]
+            position, rotation, displacement = figures["bounds"]
+            print(f"{run:10} {name:8} {figures['status']:8} {wall:6.1f} {peak:7.0f} {position:6.2f} {rotation:7.2f} "
+                  f"{displacement:7.2f} | {reach[0]:5.2f} {reach[1]:5.2f} {reach[2]:5.2f} | "
+                  f"{ratios[0]:5.2f} {ratios[1]:5.2f} {ratios[2]:5.2f} | {REFERENCE[run][0]:.2f} / {REFERENCE[run][1]:.2f}")
+    for name, values in walls.items():
+        print(f"{name}: median whole-process wall time over the runs {statistics.median(values):.1f} s")
 
 
 if __name__ == "__main__":

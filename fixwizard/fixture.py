@@ -21,9 +21,13 @@ from fixwizard.geometry.se3 import make_transform
 from fixwizard.mesh_hygiene import clean_mesh, refuse_non_finite
 
 METRES_PER_UNIT = {"m": 1.0, "mm": 1e-3}
-# Rays for the parity cross-check of inside tests run along this direction: off every axis and diagonal, so that
-# rays graze the edges of axis-aligned CAD faces as rarely as possible.
-PARITY_DIRECTION = np.array([0.5773, 0.5775, 0.5771]) / np.linalg.norm([0.5773, 0.5775, 0.5771])
+# Rays for the parity cross-check of inside tests leave along the axis to the nearest side of the mesh's bounding
+# box (the shortest way out, the fewest crossings), tilted by this off every axis and diagonal so that they graze
+# the edges of axis-aligned CAD faces as rarely as possible.
+PARITY_TILT = np.array([0.0117, 0.0131, 0.0093])
+# A face whose largest angle has a sine below this has no normal worth trusting for a sign (a sliver of zero area
+# left in to keep the mesh closed): points nearest to it are checked by ray parity.
+RELIABLE_NORMAL_SINE = 1e-6
 MESH_SUFFIXES = (".stl", ".ply", ".obj")
 PLAUSIBLE_SIZE_M = (0.005, 2.5)
 
@@ -68,8 +72,8 @@ class DistanceOracle:
     Distances are guaranteed intervals from the float64 hierarchy of ``geometry.mesh_distance`` (any triangle
     shape). Signs (closed, consistently oriented meshes only) come from the angle-weighted pseudonormal of the
     closest feature (face, edge or vertex; Baerentzen and Aanaes 2005), which is exact for a closed manifold
-    mesh; the parity of a ray's crossings cross-checks it, and the exact generalised winding number (libigl)
-    settles every disagreement. A point closer to the surface than ``SIGN_FREE_M`` gets an interval of both
+    mesh; near edges and corners, where which feature is closest is a numerical decision, the parity of a ray's
+    crossings cross-checks it, and the exact generalised winding number (libigl) settles every disagreement. A point closer to the surface than ``SIGN_FREE_M`` gets an interval of both
     signs: there the sign is not worth trusting and does not matter.
     """
 
@@ -87,6 +91,11 @@ class DistanceOracle:
         self._distance = MeshDistance(self._vertices, self._faces)
         if signed:
             self._face_normals = np.asarray(mesh_m.face_normals, np.float64)
+            corners = self._vertices[self._faces]
+            edges = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)
+            twice_area = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+            longest_pair = np.sort(edges, axis=1)[:, 1:].prod(axis=1)
+            self._reliable_normal = twice_area > RELIABLE_NORMAL_SINE * longest_pair
             edge_normals = np.zeros((len(mesh_m.edges_unique), 3))
             np.add.at(edge_normals, mesh_m.faces_unique_edges.ravel(), np.repeat(self._face_normals, 3, axis=0))
             self._edge_normals = edge_normals[mesh_m.faces_unique_edges]
@@ -137,18 +146,31 @@ class DistanceOracle:
         normals[at_vertex] = self._corner_normals[faces[at_vertex], corner]
         return np.einsum("ij,ij->i", points_m - closest, normals) < 0.0
 
+    def _parity_inside(self, points_m: np.ndarray) -> np.ndarray:
+        """Whether each point lies inside by the parity of its ray's crossings (see ``PARITY_TILT``)."""
+        low, high = self.bounds_m
+        gaps = np.hstack([points_m - low, high - points_m])  # to the -x, -y, -z, +x, +y, +z sides
+        side = np.argmin(gaps, axis=1)
+        directions = np.zeros_like(points_m)
+        directions[np.arange(len(points_m)), side % 3] = np.where(side < 3, -1.0, 1.0)
+        directions += PARITY_TILT
+        return self._distance.rays(points_m, directions)[1] % 2 == 1
+
     def _inside(self, points_m: np.ndarray, faces: np.ndarray, weights: np.ndarray) -> np.ndarray:
-        """Whether each point lies inside the closed surface, from its closest point's face and weights;
-        cross-checked against ray parity, with the winding number settling disagreements."""
+        """Whether each point lies inside the closed surface, from its closest point's face and weights. Where the
+        closest point lies on an edge or a corner, or on a face without a trustworthy normal, the pseudonormal is
+        cross-checked against ray parity, and the exact winding number settles every disagreement; inside a face
+        the face's plane decides (the point lies on the normal through its closest point)."""
         corners = self._vertices[self._faces[faces]]
         closest = (corners[:, 0] + weights[:, :1] * (corners[:, 1] - corners[:, 0])
                    + weights[:, 1:] * (corners[:, 2] - corners[:, 0]))
         inside = self._pseudonormal_inside(points_m, closest, weights, faces)
-        parity = self._distance.rays(points_m, PARITY_DIRECTION)[1] % 2 == 1
-        disagree = inside != parity
-        if np.any(disagree):
-            winding = igl.winding_number(self._vertices, self._faces, points_m[disagree])
-            inside[disagree] = winding > 0.5
+        barycentric_low = np.minimum(1.0 - weights.sum(axis=1), weights.min(axis=1))
+        checked = np.flatnonzero((barycentric_low <= self.FEATURE_MARGIN) | ~self._reliable_normal[faces])
+        if len(checked):
+            disagree = checked[inside[checked] != self._parity_inside(points_m[checked])]
+            if len(disagree):
+                inside[disagree] = igl.winding_number(self._vertices, self._faces, points_m[disagree]) > 0.5
         return inside
 
     def distance_interval_m(self, points_m: np.ndarray, signed: np.ndarray | None = None,

@@ -21,12 +21,14 @@ from scipy.spatial.transform import Rotation
 
 from fixwizard.geometry.se3 import make_transform, points_in_frames
 from fixwizard.solver.estimates import BoundCentre
+from fixwizard.solver.mode_mass import laplace_peak
 from fixwizard.solver.search import SearchProblem
 
 RANDOM_DIRECTIONS = 4
 BACKOFF_STEPS = 12  # bisections towards the start for a candidate that does not certify
 OPTIMISER_ITERATIONS = 60
 DIFFERENCE_STEP_M = 1e-6
+FEASIBLE_SHARE = 0.9  # a start is looked for with every tap within this share of the bound, so that it certifies
 
 
 @dataclass(frozen=True)
@@ -73,10 +75,12 @@ def _residuals_m(problem: SearchProblem, start: np.ndarray, steps: np.ndarray) -
     return distances.reshape(len(steps), -1) - problem.ball_radius_m
 
 
-def _push(problem: SearchProblem, start: np.ndarray, objective, extent_m: float) -> np.ndarray:
-    """The pose that maximises ``objective(pose)`` subject to every tap within the sample bound, from ``start``."""
+def _push(problem: SearchProblem, start: np.ndarray, objective, extent_m: float,
+          bound_m: float | None = None) -> np.ndarray:
+    """The pose that maximises ``objective(pose)`` subject to every tap within ``bound_m`` (default the sample
+    bound), from ``start``."""
     radius = problem.fixture_radius_m
-    bound = problem.sample_bound_m
+    bound = problem.sample_bound_m if bound_m is None else bound_m
     offsets = DIFFERENCE_STEP_M * np.vstack([np.zeros(6), np.eye(6)])
 
     def constraints(step: np.ndarray) -> np.ndarray:
@@ -141,9 +145,21 @@ def _objectives(centre: BoundCentre, fix_p_origin: np.ndarray, fix_p_hull: np.nd
 
 def reach(problem: SearchProblem, starts: list[np.ndarray], centre: BoundCentre, fix_p_origin: np.ndarray,
           fix_p_hull: np.ndarray, extent_m: float, seed: int = 0) -> Reach | None:
-    """The certified reach from the first certified pose of ``starts`` (poses ``base_T_fix``), pushed outward
-    within ``extent_m`` (a bound on how far any pose of the set lies); None when no start certifies."""
+    """The certified reach from the first certified pose of ``starts`` (poses ``base_T_fix``; a start that does not
+    certify is first moved to its nearest least-squares fit), pushed outward within ``extent_m`` (a bound on how
+    far any pose of the set lies); None when no start certifies."""
     start = next((pose for pose in starts if certified(problem, pose)), None)
+    for pose in starts if start is None else ():
+        fitted = laplace_peak(problem.oracle, problem.base_p_taps, problem.ball_radius_m, problem.sample_bound_m / 3.0,
+                              pose, problem.fixture_radius_m, extent_m).base_T_fix
+        # a least-squares fit can leave one tap just outside the bound: look for any pose with every tap inside
+        feasible = _push(problem, fitted, lambda _: 0.0, extent_m, FEASIBLE_SHARE * problem.sample_bound_m)
+        for candidate in (fitted, feasible):
+            if certified(problem, candidate):
+                start = candidate
+                break
+        if start is not None:
+            break
     if start is None:
         return None
     poses = [start]
