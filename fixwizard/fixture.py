@@ -73,8 +73,9 @@ class DistanceOracle:
     shape). Signs (closed, consistently oriented meshes only) come from the angle-weighted pseudonormal of the
     closest feature (face, edge or vertex; Baerentzen and Aanaes 2005), which is exact for a closed manifold
     mesh; near edges and corners, where which feature is closest is a numerical decision, the parity of a ray's
-    crossings cross-checks it, and the exact generalised winding number (libigl) settles every disagreement. A point closer to the surface than ``SIGN_FREE_M`` gets an interval of both
-    signs: there the sign is not worth trusting and does not matter.
+    crossings cross-checks it, and the exact generalised winding number (libigl) settles every disagreement. A
+    point closer to the surface than ``SIGN_FREE_M`` gets an interval of both signs: there the sign is not worth
+    trusting and does not matter.
     """
 
     # A closest point within this barycentric margin of an edge or vertex takes that feature's pseudonormal (that
