@@ -183,22 +183,29 @@ class DistanceOracle:
         default); it is unsigned for the others and everywhere on an open mesh. ``hint_faces``: a face likely
         near each point (-1 for none), for speed only.
         """
+        return self._signed_interval_m(points_m, signed, hint_faces, np.inf)
+
+    def _signed_interval_m(self, points_m: np.ndarray, signed: np.ndarray | None, hint_faces: np.ndarray | None,
+                           cap_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         points_m = np.asarray(points_m, np.float64).reshape(-1, 3)
-        low, high, faces, weights = self._distance.query(points_m, hint_faces)
+        low, high, faces, weights = self._distance.query(points_m, hint_faces, cap_m)
         if self.signed:
             rows = np.arange(len(points_m)) if signed is None else np.flatnonzero(signed)
             touching = rows[low[rows] <= self.SIGN_FREE_M]
-            rows = rows[low[rows] > self.SIGN_FREE_M]
+            rows = rows[(low[rows] > self.SIGN_FREE_M) & (faces[rows] >= 0)]
             inside = rows[self._inside(points_m[rows], faces[rows], weights[rows])]
             low[inside], high[inside] = -high[inside], -low[inside]
             low[touching] = -high[touching]
         return low, high, faces
 
-    def signed_distance_m(self, points_m: np.ndarray, signed: np.ndarray | None = None) -> np.ndarray:
+    def signed_distance_m(self, points_m: np.ndarray, signed: np.ndarray | None = None,
+                          cap_m: float = np.inf) -> np.ndarray:
         """Distance (m, negative inside) where the mesh is closed, unsigned otherwise (and where ``signed`` is
-        false): the middle of ``distance_interval_m``, within 1e-8 m of the truth."""
-        low, high, _ = self.distance_interval_m(points_m, signed)
-        return 0.5 * (low + high)
+        false): the middle of ``distance_interval_m``, within 1e-8 m of the truth. Points farther than ``cap_m``
+        from the surface (on either side) get ``cap_m``: for weights that are nil that far, at a fraction of the
+        cost."""
+        low, high, _ = self._signed_interval_m(points_m, signed, None, cap_m)
+        return np.where(np.isfinite(high), 0.5 * (low + high), low)
 
     def ray_hit_distance_m(self, origins_m: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """Distance (m) along each ray (origins (N, 3) m, unit directions (N, 3)) to the first surface it hits;

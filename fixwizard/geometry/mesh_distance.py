@@ -321,17 +321,18 @@ def _box_low_m(x: np.ndarray, low: np.ndarray, high: np.ndarray) -> float:
 
 
 @numba.njit(nogil=True, cache=True)
-def _query_point(x: np.ndarray, rows: np.ndarray, hierarchy: tuple,
-                 hint: int) -> tuple[float, float, int, float, float]:
+def _query_point(x: np.ndarray, rows: np.ndarray, hierarchy: tuple, hint: int,
+                 cap: float) -> tuple[float, float, int, float, float]:
     """The mesh's distance interval at ``x`` (m), the triangle of the smallest ``high`` and its weights. ``hint``:
     a triangle likely to be near (-1: none); its interval starts the search, so that far nodes are pruned at once
-    (the result is the same: every triangle nearer than its ``high`` is still visited)."""
+    (the result is the same: every triangle nearer than its ``high`` is still visited). ``cap`` (m): nothing
+    farther is looked for; where no triangle lies within it the interval is ``[cap, inf]`` and the triangle -1."""
     node_low, node_high, children, ranges, order = hierarchy
     stack = np.empty(STACK_DEPTH, np.int64)
     reach = np.empty(STACK_DEPTH)  # each stacked node's box distance bound
     stack[0], reach[0] = 0, 0.0
     depth = 1
-    best_low, best_high, best_face, best_v, best_w = np.inf, np.inf, -1, 0.0, 0.0
+    best_low, best_high, best_face, best_v, best_w = cap, cap, -1, 0.0, 0.0
     if hint >= 0:
         best_low, best_high, best_v, best_w = triangle_row_interval_m(x[0], x[1], x[2], rows[hint])
         best_face = hint
@@ -347,7 +348,7 @@ def _query_point(x: np.ndarray, rows: np.ndarray, hierarchy: tuple,
                     continue
                 low, high, v, w = triangle_row_interval_m(x[0], x[1], x[2], rows[face])
                 best_low = min(best_low, low)
-                if high < best_high:
+                if high < best_high or best_face < 0:
                     best_high, best_face, best_v, best_w = high, face, v, w
             continue
         first, second = children[node, 0], children[node, 1]
@@ -358,17 +359,20 @@ def _query_point(x: np.ndarray, rows: np.ndarray, hierarchy: tuple,
         stack[depth], reach[depth] = second, second_reach
         stack[depth + 1], reach[depth + 1] = first, first_reach
         depth += 2
+    if best_face < 0:
+        return cap, np.inf, -1, 0.0, 0.0
     return best_low, best_high, best_face, best_v, best_w
 
 
 @numba.njit(nogil=True, cache=True, parallel=True)
-def _query(points: np.ndarray, rows: np.ndarray, hierarchy: tuple, hints: np.ndarray, out: tuple) -> None:
+def _query(points: np.ndarray, rows: np.ndarray, hierarchy: tuple, hints: np.ndarray, cap: float,
+           out: tuple) -> None:
     low_out, high_out, face_out, weights_out = out
     count = len(points)
     blocks = (count + BLOCK_POINTS - 1) // BLOCK_POINTS
     for block in numba.prange(blocks):
         for point in range(block * BLOCK_POINTS, min(count, (block + 1) * BLOCK_POINTS)):
-            low, high, face, v, w = _query_point(points[point], rows, hierarchy, hints[point])
+            low, high, face, v, w = _query_point(points[point], rows, hierarchy, hints[point], cap)
             low_out[point], high_out[point], face_out[point] = low, high, face
             weights_out[point, 0], weights_out[point, 1] = v, w
 
@@ -456,18 +460,20 @@ class MeshDistance:
         self.rows = _triangle_rows(vertices, triangles)
         self._hierarchy = _build_hierarchy(corners.min(axis=1), corners.max(axis=1))
 
-    def query(self, points_m: np.ndarray,
-              hint_faces: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def query(self, points_m: np.ndarray, hint_faces: np.ndarray | None = None,
+              cap_m: float = np.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """For each (N, 3) point: the interval's low and high ends (m), the triangle of the nearest point found,
         and that point's barycentric weights ``(N, 2)`` (of the triangle's second and third vertex).
-        ``hint_faces`` (N,): a triangle likely near each point (-1 for none), which only makes the search faster."""
+        ``hint_faces`` (N,): a triangle likely near each point (-1 for none), which only makes the search faster.
+        ``cap_m``: points farther from every triangle get ``[cap_m, inf]`` and triangle -1 (a far point costs a
+        search of the whole hierarchy otherwise)."""
         points = np.ascontiguousarray(points_m, np.float64).reshape(-1, 3)
         count = len(points)
         hints = np.full(count, -1, np.int64) if hint_faces is None else np.ascontiguousarray(hint_faces, np.int64)
         if len(hints) != count or (count and (hints.min() < -1 or hints.max() >= len(self.rows))):
             raise ValueError("one hint face (or -1) per point, within the mesh")
         out = (np.empty(count), np.empty(count), np.empty(count, np.int64), np.empty((count, 2)))
-        _query(points, self.rows, self._hierarchy, hints, out)
+        _query(points, self.rows, self._hierarchy, hints, float(cap_m), out)
         return out
 
     def rays(self, origins_m: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

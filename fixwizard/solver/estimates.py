@@ -26,6 +26,7 @@ MIN_EFFECTIVE_SAMPLES = 1000
 # PROPOSAL_INFLATION in scale, and never narrower per coordinate than a cell's own spread scaled by the previous
 # effective sample size), the rest uniform over the cells so that no part of the set goes unsampled; up to
 # FITTED_ROUNDS of them while they gain.
+NIL_SIGMAS = 10.0
 QUERY_POINTS = 2_000_000  # tap points per distance query: bounded memory for any number of taps
 PROPOSAL_SHARE = 0.8
 PROPOSAL_DOF = 5.0
@@ -215,7 +216,8 @@ def _log_likelihood(oracle: DistanceOracle, base_p_taps: np.ndarray, ball_radius
         rows = slice(first, first + batch)
         fix_p_taps = points_in_frames(matrices[rows], positions_m[rows], base_p_taps).reshape(-1, 3)
         outside = distance_grid_for(oracle).interval_m(fix_p_taps)[0] > 0.0  # no inside test needed there
-        residual = oracle.signed_distance_m(fix_p_taps, ~outside) - ball_radius_m
+        # a tap this many sigmas off zeroes the weight (exp(-50)): farther distances need not be known
+        residual = oracle.signed_distance_m(fix_p_taps, ~outside, ball_radius_m + NIL_SIGMAS * sigma_m) - ball_radius_m
         log_likelihood[rows] = -0.5 * np.sum((residual.reshape(-1, len(base_p_taps)) / sigma_m) ** 2, axis=1)
     return log_likelihood
 
