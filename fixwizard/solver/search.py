@@ -310,12 +310,13 @@ def search_budget(max_cells: float) -> float:
     return max_cells * UNIFORM_SHARE
 
 
-def _descends(problem: SearchProblem, tree: SearchTree, max_cells: float) -> bool:
-    """Whether the uniform descent splits the finest survivors once more within the cell budget."""
+def _descends(problem: SearchProblem, tree: SearchTree, max_cells: float, exhaustive: bool) -> bool:
+    """Whether the uniform descent splits the finest survivors once more within the cell budget (``exhaustive``:
+    whenever the budget allows, to tell an empty set from a non-empty one)."""
     cells = tree.final.cells
     if len(cells) == 0 or tree.spent + 8 * len(cells) > max_cells or not splittable(cells):
         return False
-    if 8 * len(cells) <= search_budget(max_cells):
+    if exhaustive or 8 * len(cells) <= search_budget(max_cells):
         return True
     gamma = float(np.max(cells.rotation_grid.gamma(cells.rotation_level, cells.rotation_ids)))
     span_m = cells.position_bound_m + problem.fixture_radius_m * chord(gamma)
@@ -324,10 +325,11 @@ def _descends(problem: SearchProblem, tree: SearchTree, max_cells: float) -> boo
 
 
 def _descend(problem: SearchProblem, tree: SearchTree, max_cells: float, started: float,
-             progress: Callable[[SearchProgress], None] | None, cancel: threading.Event | None) -> SearchTree:
+             progress: Callable[[SearchProgress], None] | None, cancel: threading.Event | None,
+             exhaustive: bool = False) -> SearchTree:
     """Split and filter level after level while ``_descends`` says so; reports every level."""
     while True:
-        descends = _descends(problem, tree, max_cells)
+        descends = _descends(problem, tree, max_cells, exhaustive)
         _report(progress, tree.evaluated, tree.final, started, final=not descends)
         if not descends:
             return tree
@@ -349,8 +351,10 @@ def _report(progress: Callable[[SearchProgress], None] | None, evaluated: int, s
 
 def search(problem: SearchProblem, max_cells: float = 1e7,
            progress: Callable[[SearchProgress], None] | None = None,
-           cancel: threading.Event | None = None) -> SearchTree | None:
+           cancel: threading.Event | None = None, exhaustive: bool = False) -> SearchTree | None:
     """Survivors of every level down to the finest the cell budget allows (the finest empty if no pose fits).
+    ``exhaustive``: descend as long as the whole budget allows (to prove a set empty), not only as far as the
+    estimates need.
 
     Returns None when the taps are too far apart for any pose (no possible fixture centre).
     """
@@ -360,7 +364,8 @@ def search(problem: SearchProblem, max_cells: float = 1e7,
         return None
     cells = root_cells(position_grid)
     survivors = filter_cells(problem, cells, cancel=cancel)
-    return _descend(problem, SearchTree([survivors], len(cells), len(cells)), max_cells, started, progress, cancel)
+    return _descend(problem, SearchTree([survivors], len(cells), len(cells)), max_cells, started, progress, cancel,
+                    exhaustive)
 
 
 def worth_extending(problem: SearchProblem, previous: SearchTree) -> bool:
