@@ -48,6 +48,7 @@ NORMAL_ULPS = 16.0
 LEAF_TRIANGLES = 4
 STACK_DEPTH = 128
 BLOCK_POINTS = 1024  # points per parallel work item
+SERIAL_POINTS = 2 * BLOCK_POINTS  # fewer points are queried on the calling thread
 
 
 @numba.njit(nogil=True, cache=True, inline="always")
@@ -364,17 +365,24 @@ def _query_point(x: np.ndarray, rows: np.ndarray, hierarchy: tuple, hint: int,
     return best_low, best_high, best_face, best_v, best_w
 
 
+@numba.njit(nogil=True, cache=True)
+def _query_range(start: int, stop: int, points: np.ndarray, rows: np.ndarray, hierarchy: tuple, hints: np.ndarray,
+                 cap: float, out: tuple) -> None:
+    low_out, high_out, face_out, weights_out = out
+    for point in range(start, stop):
+        low, high, face, v, w = _query_point(points[point], rows, hierarchy, hints[point], cap)
+        low_out[point], high_out[point], face_out[point] = low, high, face
+        weights_out[point, 0], weights_out[point, 1] = v, w
+
+
 @numba.njit(nogil=True, cache=True, parallel=True)
 def _query(points: np.ndarray, rows: np.ndarray, hierarchy: tuple, hints: np.ndarray, cap: float,
            out: tuple) -> None:
-    low_out, high_out, face_out, weights_out = out
     count = len(points)
     blocks = (count + BLOCK_POINTS - 1) // BLOCK_POINTS
     for block in numba.prange(blocks):
-        for point in range(block * BLOCK_POINTS, min(count, (block + 1) * BLOCK_POINTS)):
-            low, high, face, v, w = _query_point(points[point], rows, hierarchy, hints[point], cap)
-            low_out[point], high_out[point], face_out[point] = low, high, face
-            weights_out[point, 0], weights_out[point, 1] = v, w
+        _query_range(block * BLOCK_POINTS, min(count, (block + 1) * BLOCK_POINTS), points, rows, hierarchy, hints,
+                     cap, out)
 
 
 @numba.njit(nogil=True, cache=True, inline="always")
@@ -417,12 +425,12 @@ def _ray_triangle_t(origin: np.ndarray, direction: np.ndarray, row: np.ndarray) 
     return t if t > 0.0 else np.inf
 
 
-@numba.njit(nogil=True, cache=True, parallel=True)
-def _rays(origins: np.ndarray, directions: np.ndarray, rows: np.ndarray, hierarchy: tuple, first_out: np.ndarray,
-          crossings_out: np.ndarray) -> None:
-    """Per ray: the parameter of its first hit (inf: none) and how many triangles it crosses."""
+@numba.njit(nogil=True, cache=True)
+def _ray_range(start: int, stop: int, origins: np.ndarray, directions: np.ndarray, rows: np.ndarray,
+               hierarchy: tuple, first_out: np.ndarray, crossings_out: np.ndarray) -> None:
+    """Per ray of ``start .. stop``: the parameter of its first hit (inf: none) and how many triangles it crosses."""
     node_low, node_high, children, ranges, order = hierarchy
-    for ray in numba.prange(len(origins)):
+    for ray in range(start, stop):
         origin, direction = origins[ray], directions[ray]
         inverse = np.empty(3)
         for axis in range(3):
@@ -446,6 +454,16 @@ def _rays(origins: np.ndarray, directions: np.ndarray, rows: np.ndarray, hierarc
             stack[depth], stack[depth + 1] = children[node, 0], children[node, 1]
             depth += 2
         first_out[ray], crossings_out[ray] = first, crossings
+
+
+@numba.njit(nogil=True, cache=True, parallel=True)
+def _rays(origins: np.ndarray, directions: np.ndarray, rows: np.ndarray, hierarchy: tuple, first_out: np.ndarray,
+          crossings_out: np.ndarray) -> None:
+    count = len(origins)
+    blocks = (count + BLOCK_POINTS - 1) // BLOCK_POINTS
+    for block in numba.prange(blocks):
+        _ray_range(block * BLOCK_POINTS, min(count, (block + 1) * BLOCK_POINTS), origins, directions, rows,
+                   hierarchy, first_out, crossings_out)
 
 
 class MeshDistance:
@@ -473,7 +491,10 @@ class MeshDistance:
         if len(hints) != count or (count and (hints.min() < -1 or hints.max() >= len(self.rows))):
             raise ValueError("one hint face (or -1) per point, within the mesh")
         out = (np.empty(count), np.empty(count), np.empty(count, np.int64), np.empty((count, 2)))
-        _query(points, self.rows, self._hierarchy, hints, float(cap_m), out)
+        if count < SERIAL_POINTS:  # waking the parallel workers costs milliseconds: more than a few queries
+            _query_range(0, count, points, self.rows, self._hierarchy, hints, float(cap_m), out)
+        else:
+            _query(points, self.rows, self._hierarchy, hints, float(cap_m), out)
         return out
 
     def rays(self, origins_m: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -483,5 +504,8 @@ class MeshDistance:
         origins = np.ascontiguousarray(origins_m, np.float64).reshape(-1, 3)
         directions = np.ascontiguousarray(np.broadcast_to(directions, origins.shape), np.float64)
         first, crossings = np.empty(len(origins)), np.empty(len(origins), np.int64)
-        _rays(origins, directions, self.rows, self._hierarchy, first, crossings)
+        if len(origins) < SERIAL_POINTS:
+            _ray_range(0, len(origins), origins, directions, self.rows, self._hierarchy, first, crossings)
+        else:
+            _rays(origins, directions, self.rows, self._hierarchy, first, crossings)
         return first, crossings

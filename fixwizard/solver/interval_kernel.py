@@ -131,14 +131,24 @@ def face_distances_m(points_m: np.ndarray, faces: np.ndarray, triangle_rows: np.
 
 
 @numba.njit(nogil=True, cache=True, parallel=True)
-def cheap_pass(cells: tuple, taps: tuple, band: tuple, parent_index: np.ndarray, parents: tuple, lattice: tuple,
-               triangle_rows: np.ndarray, out: tuple) -> None:
-    """``_cheap_pass_range`` over all cells, in blocks spread over the cores."""
+def _parallel_cheap_pass(cells: tuple, taps: tuple, band: tuple, parent_index: np.ndarray, parents: tuple,
+                         lattice: tuple, triangle_rows: np.ndarray, out: tuple) -> None:
     count = len(cells[1])
     blocks = (count + BLOCK_CELLS - 1) // BLOCK_CELLS
     for block in numba.prange(blocks):
         _cheap_pass_range(block * BLOCK_CELLS, min(count, (block + 1) * BLOCK_CELLS), cells, taps, band,
                           parent_index, parents, lattice, triangle_rows, out)
+
+
+def cheap_pass(cells: tuple, taps: tuple, band: tuple, parent_index: np.ndarray, parents: tuple, lattice: tuple,
+               triangle_rows: np.ndarray, out: tuple) -> None:
+    """``_cheap_pass_range`` over all cells, in blocks spread over the cores (a few blocks on the calling thread:
+    waking the parallel workers costs milliseconds)."""
+    count = len(cells[1])
+    if count <= 2 * BLOCK_CELLS:
+        _cheap_pass_range(0, count, cells, taps, band, parent_index, parents, lattice, triangle_rows, out)
+    else:
+        _parallel_cheap_pass(cells, taps, band, parent_index, parents, lattice, triangle_rows, out)
 
 
 @numba.njit(nogil=True, cache=True)
