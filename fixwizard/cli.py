@@ -64,7 +64,8 @@ def _report_path(args: argparse.Namespace) -> Path:
 def solve_command(args: argparse.Namespace) -> int:
     ball_diameter_m, sample_bound_m = _lengths_from(args)
     request = SolveRequest(Path(args.mesh), Path(args.points), ball_diameter_m, sample_bound_m, args.mesh_units,
-                           parse_length_m(args.sigma) if args.sigma else None, args.max_cells)
+                           parse_length_m(args.sigma) if args.sigma else None, args.max_cells,
+                           report.fixture_name(args.fixture_name) if args.fixture_name else None)
     output = _report_path(args)
     check_output(output, [("mesh", args.mesh), ("POINTS file", args.points), ("tip calibration", args.calibration)],
                  "give another report path with -o, e.g. -o report.yaml")
@@ -132,6 +133,8 @@ def build_parser() -> argparse.ArgumentParser:
     solve_parser.add_argument("--mesh-units", choices=("m", "mm"), default="m", help="units of the mesh file")
     solve_parser.add_argument("--max-cells", type=_parse_cell_budget, default=1e7, help="cell budget (default 1e7)")
     solve_parser.add_argument("--sigma", help="standard deviation of tap errors (default: sample bound / 3)")
+    solve_parser.add_argument("--fixture-name", metavar="NAME", help="the fixture's name in the report, as "
+                              "`fixwizard serve` offers it (default: the mesh file's name without its suffix)")
     solve_parser.add_argument("-o", "--output", help="report path (default: POINTS with .report.yaml)")
     solve_parser.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     solve_parser.set_defaults(func=solve_command)
