@@ -1,6 +1,6 @@
 """The ``fixwizard`` command: without a sub-command the interactive wizard (simulated demo cell, or a UR
 arm with ``--robot HOST``; ``--resume`` reopens an unfinished session); the headless sub-commands solve,
-import-poses, calibrate-tip and identify.
+import-poses, calibrate-tip, identify, verify, export and serve.
 
 Exit codes (``EXIT_CODES``): 0 unique (one pose, pinned down), 1 bad input, 2 inconsistent (no pose explains the
 taps), 3 ambiguous (several distinct poses), 4 undetermined (the taps do not pin the pose down), 130 cancelled.
@@ -22,6 +22,7 @@ from fixwizard.workflow.identify import register_identify_parser
 from fixwizard.workflow.import_poses import import_pose_dir, load_tip
 from fixwizard.workflow.solve_run import SolveRequest, run_solve, summary_lines
 from fixwizard.workflow.tip_calibration import register_calibrate_tip_parser
+from fixwizard.workflow.verify import register_verify_parser
 
 EXIT_OK, EXIT_BAD_INPUT, EXIT_INCONSISTENT, EXIT_CANCELLED = 0, 1, 2, 130
 EXIT_CODES = {"unique": EXIT_OK, "inconsistent": EXIT_INCONSISTENT, "ambiguous": 3, "undetermined": 4}
@@ -147,6 +148,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     register_calibrate_tip_parser(commands)
     register_identify_parser(commands, _parse_cell_budget)
+    register_verify_parser(commands)
     return parser
 
 
