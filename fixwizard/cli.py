@@ -15,6 +15,7 @@ from pathlib import Path
 from fixwizard import report
 from fixwizard.atomic import check_output
 from fixwizard.errors import FixwizardError, InputError, MeshUnitsError, file_problem
+from fixwizard.export import register_export_parser
 from fixwizard.points import write_points
 from fixwizard.solver.search import SearchCancelled, SearchProgress
 from fixwizard.units import parse_length_m
@@ -149,6 +150,7 @@ def build_parser() -> argparse.ArgumentParser:
     register_calibrate_tip_parser(commands)
     register_identify_parser(commands, _parse_cell_budget)
     register_verify_parser(commands)
+    register_export_parser(commands)
     return parser
 
 

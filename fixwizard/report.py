@@ -69,7 +69,7 @@ def _rounded(values, decimals: int) -> list[float]:
     return [round(float(value), decimals) for value in np.asarray(values, float).ravel()]
 
 
-def _round_up(value: float, decimals: int) -> float:
+def round_up(value: float, decimals: int) -> float:
     """The smallest number of ``decimals`` decimals that is not below ``value``."""
     scale = 10.0**decimals
     rounded = math.ceil(value * scale) / scale
@@ -106,9 +106,9 @@ def _gap(first: np.ndarray, second: np.ndarray, fixture: Fixture) -> _Gap:
 
 def _figures(position_m: float, rotation_rad: float, point_m: float) -> dict:
     """Guaranteed figures as written: rounded up."""
-    return {"position_m": _round_up(position_m, POSITION_DECIMALS),
-            "rotation_deg": _round_up(float(np.degrees(min(rotation_rad, np.pi))), DEGREE_DECIMALS),
-            "max_point_displacement_m": _round_up(point_m, POSITION_DECIMALS)}
+    return {"position_m": round_up(position_m, POSITION_DECIMALS),
+            "rotation_deg": round_up(float(np.degrees(min(rotation_rad, np.pi))), DEGREE_DECIMALS),
+            "max_point_displacement_m": round_up(point_m, POSITION_DECIMALS)}
 
 
 def pose_dict(base_T_cad: np.ndarray) -> dict:
@@ -187,8 +187,8 @@ def report_dict(solution: Solution, fixture: Fixture, base_p_taps: np.ndarray, b
         "pose": (_pose_with_guarantee(solution.base_T_cad, bounds, fixture)
                  if solution.base_T_cad is not None and bounds is not None else None),
         "bounds": bounds,
-        "intervals": [{"level": interval.level, "position_m": _round_up(interval.position_m, POSITION_DECIMALS),
-                       "rotation_deg": _round_up(float(np.degrees(interval.rotation_rad)), DEGREE_DECIMALS)}
+        "intervals": [{"level": interval.level, "position_m": round_up(interval.position_m, POSITION_DECIMALS),
+                       "rotation_deg": round_up(float(np.degrees(interval.rotation_rad)), DEGREE_DECIMALS)}
                       for interval in solution.intervals] or None,
         "effective_samples": round(float(solution.effective_samples), 1),
         "modes": [{"probability": round(float(mode.probability), 6), "cells": mode.cell_count,
@@ -275,6 +275,19 @@ class Report:
     ball_diameter_m: float
     sample_bound_m: float
     pose_guarantee: Guarantee | None
+
+    def pose_to_use(self) -> tuple[np.ndarray, Guarantee] | None:
+        """The pose a robot program uses and the guarantee of its error: ``pose`` and ``pose.guaranteed``; for a
+        ``/1`` file, which states no guarantee for ``pose``, the bounds' centre and the bounds. None for an
+        inconsistent report."""
+        if self.base_T_cad is None or self.center_base_T_cad is None:
+            return None
+        if self.pose_guarantee is not None:
+            return self.base_T_cad, self.pose_guarantee
+        assert self.position_bound_m is not None and self.rotation_bound_deg is not None
+        assert self.max_point_displacement_m is not None
+        return self.center_base_T_cad, Guarantee(self.position_bound_m, self.rotation_bound_deg,
+                                                 self.max_point_displacement_m)
 
 
 def _pose_from(section: object, path: Path, where: str) -> np.ndarray:
