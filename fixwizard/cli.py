@@ -17,6 +17,7 @@ from fixwizard.atomic import check_output
 from fixwizard.errors import FixwizardError, InputError, MeshUnitsError, file_problem
 from fixwizard.export import register_export_parser
 from fixwizard.points import write_points
+from fixwizard.serve import register_serve_parser
 from fixwizard.solver.search import SearchCancelled, SearchProgress
 from fixwizard.units import parse_length_m
 from fixwizard.workflow.identify import register_identify_parser
@@ -151,6 +152,7 @@ def build_parser() -> argparse.ArgumentParser:
     register_identify_parser(commands, _parse_cell_budget)
     register_verify_parser(commands)
     register_export_parser(commands)
+    register_serve_parser(commands)
     return parser
 
 

@@ -17,7 +17,6 @@ import json
 import re
 import sys
 
-import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
@@ -34,8 +33,8 @@ def _identifier(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_]", "_", name)
 
 
-def _usable(loaded: report.Report, allow_simulated: bool, format_name: str) -> tuple[np.ndarray, report.Guarantee]:
-    """The pose to use and its guarantee; InputError when a robot must not use this report."""
+def _usable(loaded: report.Report, allow_simulated: bool, format_name: str) -> report.Guarantee:
+    """The guarantee of the pose to use; InputError when a robot must not use this report."""
     pose = loaded.pose_to_use()
     if loaded.status != "unique" or pose is None:
         raise InputError(f"the report {loaded.path} is {loaded.status}, so a robot must not use its pose: calibrate "
@@ -43,7 +42,7 @@ def _usable(loaded: report.Report, allow_simulated: bool, format_name: str) -> t
     if loaded.simulated and not allow_simulated:
         raise InputError(f"the report {loaded.path} comes from the simulated cell, not from a real fixture: export "
                          f"it to {format_name} only for a test, with --allow-simulated")
-    return pose
+    return pose[1]
 
 
 def _comment_lines(loaded: report.Report, guarantee: report.Guarantee, prefix: str) -> list[str]:
@@ -60,17 +59,14 @@ def _comment_lines(loaded: report.Report, guarantee: report.Guarantee, prefix: s
 
 
 def _ur_values(loaded: report.Report) -> list[float]:
-    """``[x, y, z, rx, ry, rz]`` of the pose to use as the report writes it (exported unrounded: every digit the
-    report holds, so that its guarantee holds for the exported pose)."""
-    pose = loaded.data["pose"] if loaded.pose_guarantee is not None else loaded.data["bounds"]["center"]
-    values = np.concatenate([np.array(pose["position_m"], float).reshape(3),
-                             np.array(pose["rotvec_rad"], float).reshape(3)])
-    return [float(value) for value in values]
+    values = loaded.ur_pose_to_use()
+    assert values is not None  # _usable refused a report without a pose
+    return values
 
 
 def urscript_text(loaded: report.Report, allow_simulated: bool = False) -> str:
     """A URScript file defining ``fixture_<name>`` as the pose to use."""
-    _, guarantee = _usable(loaded, allow_simulated, "URScript")
+    guarantee = _usable(loaded, allow_simulated, "URScript")
     literal = "p[" + ", ".join(repr(value) for value in _ur_values(loaded)) + "]"
     variable = f"fixture_{_identifier(loaded.name)}"
     lines = _comment_lines(loaded, guarantee, "#")
@@ -107,7 +103,7 @@ def ros2_document(loaded: report.Report, frame_id: str = BASE_FRAME_ID, child_fr
 def ros2_text(loaded: report.Report, frame_id: str = BASE_FRAME_ID, child_frame_id: str | None = None,
               allow_simulated: bool = False) -> str:
     document = ros2_document(loaded, frame_id, child_frame_id, allow_simulated)
-    _, guarantee = _usable(loaded, allow_simulated, "ROS 2")
+    guarantee = _usable(loaded, allow_simulated, "ROS 2")
     lines = _comment_lines(loaded, guarantee, "#")
     lines.append(f"# frame '{frame_id}': the UR controller's base frame (the UR ROS 2 driver's 'base', not "
                  "'base_link'); metres, quaternion x y z w")

@@ -276,6 +276,16 @@ class Report:
     sample_bound_m: float
     pose_guarantee: Guarantee | None
 
+    def ur_pose_to_use(self) -> list[float] | None:
+        """``pose_to_use`` as the report writes it, ``[x, y, z, rx, ry, rz]`` (m, rad), every digit kept (so that
+        its guarantee holds for these numbers); None for an inconsistent report."""
+        if self.pose_to_use() is None:
+            return None
+        section = self.data["pose"] if self.pose_guarantee is not None else self.data["bounds"]["center"]
+        values = np.concatenate([np.array(section["position_m"], float).reshape(3),
+                                 np.array(section["rotvec_rad"], float).reshape(3)])
+        return [float(value) for value in values]
+
     def pose_to_use(self) -> tuple[np.ndarray, Guarantee] | None:
         """The pose a robot program uses and the guarantee of its error: ``pose`` and ``pose.guaranteed``; for a
         ``/1`` file, which states no guarantee for ``pose``, the bounds' centre and the bounds. None for an
