@@ -31,6 +31,7 @@ DEFAULT_MAX_CELLS = 1e6  # cells one level may test: about a second each
 # sample bound: surviving cells then hold poses that explain the taps within very nearly the sample bound.
 FINE_SHARE = 0.05
 MAX_LEVELS = 40
+MAX_START_LEVEL = 20  # rotation cells of about 1e-6 rad: finer start cells would gain nothing (and HealPix ends at 29)
 MARGIN_M = 1e-9  # float slack on the start cube's half side and the rotation ball (1e-9 rad)
 # The smallest sample bound that explains the taps within the region: doubled from the given one up to this,
 # then bisected; each probe at a smaller budget (it only tells empty from not empty).
@@ -70,14 +71,15 @@ class RegionSearch:
 def _rotation_cells(region: AllowedRegion, grid: RotationGrid) -> tuple[int, np.ndarray]:
     """The level and ids of the rotation cells that overlap the region's rotation ball: from level 0 down to the
     first level whose cells are no larger than the ball, keeping each cell whose centre lies within the ball's
-    radius plus the cell's ``gamma`` of the ball's centre (no rotation of the other cells is within the ball)."""
+    radius plus the cell's ``gamma`` of the ball's centre (no rotation of the other cells is within the ball); at
+    most down to ``MAX_START_LEVEL``."""
     base_R_center = region.base_T_cad_center[:3, :3]
     level, ids = 0, np.arange(grid.n_cells(0), dtype=np.int64)
     while True:
         gammas = grid.gamma(level, ids)
         angles = rotation_angles(base_R_center, grid.center_matrices(level, ids))
         ids = ids[angles <= region.rotation_rad + gammas + MARGIN_M]
-        if float(np.max(gammas)) <= region.rotation_rad or level >= MAX_LEVELS:
+        if float(np.max(gammas)) <= region.rotation_rad or level >= MAX_START_LEVEL:
             return level, ids
         ids, level = grid.children(level, ids), level + 1
 
