@@ -1,6 +1,6 @@
 """The ``fixwizard`` command: without a sub-command the interactive wizard (simulated demo cell, or a UR
 arm with ``--robot HOST``; ``--resume`` reopens an unfinished session); the headless sub-commands solve,
-import-poses, calibrate-tip and identify.
+import-poses, calibrate-tip, identify, verify, export and serve.
 
 This module holds only the argument parser and imports nothing heavy: ``--help`` and bad arguments answer at
 once. A chosen command's module (``COMMAND_MODULE:function``) is imported when it runs.
@@ -23,6 +23,11 @@ __all__ = ["EXIT_CODES", "EXIT_OK", "build_parser", "main"]
 DEFAULT_MAX_CELLS = 1e7
 DEFAULT_IDENTIFY_MAX_CELLS = 1e7
 DEFAULT_TIME_LIMIT_S = 120.0
+EXPORT_FORMATS = ("urscript", "ros2", "json")
+ROS_BASE_FRAME_ID = "base"  # the UR ROS 2 driver's base frame (not base_link)
+SERVE_PORT = 50000  # as UR's XML-RPC examples use
+SERVE_HOST = "0.0.0.0"
+SERVE_MAX_AGE = "30d"
 
 
 def _cell_budget(text: str) -> float:
@@ -91,6 +96,8 @@ def _add_solve(commands: argparse._SubParsersAction) -> None:
                         help=f"cell budget (default {DEFAULT_MAX_CELLS:g})")
     parser.add_argument("--sigma", type=_positive_length, help="standard deviation of tap errors (default: sample "
                         "bound / 3)")
+    parser.add_argument("--fixture-name", metavar="NAME", help="the fixture's name in the report, as `fixwizard "
+                        "serve` offers it (default: the mesh file's name without its suffix)")
     parser.add_argument("-o", "--output", help="report path (default: POINTS with .report.yaml)")
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     parser.set_defaults(handler="fixwizard.commands:solve_command")
@@ -135,6 +142,51 @@ def _add_identify(commands: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler="fixwizard.workflow.identify:identify_command")
 
 
+def _add_verify(commands: argparse._SubParsersAction) -> None:
+    parser = commands.add_parser("verify", help="has the fixture moved? test a few new taps against a report",
+                                 description="Test new taps against the poses a report's guaranteed set allows. "
+                                 "Exit 0: consistent with the report; 2: the fixture has moved (a proof); 1: bad "
+                                 "input.")
+    parser.add_argument("report", metavar="REPORT", help="the fixture's report (fixwizard.report/1 or /2)")
+    parser.add_argument("points", metavar="POINTS", help="the new taps: YAML {frame: base, points_m: [...]} or CSV "
+                        "x,y,z (3-5 spread over the fixture)")
+    parser.add_argument("--mesh", metavar="PATH", help="the report's mesh, if it has moved to another folder (it must "
+                        "be the same file)")
+    parser.add_argument("--ball-diameter", type=_diameter, help="the new taps' ball, e.g. 3mm (default: the report's)")
+    parser.add_argument("--sample-bound", type=_positive_length, help="bound on the new taps' error, e.g. 1mm "
+                        "(default: the report's)")
+    parser.set_defaults(handler="fixwizard.workflow.verify:verify_command")
+
+
+def _add_export(commands: argparse._SubParsersAction) -> None:
+    parser = commands.add_parser("export", help="the report's pose as URScript, a ROS 2 transform or JSON",
+                                 description="Write the pose to use from a report for a robot program (URScript, "
+                                 "ROS 2) or anything else (JSON).")
+    parser.add_argument("report", metavar="REPORT", help="a fixwizard report")
+    parser.add_argument("--format", required=True, choices=EXPORT_FORMATS, help="urscript, ros2 or json")
+    parser.add_argument("-o", "--output", help="file to write (default: standard output)")
+    parser.add_argument("--frame-id", default=ROS_BASE_FRAME_ID,
+                        help=f"ros2: the parent frame (default {ROS_BASE_FRAME_ID})")
+    parser.add_argument("--child-frame-id", help="ros2: the fixture's frame (default: its name)")
+    parser.add_argument("--allow-simulated", action="store_true",
+                        help="export a report of the simulated cell to urscript or ros2 (for tests; marked SIMULATED)")
+    parser.set_defaults(handler="fixwizard.export:export_command")
+
+
+def _add_serve(commands: argparse._SubParsersAction) -> None:
+    parser = commands.add_parser("serve", help="serve the newest report of each fixture to robot programs (XML-RPC)",
+                                 description="An XML-RPC server for URScript's rpc_factory: get_pose, get_bounds, "
+                                 "get_status, is_usable, get_status_text and list_fixtures over the newest report "
+                                 "of each fixture in the reports folder.")
+    parser.add_argument("--reports", default="reports", metavar="DIR", help="the reports folder (default reports)")
+    parser.add_argument("--host", default=SERVE_HOST, help=f"address to listen on (default {SERVE_HOST}: all)")
+    parser.add_argument("--port", type=int, default=SERVE_PORT, help=f"port (default {SERVE_PORT})")
+    parser.add_argument("--max-age", default=SERVE_MAX_AGE, help=f"refuse older reports, e.g. 8h or 7d (default "
+                        f"{SERVE_MAX_AGE})")
+    parser.add_argument("--log", metavar="FILE", help="also append the log of calls to FILE")
+    parser.set_defaults(handler="fixwizard.serve:serve_command")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="fixwizard", description="Fixture pose calibration with guaranteed bounds from a few "
                      "robot taps. Without a COMMAND it starts the interactive wizard.",
@@ -146,7 +198,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--seed", type=int, default=0, help="wizard: seed of the simulated demo cell (default 0)")
     parser.set_defaults(handler="fixwizard.commands:wizard_command")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    for add in (_add_solve, _add_import_poses, _add_calibrate_tip, _add_identify):
+    for add in (_add_solve, _add_import_poses, _add_calibrate_tip, _add_identify, _add_verify, _add_export, _add_serve):
         add(commands)
     return parser
 

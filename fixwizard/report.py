@@ -1,10 +1,23 @@
-"""The YAML report robot programs read, schema ``fixwizard.report/1``: written atomically, loaded with checks.
+"""The YAML report robot programs read, schema ``fixwizard.report/2``: built, written atomically, loaded with checks.
 
-Poses are of the fixture's CAD frame in the robot base frame. Taps are numbered from 1 in
-messages and in ``suspect_tap.tap``.
+Every pose is of the fixture mesh's own CAD frame (its file's origin and axes) in the robot base frame: positions
+in metres, rotations as rotation vectors in radians (axis times angle, UR's ``rx, ry, rz``) and quaternions
+``x, y, z, w``; angles of bounds in degrees. ``simulated`` comes first, then ``status``.
+
+The pose to use is ``pose``, the most probable pose (the likelihood-weighted mean; the 95/99 % intervals are about
+it), with ``pose.guaranteed``: the true pose lies within those figures of it. ``bounds`` describes the guaranteed
+set itself: every pose that explains the taps lies within ``bounds`` of ``bounds.center``, the centre those figures
+are smallest about; that centre is a reference for the bounds, not a better pose.
+
+Numbers are rounded for people (0.1 um, 1e-6 rad, 1e-5 deg) and guaranteed figures are rounded up, after adding
+how far rounding moved the centre they are measured from, so that the written bounds still hold about the written
+centre. ``schema: fixwizard.report/2`` is documented by ``fixwizard/schemas/report-2.schema.json``; ``load``
+also reads ``fixwizard.report/1`` files. Taps are numbered from 1 in messages and in ``suspect_tap.tap``.
 """
 
 import datetime as dt
+import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -13,36 +26,132 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from fixwizard.atomic import write_text_atomic
-from fixwizard.errors import InputError
+from fixwizard.errors import InputError, quoted
 from fixwizard.fixture import Fixture
-from fixwizard.geometry.se3 import format_ur_pose, make_transform
+from fixwizard.geometry.se3 import make_transform
+from fixwizard.geometry.so3_grid import chord, rotation_angles
 from fixwizard.solver.estimates import Bounds
 from fixwizard.solver.solve import Solution
 from fixwizard.solver.verdict import STATUSES
 from fixwizard.yamlfile import load_document
 
-SCHEMA = "fixwizard.report/1"
+SCHEMA = "fixwizard.report/2"
+SCHEMA_V1 = "fixwizard.report/1"
+SCHEMAS = (SCHEMA, SCHEMA_V1)
+FRAME = {"pose_of": "fixture CAD frame (the mesh file's own origin and axes)", "relative_to": "robot base frame"}
+UNITS = {"length": "m", "rotation_vector": "rad (axis times angle, as UR's rx, ry, rz)",
+         "quaternion": "x, y, z, w", "angle": "deg"}
+POSITION_DECIMALS = 7  # 0.1 um
+ROTVEC_DECIMALS = 6  # 1e-6 rad
+QUATERNION_DECIMALS = 7
+DEGREE_DECIMALS = 5  # 1e-5 deg, about 2e-7 rad
+# A rotation read from the rounded quaternion lies within this angle (rad) of the one of the unrounded quaternion:
+# each of four components moves by at most half a unit of the last decimal, and the angle is at most 2 |dq|.
+QUATERNION_ROUNDING_RAD = 2.0 * 2.0 * 0.5 * 10.0**-QUATERNION_DECIMALS
+NAME_PATTERN = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
 
 
+def fixture_name(text: str) -> str:
+    """A fixture name as given (letters, digits, ``_``, ``.``, ``-``; at most 64); InputError otherwise."""
+    if not isinstance(text, str) or not NAME_PATTERN.match(text):
+        raise InputError(f"the fixture name {quoted(text)} must be 1-64 letters, digits, '_', '.' or '-', e.g. "
+                         "bracket or cell2-plate")
+    return text
 
-def _floats(values) -> list[float]:
-    return [float(value) for value in np.asarray(values).ravel()]
+
+def name_from_stem(stem: str) -> str:
+    """The fixture name derived from a mesh file's stem: every run of other characters becomes ``_``."""
+    name = re.sub(r"[^A-Za-z0-9_.-]+", "_", stem).strip("_")[:64]
+    return name or "fixture"
+
+
+def _rounded(values, decimals: int) -> list[float]:
+    return [round(float(value), decimals) for value in np.asarray(values, float).ravel()]
+
+
+def round_up(value: float, decimals: int) -> float:
+    """The smallest number of ``decimals`` decimals that is not below ``value``."""
+    scale = 10.0**decimals
+    rounded = math.ceil(value * scale) / scale
+    return rounded if rounded >= value else rounded + 1.0 / scale
+
+
+def _written_pose(base_T_cad: np.ndarray) -> tuple[list[float], list[float]]:
+    """Position (m) and rotation vector (rad) of a pose as written."""
+    return (_rounded(base_T_cad[:3, 3], POSITION_DECIMALS),
+            _rounded(Rotation.from_matrix(base_T_cad[:3, :3]).as_rotvec(), ROTVEC_DECIMALS))
+
+
+def _as_transform(position: list[float], rotvec: list[float]) -> np.ndarray:
+    return make_transform(Rotation.from_rotvec(rotvec), np.array(position))
+
+
+@dataclass(frozen=True)
+class _Gap:
+    """How far apart two poses are: CAD origins (m), rotations (rad) and any fixture point (m)."""
+
+    position_m: float
+    rotation_rad: float
+    point_m: float
+
+
+def _gap(first: np.ndarray, second: np.ndarray, fixture: Fixture) -> _Gap:
+    """The distance of two ``base_T_cad``: any fixture point lies within ``r`` of the mesh's enclosing-ball centre,
+    so it moves by at most the centre's displacement plus ``r`` times the chord of the rotation between them."""
+    angle = float(rotation_angles(first[:3, :3], second[:3, :3][None])[0])
+    centres = [pose[:3, :3] @ fixture.cad_p_center + pose[:3, 3] for pose in (first, second)]
+    point_m = float(np.linalg.norm(centres[0] - centres[1])) + fixture.radius_m * float(chord(angle))
+    return _Gap(float(np.linalg.norm(first[:3, 3] - second[:3, 3])), angle, point_m)
+
+
+def _figures(position_m: float, rotation_rad: float, point_m: float) -> dict:
+    """Guaranteed figures as written: rounded up."""
+    return {"position_m": round_up(position_m, POSITION_DECIMALS),
+            "rotation_deg": round_up(float(np.degrees(min(rotation_rad, np.pi))), DEGREE_DECIMALS),
+            "max_point_displacement_m": round_up(point_m, POSITION_DECIMALS)}
 
 
 def pose_dict(base_T_cad: np.ndarray) -> dict:
-    """Report form of a pose: position (m), rotation vector (rad), quaternion (x, y, z, w) and UR literal."""
-    rotation = Rotation.from_matrix(base_T_cad[:3, :3])
-    return {"position_m": _floats(base_T_cad[:3, 3]), "rotvec_rad": _floats(rotation.as_rotvec()),
-            "quaternion_xyzw": _floats(rotation.as_quat()), "ur": format_ur_pose(base_T_cad)}
+    """Report form of a pose: position (m), rotation vector (rad), quaternion (x, y, z, w) and UR literal, rounded;
+    the quaternion is that of the written rotation vector."""
+    position, rotvec = _written_pose(base_T_cad)
+    quaternion = Rotation.from_rotvec(rotvec).as_quat()
+    quaternion = quaternion if quaternion[3] >= 0 else -quaternion
+    return {"position_m": position, "rotvec_rad": rotvec,
+            "quaternion_xyzw": _rounded(quaternion, QUATERNION_DECIMALS),
+            "ur": "p[" + ", ".join(f"{value:.{POSITION_DECIMALS}f}" for value in position) + ", "
+                  + ", ".join(f"{value:.{ROTVEC_DECIMALS}f}" for value in rotvec) + "]"}
 
 
-def bounds_dict(bounds: Bounds) -> dict:
-    center = bounds.base_T_cad_center
-    return {"center": {"position_m": _floats(center[:3, 3]),
-                       "rotvec_rad": _floats(Rotation.from_matrix(center[:3, :3]).as_rotvec())},
-            "position_m": float(bounds.position_m),
-            "rotation_deg": float(np.degrees(bounds.rotation_rad)),
-            "max_point_displacement_m": float(bounds.max_point_displacement_m)}
+def bounds_dict(bounds: Bounds, fixture: Fixture) -> dict:
+    """The guaranteed bounds about their centre as written: the centre rounded, and the figures grown by how far
+    rounding moved it, then rounded up."""
+    position, rotvec = _written_pose(bounds.base_T_cad_center)
+    moved = _gap(bounds.base_T_cad_center, _as_transform(position, rotvec), fixture)
+    return {"center": {"position_m": position, "rotvec_rad": rotvec},
+            **_figures(bounds.position_m + moved.position_m, bounds.rotation_rad + moved.rotation_rad,
+                       bounds.max_point_displacement_m + moved.point_m)}
+
+
+def _lever_m(fixture: Fixture) -> float:
+    """The farthest any fixture point lies from the CAD origin (m): a turn about that origin by an angle ``a``
+    moves no point by more than this times ``a``."""
+    return float(np.linalg.norm(fixture.cad_p_center)) + fixture.radius_m
+
+
+def _pose_with_guarantee(base_T_cad: np.ndarray, written_bounds: dict, fixture: Fixture) -> dict:
+    """``pose_dict`` with ``guaranteed``: the written bounds about the written centre, plus the written pose's
+    distance from that centre (and the quaternion's rounding)."""
+    pose = pose_dict(base_T_cad)
+    centre = written_bounds["center"]
+    gap = _gap(_as_transform(pose["position_m"], pose["rotvec_rad"]),
+               _as_transform(centre["position_m"], centre["rotvec_rad"]), fixture)
+    pose["guaranteed"] = _figures(written_bounds["position_m"] + gap.position_m,
+                                  np.radians(written_bounds["rotation_deg"]) + gap.rotation_rad
+                                  + QUATERNION_ROUNDING_RAD,
+                                  written_bounds["max_point_displacement_m"] + gap.point_m
+                                  + _lever_m(fixture) * QUATERNION_ROUNDING_RAD)
+    return pose
 
 
 def _diagnosis_dict(solution: Solution) -> dict | None:
@@ -58,43 +167,95 @@ def _diagnosis_dict(solution: Solution) -> dict | None:
 
 
 def report_dict(solution: Solution, fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float,
-                sample_bound_m: float, sigma_m: float, created: dt.datetime | None = None) -> dict:
-    """The report as plain data (see the module docstring for the schema)."""
-    created = created or dt.datetime.now(dt.timezone.utc).astimezone()
+                sample_bound_m: float, sigma_m: float, created: dt.datetime | None = None, simulated: bool = False,
+                name: str | None = None) -> dict:
+    """The report as plain data (see the module docstring). ``name``: the fixture's name (default: derived from
+    the mesh file's stem, ``name_from_stem``); ``simulated``: the taps come from a simulated cell. The mesh is
+    named by its absolute path, so that ``fixwizard verify`` finds it from any folder."""
+    created = created or dt.datetime.now(dt.UTC).astimezone()
     suspect = solution.suspect_tap
+    bounds = bounds_dict(solution.bounds, fixture) if solution.bounds is not None else None
     return {
         "schema": SCHEMA,
-        "created": created.isoformat(timespec="seconds"),
+        "simulated": bool(simulated),
         "status": solution.status,
-        "pose": pose_dict(solution.base_T_cad) if solution.base_T_cad is not None else None,
-        "bounds": bounds_dict(solution.bounds) if solution.bounds is not None else None,
-        "intervals": [{"level": interval.level, "position_m": float(interval.position_m),
-                       "rotation_deg": float(np.degrees(interval.rotation_rad))}
+        "created": created.isoformat(timespec="seconds"),
+        "fixture": {"name": fixture_name(name) if name is not None else name_from_stem(fixture.path.stem),
+                    "mesh": str(fixture.path.resolve()), "mesh_sha256": fixture.sha256, "mesh_units": fixture.units},
+        "frame": dict(FRAME),
+        "units": dict(UNITS),
+        "pose": (_pose_with_guarantee(solution.base_T_cad, bounds, fixture)
+                 if solution.base_T_cad is not None and bounds is not None else None),
+        "bounds": bounds,
+        "intervals": [{"level": interval.level, "position_m": round_up(interval.position_m, POSITION_DECIMALS),
+                       "rotation_deg": round_up(float(np.degrees(interval.rotation_rad)), DEGREE_DECIMALS)}
                       for interval in solution.intervals] or None,
         "effective_samples": round(float(solution.effective_samples), 1),
-        "modes": [{"probability": mode.probability, "cells": mode.cell_count, "pose": pose_dict(mode.base_T_cad),
-                   "bounds": bounds_dict(mode.bounds)} for mode in solution.modes],
+        "modes": [{"probability": round(float(mode.probability), 6), "cells": mode.cell_count,
+                   "pose": pose_dict(mode.base_T_cad), "bounds": bounds_dict(mode.bounds, fixture)}
+                  for mode in solution.modes],
         "warnings": [{"code": warning.code, "message": warning.message} for warning in solution.warnings],
-        "suspect_tap": ({"tap": suspect.index + 1, "distance_from_surface_m": suspect.distance_m}
+        "suspect_tap": ({"tap": suspect.index + 1,
+                         "distance_from_surface_m": round(float(suspect.distance_m), POSITION_DECIMALS)}
                         if suspect is not None else None),
         "diagnosis": _diagnosis_dict(solution),
         "search": {"cells": solution.stats.cells, "rotation_level": solution.stats.rotation_level,
                    "position_level": solution.stats.position_level, "elapsed_s": round(solution.stats.elapsed_s, 3),
                    "max_cells": float(solution.stats.max_cells)},
-        "inputs": {"mesh": str(fixture.path), "mesh_sha256": fixture.sha256, "mesh_units": fixture.units,
-                   "ball_diameter_m": float(ball_diameter_m), "sample_bound_m": float(sample_bound_m),
-                   "sigma_m": float(sigma_m), "points_m": [_floats(point) for point in base_p_taps]},
+        "inputs": {"ball_diameter_m": float(ball_diameter_m), "sample_bound_m": float(sample_bound_m),
+                   "sigma_m": round(float(sigma_m), 10), "points_m": [_rounded(point, POSITION_DECIMALS) for point in base_p_taps]},
     }
 
 
+def _header(report: dict) -> str:
+    """The comment lines at the top of a written report: what it is, frames and units, which pose to use."""
+    name = report.get("fixture", {}).get("name", "?")
+    usable = report.get("status") == "unique" and not report.get("simulated")
+    lines = [f"fixwizard report ({report.get('schema')}) of the fixture '{name}'.",
+             "Poses: the fixture mesh's own CAD frame (its file's origin and axes) in the robot base frame.",
+             ("Units: metres (_m), rotation vectors in radians (_rad, axis times angle, as UR's rx ry rz), degrees "
+              "(_deg)."),
+             ("Use `pose` (or `pose.ur`, a UR p[...] literal): the most probable pose; the true pose lies within "
+              "`pose.guaranteed` of it."),
+             ("`bounds` describe the guaranteed set about its centre `bounds.center` (where those bounds are "
+              "smallest); the centre is no better pose to use."),
+             ("A robot program may use only a `status: unique` report from a real cell (`simulated: false`): "
+              + ("this one is." if usable else "THIS ONE IS NOT."))]
+    return "".join(f"# {line}\n" for line in lines)
+
+
+class _Dumper(yaml.SafeDumper):
+    """YAML with mappings as blocks and lists of numbers on one line (a point per line)."""
+
+
+def _represent_list(dumper: yaml.SafeDumper, data: list) -> yaml.Node:
+    flat = all(not isinstance(item, (dict, list)) for item in data)
+    return dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=flat)
+
+
+_Dumper.add_representer(list, _represent_list)
+
+
 def write(path: str | Path, report: dict) -> Path:
-    """Write a report dict atomically."""
-    return write_text_atomic(path, yaml.safe_dump(report, sort_keys=False, width=120))
+    """Write a report dict atomically, with comment lines on top saying what it holds."""
+    return write_text_atomic(path, _header(report) + yaml.dump(report, Dumper=_Dumper, sort_keys=False, width=120,
+                                                                allow_unicode=True))
+
+
+@dataclass(frozen=True)
+class Guarantee:
+    """Guaranteed figures about a pose: CAD-origin distance (m), rotation (deg), any fixture point (m)."""
+
+    position_m: float
+    rotation_deg: float
+    max_point_displacement_m: float
 
 
 @dataclass(frozen=True)
 class Report:
-    """A loaded report. ``base_T_cad`` and ``center_base_T_cad`` are None for an inconsistent result."""
+    """A loaded report (``fixwizard.report/2`` or ``/1``). ``base_T_cad`` (the pose to use) and
+    ``center_base_T_cad`` with the bounds about it are None for an inconsistent result; ``pose_guarantee`` is
+    None for those and for ``/1`` files (which did not state it). ``created`` is timezone-aware."""
 
     status: str
     base_T_cad: np.ndarray | None
@@ -103,9 +264,45 @@ class Report:
     rotation_bound_deg: float | None
     max_point_displacement_m: float | None
     data: dict
+    path: Path
+    schema: str
+    simulated: bool
+    created: dt.datetime
+    name: str
+    mesh: Path
+    mesh_sha256: str
+    mesh_units: str
+    ball_diameter_m: float
+    sample_bound_m: float
+    pose_guarantee: Guarantee | None
+
+    def ur_pose_to_use(self) -> list[float] | None:
+        """``pose_to_use`` as the report writes it, ``[x, y, z, rx, ry, rz]`` (m, rad), every digit kept (so that
+        its guarantee holds for these numbers); None for an inconsistent report."""
+        if self.pose_to_use() is None:
+            return None
+        section = self.data["pose"] if self.pose_guarantee is not None else self.data["bounds"]["center"]
+        values = np.concatenate([np.array(section["position_m"], float).reshape(3),
+                                 np.array(section["rotvec_rad"], float).reshape(3)])
+        return [float(value) for value in values]
+
+    def pose_to_use(self) -> tuple[np.ndarray, Guarantee] | None:
+        """The pose a robot program uses and the guarantee of its error: ``pose`` and ``pose.guaranteed``; for a
+        ``/1`` file, which states no guarantee for ``pose``, the bounds' centre and the bounds. None for an
+        inconsistent report."""
+        if self.base_T_cad is None or self.center_base_T_cad is None:
+            return None
+        if self.pose_guarantee is not None:
+            return self.base_T_cad, self.pose_guarantee
+        assert self.position_bound_m is not None and self.rotation_bound_deg is not None
+        assert self.max_point_displacement_m is not None
+        return self.center_base_T_cad, Guarantee(self.position_bound_m, self.rotation_bound_deg,
+                                                 self.max_point_displacement_m)
 
 
-def _pose_from(section: dict, path: Path, where: str) -> np.ndarray:
+def _pose_from(section: object, path: Path, where: str) -> np.ndarray:
+    if not isinstance(section, dict):
+        raise InputError(f"{path}: {where} needs position_m and rotvec_rad as three numbers each")
     try:
         position = np.array(section["position_m"], float).reshape(3)
         rotvec = np.array(section["rotvec_rad"], float).reshape(3)
@@ -116,20 +313,91 @@ def _pose_from(section: dict, path: Path, where: str) -> np.ndarray:
     return make_transform(Rotation.from_rotvec(rotvec), position)
 
 
-def load(path: str | Path) -> Report:
-    """Read and check a report written by ``write``; raises InputError for a damaged or foreign file."""
-    path = Path(path)
-    data = load_document(path, SCHEMA, "fixwizard report")
-    if data.get("status") not in STATUSES:
-        raise InputError(f"{path}: status must be one of {', '.join(STATUSES)}")
-    if data["status"] == "inconsistent":
-        return Report("inconsistent", None, None, None, None, None, data)
-    bounds = data.get("bounds")
-    if not isinstance(data.get("pose"), dict) or not isinstance(bounds, dict):
-        raise InputError(f"{path}: a {data['status']} report needs 'pose' and 'bounds'")
+def _figures_from(section: object, path: Path, where: str) -> list[float]:
+    """(position_m, rotation_deg, max_point_displacement_m) of a bounds-like section, finite and not negative."""
     try:
-        figures = [float(bounds[key]) for key in ("position_m", "rotation_deg", "max_point_displacement_m")]
+        figures = [float(section[key]) for key in ("position_m", "rotation_deg",  # type: ignore[index]
+                                                   "max_point_displacement_m")]
     except (KeyError, TypeError, ValueError) as error:
-        raise InputError(f"{path}: bounds need position_m, rotation_deg and max_point_displacement_m") from error
-    return Report(data["status"], _pose_from(data["pose"], path, "pose"),
-                  _pose_from(bounds.get("center") or {}, path, "bounds.center"), *figures, data)
+        raise InputError(f"{path}: {where} need position_m, rotation_deg and max_point_displacement_m") from error
+    if not all(math.isfinite(value) and value >= 0 for value in figures):
+        raise InputError(f"{path}: {where} must be finite numbers that are not negative")
+    return figures
+
+
+def _created(data: dict, path: Path) -> dt.datetime:
+    value = data.get("created")
+    if isinstance(value, str):
+        try:
+            value = dt.datetime.fromisoformat(value)
+        except ValueError:
+            value = None
+    if not isinstance(value, dt.datetime):
+        raise InputError(f"{path}: 'created' must be the time the report was written (ISO 8601, e.g. "
+                         f"2026-11-24T10:15:00+00:00), not {quoted(data.get('created'))}")
+    return value if value.tzinfo is not None else value.replace(tzinfo=dt.UTC)
+
+
+def _positive_input(inputs: dict, key: str, path: Path, allow_zero: bool = False) -> float:
+    try:
+        value = float(inputs[key])
+    except (KeyError, TypeError, ValueError) as error:
+        raise InputError(f"{path}: inputs.{key} must be a length in metres") from error
+    if not math.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
+        raise InputError(f"{path}: inputs.{key} must be a positive length in metres, not {value}")
+    return value
+
+
+def _fixture_section(data: dict, path: Path) -> tuple[str, Path, str, str]:
+    """Name, mesh path, its sha256 and units: ``fixture`` of a /2 report, ``inputs`` of a /1 report (named after
+    the mesh file's stem)."""
+    inputs = data.get("inputs")
+    section = data.get("fixture") if data["schema"] == SCHEMA else inputs
+    if not isinstance(section, dict):
+        raise InputError(f"{path}: the report does not say which fixture it is ('fixture' with name, mesh, "
+                         "mesh_sha256 and mesh_units)")
+    mesh, sha256, units = section.get("mesh"), section.get("mesh_sha256"), section.get("mesh_units")
+    if not (isinstance(mesh, str) and mesh and isinstance(sha256, str) and units in ("m", "mm")):
+        raise InputError(f"{path}: the fixture's mesh, mesh_sha256 and mesh_units (m or mm) are missing or damaged")
+    name = section.get("name") if data["schema"] == SCHEMA else name_from_stem(Path(mesh).stem)
+    if not isinstance(name, str):
+        raise InputError(f"{path}: fixture.name must be the fixture's name, e.g. bracket, not {quoted(name)}")
+    try:
+        return fixture_name(name), Path(mesh), sha256, units
+    except InputError as error:
+        raise InputError(f"{path}: {error}") from None
+
+
+def load(path: str | Path) -> Report:
+    """Read and check a report written by ``write`` (or a ``fixwizard.report/1`` file); InputError says what is
+    wrong with a damaged or foreign file."""
+    path = Path(path)
+    data = load_document(path, SCHEMAS, "fixwizard report")
+    status = data.get("status")
+    if status not in STATUSES:
+        raise InputError(f"{path}: status must be one of {', '.join(STATUSES)}, not {quoted(status)}")
+    simulated = data.get("simulated", False)
+    if not isinstance(simulated, bool):
+        raise InputError(f"{path}: 'simulated' must be true or false, not {quoted(simulated)}")
+    name, mesh, sha256, units = _fixture_section(data, path)
+    inputs = data["inputs"] if isinstance(data.get("inputs"), dict) else {}
+    created = _created(data, path)
+    ball_diameter_m = _positive_input(inputs, "ball_diameter_m", path, allow_zero=True)
+    sample_bound_m = _positive_input(inputs, "sample_bound_m", path)
+
+    def loaded(base_T_cad: np.ndarray | None, center: np.ndarray | None, figures: list[float] | list[None],
+               guarantee: Guarantee | None) -> Report:
+        return Report(status, base_T_cad, center, position_bound_m=figures[0], rotation_bound_deg=figures[1],
+                      max_point_displacement_m=figures[2], data=data, path=path, schema=data["schema"],
+                      simulated=simulated, created=created, name=name, mesh=mesh, mesh_sha256=sha256, mesh_units=units,
+                      ball_diameter_m=ball_diameter_m, sample_bound_m=sample_bound_m, pose_guarantee=guarantee)
+
+    if status == "inconsistent":
+        return loaded(None, None, [None, None, None], None)
+    pose, bounds = data.get("pose"), data.get("bounds")
+    if not isinstance(pose, dict) or not isinstance(bounds, dict):
+        raise InputError(f"{path}: a {status} report needs 'pose' and 'bounds'")
+    guarantee = (Guarantee(*_figures_from(pose.get("guaranteed"), path, "pose.guaranteed"))
+                 if data["schema"] == SCHEMA else None)
+    return loaded(_pose_from(pose, path, "pose"), _pose_from(bounds.get("center"), path, "bounds.center"),
+                  _figures_from(bounds, path, "bounds"), guarantee)

@@ -15,8 +15,10 @@ def yaml_problem(error: yaml.YAMLError) -> str:
     return str(error).splitlines()[0]
 
 
-def load_document(path: Path, schema: str, what: str, error: type[InputError] = InputError, hint: str = "") -> dict:
-    """The YAML mapping in ``path`` if its ``schema`` key matches; ``error`` names the ``what`` otherwise."""
+def load_document(path: Path, schema: str | tuple[str, ...], what: str, error: type[InputError] = InputError,
+                  hint: str = "") -> dict:
+    """The YAML mapping in ``path`` if its ``schema`` key matches (one of several, the first the current one);
+    ``error`` names the ``what`` otherwise."""
     try:
         data = yaml.safe_load(path.read_text(encoding="utf-8-sig"))
     except OSError as problem:
@@ -26,6 +28,7 @@ def load_document(path: Path, schema: str, what: str, error: type[InputError] = 
     except yaml.YAMLError as problem:
         raise error(f"the {what} {path} is not valid YAML: {yaml_problem(problem)}") from problem
     found = data.get("schema") if isinstance(data, dict) else None
-    if found != schema:
-        raise error(f"{path} is not a {what}: expected 'schema: {schema}', found {quoted(found)}.{hint}")
+    accepted = (schema,) if isinstance(schema, str) else schema
+    if found not in accepted:
+        raise error(f"{path} is not a {what}: expected 'schema: {accepted[0]}', found {quoted(found)}.{hint}")
     return data

@@ -88,7 +88,7 @@ def test_a_symlink_output_is_written_through_to_its_target_atomically(demo, caps
     (demo / "latest.yaml").symlink_to(target)
     assert main(solve(demo, "-o", str(demo / "latest.yaml"))) == EXIT_CODES["undetermined"]  # 1e5 cells: coarse
     assert (demo / "latest.yaml").is_symlink() and os.readlink(demo / "latest.yaml") == str(target)
-    assert yaml.safe_load(target.read_text())["schema"] == "fixwizard.report/1"
+    assert yaml.safe_load(target.read_text())["schema"] == "fixwizard.report/2"
     assert [path.name for path in target.parent.iterdir()] == ["report.yaml"]  # no temporary file left
 
 

@@ -1,42 +1,192 @@
-"""The report file robot programs read: schema, atomic writing, and loading with checks."""
+"""The report file robot programs read (fixwizard.report/2): what it says at a glance, rounding that keeps the
+guarantee, atomic writing, and loading with checks, also of fixwizard.report/1 files."""
+
+import datetime as dt
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
+from scipy.spatial.transform import Rotation
+from shapes import l_prism
 
 from fixwizard import report
 from fixwizard.errors import InputError
+from fixwizard.fixture import load_fixture
+from fixwizard.geometry.se3 import make_transform, transform_points
+from fixwizard.solver.estimates import Bounds
 from fixwizard.solver.solve import solve
 from fixwizard.synthetic import bounded_noise, touching_ball_centres
-from shapes import as_fixture
+
+V1_REPORT = Path(__file__).resolve().parent / "data" / "report_v1.yaml"
 
 
 @pytest.fixture(scope="module")
-def solved():
-    fixture = as_fixture("l_prism")
+def plate(tmp_path_factory):
+    """The L-plate as a mesh file (mm), loaded."""
+    folder = tmp_path_factory.mktemp("plate")
+    mesh = l_prism()
+    mesh.apply_scale(1000.0)
+    mesh.export(folder / "l plate (v2).stl")
+    return load_fixture(folder / "l plate (v2).stl", "mm")
+
+
+@pytest.fixture(scope="module")
+def solved(plate):
     rng = np.random.default_rng(4)
-    taps = touching_ball_centres(fixture.mesh, 20, 0.0015, rng) + bounded_noise(20, 0.0005, rng)
-    solution = solve(fixture, taps, 0.003, 0.0005, max_cells=1e6, max_samples=2000)
+    base_T_cad = make_transform(Rotation.from_euler("xyz", [3, -2, 50], degrees=True), [0.4, -0.2, 0.05])
+    taps = transform_points(base_T_cad, touching_ball_centres(plate.mesh, 20, 0.0015, rng)) + bounded_noise(20, 0.0005,
+                                                                                                          rng)
+    solution = solve(plate, taps, 0.003, 0.0005, max_cells=1e6, max_samples=2000)
     assert solution.status == "unique"
-    return fixture, taps, solution
+    return plate, taps, solution
 
 
-def test_report_round_trip_keeps_pose_and_bounds(solved, tmp_path):
+def written(solved, tmp_path, **options) -> Path:
     fixture, taps, solution = solved
-    data = report.report_dict(solution, fixture, taps, 0.003, 0.0005, 0.0005 / 3)
-    report.write(tmp_path / "r.yaml", data)
-    loaded = report.load(tmp_path / "r.yaml")
-    assert loaded.data["schema"] == "fixwizard.report/1"
-    assert loaded.base_T_cad == pytest.approx(solution.base_T_cad, abs=1e-12)
-    assert loaded.position_bound_m == pytest.approx(solution.bounds.position_m)
+    return report.write(tmp_path / "r.yaml", report.report_dict(solution, fixture, taps, 0.003, 0.0005, 0.0005 / 3,
+                                                                 **options))
+
+
+def test_the_file_says_at_the_top_whether_it_is_simulated_its_status_frame_and_units(solved, tmp_path):
+    text = written(solved, tmp_path, simulated=True).read_text()
+    comments = [line for line in text.splitlines() if line.startswith("#")]
+    assert "CAD frame" in comments[1] and "robot base frame" in comments[1]
+    assert "metres" in comments[2] and "radians" in comments[2] and "degrees" in comments[2]
+    assert "Use `pose`" in comments[3] and "`bounds.center`" in comments[4]
+    assert comments[-1].endswith("THIS ONE IS NOT.")
+    data = yaml.safe_load(text)
+    assert list(data)[:4] == ["schema", "simulated", "status", "created"]
+    assert data["schema"] == "fixwizard.report/2" and data["simulated"] is True
+    assert data["frame"]["relative_to"] == "robot base frame" and data["units"]["length"] == "m"
+
+
+def test_a_unique_report_from_a_real_cell_says_a_program_may_use_it(solved, tmp_path):
+    assert written(solved, tmp_path).read_text().splitlines()[5].endswith("this one is.")
+
+
+def test_round_trip_keeps_the_pose_to_within_its_rounding(solved, tmp_path):
+    _, _, solution = solved
+    loaded = report.load(written(solved, tmp_path))
+    assert loaded.schema == "fixwizard.report/2" and not loaded.simulated
+    assert loaded.base_T_cad[:3, 3] == pytest.approx(solution.base_T_cad[:3, 3], abs=1e-7)
+    angle = Rotation.from_matrix(loaded.base_T_cad[:3, :3].T @ solution.base_T_cad[:3, :3]).magnitude()
+    assert angle < 2e-6
+    assert loaded.position_bound_m >= solution.bounds.position_m
+    assert loaded.pose_guarantee.position_m >= loaded.position_bound_m
     assert [interval["level"] for interval in loaded.data["intervals"]] == [0.95, 0.99]
-    assert loaded.data["pose"]["ur"].startswith("p[")
     assert set(loaded.data) >= {"created", "status", "modes", "warnings", "search", "inputs"}
 
 
-@pytest.mark.parametrize("text, match", [("just words", "not a fixwizard report"),
-                                         ("schema: fixwizard.report/1\nstatus: great\n", "status"),
-                                         ("schema: fixwizard.report/1\nstatus: unique\npose: null\n", "needs 'pose'"),
-                                         ("{{{", "is not valid YAML: .* at line 1")])
+def test_the_fixture_is_named_after_the_mesh_file_unless_named(solved, tmp_path):
+    fixture = solved[0]
+    loaded = report.load(written(solved, tmp_path))
+    assert loaded.name == "l_plate_v2" and loaded.mesh == fixture.path.resolve() and loaded.mesh.is_absolute()
+    assert loaded.mesh_sha256 == fixture.sha256 and loaded.mesh_units == "mm"
+    assert report.load(written(solved, tmp_path, name="bracket-2")).name == "bracket-2"
+    with pytest.raises(InputError, match="letters, digits"):
+        written(solved, tmp_path, name="two words")
+
+
+def test_numbers_have_sensible_precision(solved, tmp_path):
+    text = written(solved, tmp_path).read_text()
+    data = yaml.safe_load(text)
+    assert not re.search(r"\d\.\d{11,}", text)  # no 17-digit floats anywhere
+    for values, decimals in ((data["pose"]["position_m"], 7), (data["pose"]["rotvec_rad"], 6),
+                             (data["bounds"]["center"]["position_m"], 7), ([data["bounds"]["rotation_deg"]], 5),
+                             ([value for point in data["inputs"]["points_m"] for value in point], 7)):
+        assert all(round(value, decimals) == value for value in values)
+    position, rotvec = data["pose"]["position_m"], data["pose"]["rotvec_rad"]
+    assert data["pose"]["ur"] == "p[" + ", ".join([f"{v:.7f}" for v in position] + [f"{v:.6f}" for v in rotvec]) + "]"
+    quaternion = Rotation.from_quat(data["pose"]["quaternion_xyzw"])
+    assert (quaternion.inv() * Rotation.from_rotvec(rotvec)).magnitude() < 2e-7
+
+
+def _pose_at(rng, centre: np.ndarray, position_m: float, rotation_rad: float) -> np.ndarray:
+    """A pose whose CAD origin lies exactly ``position_m`` and whose rotation exactly ``rotation_rad`` from the
+    centre's: the worst case a guarantee must hold for."""
+    direction, axis = rng.normal(size=3), rng.normal(size=3)
+    turn = Rotation.from_rotvec(axis / np.linalg.norm(axis) * rotation_rad)
+    return make_transform(turn * Rotation.from_matrix(centre[:3, :3]),
+                          centre[:3, 3] + position_m * direction / np.linalg.norm(direction))
+
+
+def _within(figures: dict, centre: np.ndarray, pose: np.ndarray, vertices: np.ndarray) -> bool:
+    """Whether ``pose`` lies within the written figures of ``centre`` (CAD origin, rotation, every vertex)."""
+    angle = np.degrees(Rotation.from_matrix(centre[:3, :3].T @ pose[:3, :3]).magnitude())
+    moved = np.linalg.norm(transform_points(pose, vertices) - transform_points(centre, vertices), axis=1).max()
+    return bool(np.linalg.norm(pose[:3, 3] - centre[:3, 3]) <= figures["position_m"]
+                and angle <= figures["rotation_deg"] and moved <= figures["max_point_displacement_m"])
+
+
+def test_rounding_never_lets_a_pose_at_the_edge_of_the_bounds_escape_them(plate):
+    """Random centres and poses exactly at the bounds (tight in every figure): the written bounds about the written
+    centre, and the pose's guarantee about the written pose, still hold them, also read through the quaternion."""
+    rng = np.random.default_rng(21)
+    vertices = plate.mesh.vertices
+    for _ in range(300):
+        centre = make_transform(Rotation.random(random_state=rng), rng.uniform(-0.8, 0.8, 3))
+        position_m, rotation_rad = rng.uniform(1e-7, 3e-3), rng.uniform(1e-7, 0.05)
+        true = _pose_at(rng, centre, position_m, rotation_rad)
+        point_m = np.linalg.norm(transform_points(true, vertices) - transform_points(centre, vertices), axis=1).max()
+        bounds = report.bounds_dict(Bounds(centre, position_m, rotation_rad, point_m), plate)
+        written_centre = make_transform(Rotation.from_rotvec(bounds["center"]["rotvec_rad"]),
+                                        bounds["center"]["position_m"])
+        assert _within(bounds, written_centre, true, vertices)
+        estimate = _pose_at(rng, centre, rng.uniform(0, position_m), rng.uniform(0, rotation_rad))
+        pose = report._pose_with_guarantee(estimate, bounds, plate)
+        for rotation in (Rotation.from_rotvec(pose["rotvec_rad"]), Rotation.from_quat(pose["quaternion_xyzw"])):
+            assert _within(pose["guaranteed"], make_transform(rotation, pose["position_m"]), true, vertices)
+
+
+def test_an_inconsistent_report_has_no_pose_and_loads(plate, solved, tmp_path):
+    _, taps, _ = solved
+    off = taps.copy()
+    off[3] += [0.0, 0.0, 0.05]
+    solution = solve(plate, off, 0.003, 0.0005, max_cells=2e5, max_samples=500, diagnose_inconsistent=False)
+    path = report.write(tmp_path / "off.yaml", report.report_dict(solution, plate, off, 0.003, 0.0005, 0.0005 / 3))
+    loaded = report.load(path)
+    assert loaded.status == "inconsistent" and loaded.base_T_cad is None and loaded.pose_guarantee is None
+    assert loaded.data["pose"] is None and loaded.data["bounds"] is None
+    assert path.read_text().splitlines()[5].endswith("THIS ONE IS NOT.")
+
+
+def test_a_version_1_report_still_loads(tmp_path):
+    loaded = report.load(V1_REPORT)
+    assert loaded.schema == "fixwizard.report/1" and loaded.status == "unique"
+    assert loaded.name == "demo_bracket" and loaded.mesh == Path("fixtures/demo_bracket.stl")
+    assert loaded.mesh_units == "mm" and loaded.ball_diameter_m == 0.003 and loaded.sample_bound_m == 0.001
+    assert loaded.pose_guarantee is None and not loaded.simulated
+    assert loaded.created == dt.datetime(2026, 11, 24, 4, 28, 12, tzinfo=dt.UTC)
+    assert loaded.position_bound_m == pytest.approx(0.004182796099050545)
+    assert loaded.base_T_cad[:3, 3] == pytest.approx([0.4500388342801127, -0.12033487023360534, 0.01998762907265287])
+
+
+V2_START = ("schema: fixwizard.report/2\nsimulated: false\nstatus: unique\ncreated: '2026-01-02T03:04:05+00:00'\n"
+            "fixture: {name: b, mesh: /x.stl, mesh_sha256: abc, mesh_units: mm}\n"
+            "inputs: {ball_diameter_m: 0.003, sample_bound_m: 0.001}\n")
+
+
+@pytest.mark.parametrize("text, match", [
+    ("just words", "not a fixwizard report"),
+    ("schema: fixwizard.report/3\n", "expected 'schema: fixwizard.report/2'"),
+    ("schema: fixwizard.report/1\nstatus: great\n", "status"),
+    (V2_START + "pose: null\n", "needs 'pose'"),
+    (V2_START.replace("simulated: false", "simulated: maybe"), "'simulated' must be true or false"),
+    (V2_START.replace("created: '2026-01-02T03:04:05+00:00'", "created: yesterday"), "'created' must be"),
+    (V2_START.replace("fixture: {name: b, mesh: /x.stl, mesh_sha256: abc, mesh_units: mm}\n", ""),
+     "does not say which fixture"),
+    (V2_START.replace("name: b,", "name: 'a b',"), "letters, digits"),
+    (V2_START.replace("mesh_units: mm", "mesh_units: inch"), "mesh_units"),
+    (V2_START.replace("sample_bound_m: 0.001", "sample_bound_m: -1"), "positive length"),
+    (V2_START + "pose: {position_m: [0, 0, 0], rotvec_rad: [0, 0, 0], guaranteed: {position_m: 0.001, rotation_deg: 1,"
+     " max_point_displacement_m: 0.002}}\nbounds: {center: {position_m: [0, 0, 0], rotvec_rad: [0, 0, .nan]},"
+     " position_m: 0.001, rotation_deg: 1, max_point_displacement_m: 0.002}\n", "not finite"),
+    (V2_START + "pose: {position_m: [0, 0, 0], rotvec_rad: [0, 0, 0], guaranteed: {position_m: 0.001, rotation_deg: 1,"
+     " max_point_displacement_m: 0.002}}\nbounds: {center: {position_m: [0, 0, 0], rotvec_rad: [0, 0, 0]},"
+     " position_m: -0.001, rotation_deg: 1, max_point_displacement_m: 0.002}\n", "not negative"),
+    ("{{{", "is not valid YAML: .* at line 1")])
 def test_damaged_reports_are_refused_with_a_reason(tmp_path, text, match):
     path = tmp_path / "bad.yaml"
     path.write_text(text)
@@ -45,9 +195,8 @@ def test_damaged_reports_are_refused_with_a_reason(tmp_path, text, match):
 
 
 def test_writing_replaces_the_file_whole(solved, tmp_path):
-    fixture, taps, solution = solved
     path = tmp_path / "r.yaml"
     path.write_text("old")
-    report.write(path, report.report_dict(solution, fixture, taps, 0.003, 0.0005, 0.0005 / 3))
-    assert report.load(path).status == solution.status
+    written(solved, tmp_path)
+    assert report.load(path).status == solved[2].status
     assert [entry.name for entry in tmp_path.iterdir()] == ["r.yaml"]

@@ -1,6 +1,7 @@
 """The start screen: the robot, the fixture (listed or typed, with its units and size), the tip calibration
 (stored or new) and, when there are any, an unfinished session to resume. It fills the context and
-dismisses with True; the app decides what comes next."""
+dismisses with True; the app decides what comes next. "Check a calibrated fixture" opens ``CheckScreen`` over it
+(with the chosen stored tip calibration); back from there is back here."""
 
 from collections.abc import Callable
 from pathlib import Path
@@ -14,6 +15,7 @@ from fixwizard.demo import DEMO_MESH
 from fixwizard.errors import FixwizardError, MeshError, MeshUnitsError
 from fixwizard.fixture import Fixture, load_fixture
 from fixwizard.tui.background import ShownError, run_in_thread
+from fixwizard.tui.check import CheckScreen
 from fixwizard.tui.choices import (
     CalibrationChoice,
     calibration_choices,
@@ -48,7 +50,8 @@ class StartScreen(Screen[bool]):
     StartScreen #units { width: 10; }
     StartScreen #fixture-path { margin-left: 12; width: 60; }
     StartScreen #calibration, StartScreen #session { width: 60; }
-    StartScreen #continue { margin: 1 0 0 12; }
+    StartScreen #buttons { margin-left: 12; }
+    StartScreen #check { margin-left: 2; }
     StartScreen #robot-host { margin-left: 12; width: 60; }
     StartScreen #use-simulated { margin-left: 12; }
     StartScreen .-hidden { display: none; }
@@ -101,7 +104,9 @@ class StartScreen(Screen[bool]):
                                   *((f"Resume {path.stem}", str(path)) for path in self._sessions)],
                                  id="session", value=NEW, allow_blank=False, compact=True)
                 yield Static("", id="session-info", classes="detail")
-            yield Button("Continue", id="continue", variant="primary", compact=True)
+            with Horizontal(id="buttons", classes="row"):
+                yield Button("Continue", id="continue", variant="primary", compact=True)
+                yield Button("Check a calibrated fixture", id="check", compact=True)
 
     def on_mount(self) -> None:
         self.query_one("#fixture", Select).focus()
@@ -215,6 +220,8 @@ class StartScreen(Screen[bool]):
     def on_button_pressed(self, event: Button.Pressed) -> None:
         if event.button.id == "continue":
             self._continue()
+        elif event.button.id == "check":
+            self._check()
         elif event.button.id == "use-simulated":
             self._switch_robot(lambda: use_simulated_cell(self.context))
 
@@ -246,6 +253,19 @@ class StartScreen(Screen[bool]):
     def _resumed(self, opened: str) -> None:
         self.app.notify_resumed(opened)
         self.dismiss(True)
+
+    def _check(self) -> None:
+        """Check a calibrated fixture (``CheckScreen``) with the chosen stored tip calibration: its tip and ball."""
+        choice = self._chosen_calibration()
+        if choice is None:
+            self.notify("Checking a fixture needs a stored tip calibration: choose one under Tip (or calibrate the "
+                        "tip first with Continue).", severity="warning")
+            return
+        if choice.calibration is None:
+            self.notify("That tip calibration cannot be read; choose another.", severity="warning")
+            return
+        self.context.calibration, self.context.calibration_path = choice.calibration, choice.path
+        self.app.push_screen(CheckScreen(self.context, choice.calibration))
 
     def _continue(self) -> None:
         session_value = str(self.query_one("#session", Select).value) if self._sessions else NEW

@@ -25,6 +25,7 @@ class SolveRequest:
     mesh_units: str = "m"
     sigma_m: float | None = None
     max_cells: float = DEFAULT_MAX_CELLS
+    fixture_name: str | None = None  # the report's name of the fixture (default: from the mesh file's stem)
 
 
 @dataclass(frozen=True)
@@ -44,7 +45,7 @@ def run_solve(request: SolveRequest, progress: Callable[[SearchProgress], None] 
     solution = solve(fixture, base_p_taps, request.ball_diameter_m, request.sample_bound_m, sigma_m,
                      request.max_cells, progress, cancel)
     data = report.report_dict(solution, fixture, base_p_taps, request.ball_diameter_m, request.sample_bound_m,
-                              sigma_m)
+                              sigma_m, name=request.fixture_name)
     return SolveOutcome(fixture, base_p_taps, solution, data)
 
 

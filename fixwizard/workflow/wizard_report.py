@@ -1,5 +1,7 @@
-"""The report the wizard writes after a solve: the ``fixwizard.report/1`` document of the session's taps, with
-where the taps came from (the session journal) and, on a simulated cell, ``simulated: true``."""
+"""The report the wizard writes after a solve: the ``fixwizard.report/2`` document of the session's taps, with
+where the taps came from (the session journal) and, on a simulated cell, ``simulated: true``. The fixture's name
+in it is derived from the mesh file's stem (``report.name_from_stem``): the reports of a cell with several
+fixtures are told apart by it (``workflow/cell_reports.py``)."""
 
 import datetime as dt
 from pathlib import Path
@@ -23,11 +25,9 @@ def session_report(solution: Solution, fixture: Fixture, session: SamplingSessio
                    simulated: bool) -> dict:
     """The report of a solve of the session's active taps, with the calibration's ball and sample bound."""
     data = report.report_dict(solution, fixture, session.base_p_taps, calibration.ball_diameter_m,
-                              calibration.sample_bound_m, calibration.sample_bound_m / 3.0)
+                              calibration.sample_bound_m, calibration.sample_bound_m / 3.0, simulated=simulated)
     data["session"] = {"journal": str(session.path), "tap_ids": [tap.id for tap in session.taps],
                        "tip_calibration": calibration.name}
-    if simulated:
-        data["simulated"] = True
     return data
 
 

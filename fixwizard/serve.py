@@ -1,0 +1,269 @@
+"""``fixwizard serve``: the newest report of each fixture, over XML-RPC, for URScript programs.
+
+A UR program reaches it with ``fw = rpc_factory("xmlrpc", "http://PC:50000")``. Functions, each taking the
+fixture's name (``fixture.name`` in the report, see ``workflow/cell_reports.py``):
+
+- ``get_pose(name)``: the pose to use (``Report.pose_to_use``) as a UR pose struct ``{x, y, z, rx, ry, rz}``
+  (m, rad): the fixture's CAD frame in the robot base frame;
+- ``get_bounds(name)``: ``[position_m, rotation_deg, max_point_displacement_m]``, the guarantee of that pose (a
+  list: URScript takes lists of numbers, not structs other than poses);
+- ``get_status(name)``: ``{status, age_s, simulated, usable, reason, report, created}`` (for PC programs);
+- ``is_usable(name)``: whether ``get_pose`` would serve it (never a fault: for ``if`` in URScript);
+- ``get_status_text(name)``: why it is or is not usable, in one sentence (for a ``popup``);
+- ``list_fixtures()``: the names, sorted.
+
+``get_pose`` and ``get_bounds`` refuse, with an XML-RPC fault whose text says why and what to do, a fixture
+without a report, a report that is not ``unique``, one from the simulated cell, one older than ``max_age_s`` or
+dated in the future (a wrong clock): a URScript program stops on a fault, so a bad pose is never used as if good.
+Before every call the folder is looked at (names, sizes, times): a new, replaced or removed report is served from
+the next call on. Every call is logged with the caller's address, what it asked and what it got.
+"""
+
+import argparse
+import logging
+import math
+import re
+import socketserver
+import sys
+import threading
+import time
+import xmlrpc.client
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+from xmlrpc.server import SimpleXMLRPCRequestHandler, SimpleXMLRPCServer
+
+from fixwizard import report
+from fixwizard.errors import InputError
+from fixwizard.workflow.cell_reports import CellReports, folder_state, scan
+from fixwizard.workflow.verify import age_text
+
+FUTURE_TOLERANCE_S = 300.0  # clocks of the PC that wrote a report and this one may differ by this much
+REQUEST_TIMEOUT_S = 10.0  # a client that stops sending mid-request is dropped after this
+LOG = logging.getLogger("fixwizard.serve")
+# Fault codes a program can tell apart (the text says the same in words).
+NO_SUCH_FIXTURE, NOT_UNIQUE, SIMULATED, TOO_OLD, FROM_THE_FUTURE, BAD_CALL, INTERNAL = 1, 2, 3, 4, 5, 6, 9
+_DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*(s|min|h|d)?\s*$")
+_SECONDS = {"s": 1.0, "min": 60.0, "h": 3600.0, "d": 86400.0}
+
+
+def parse_duration_s(text: str) -> float:
+    """A duration such as ``90``, ``90s``, ``30min``, ``8h`` or ``30d`` in seconds."""
+    match = _DURATION.match(str(text))
+    if match is None:
+        raise InputError(f"cannot read the age {text!r}: write a number with s, min, h or d, e.g. 8h or 30d")
+    seconds = float(match.group(1)) * _SECONDS[match.group(2) or "s"]
+    if not math.isfinite(seconds) or seconds <= 0:
+        raise InputError(f"the largest report age must be positive, not {text!r}")
+    return seconds
+
+
+class Refused(xmlrpc.client.Fault):
+    """A call the service refuses: the fault the caller sees."""
+
+
+@dataclass(frozen=True)
+class Judgement:
+    """Whether a report may be served: ``reason`` (a sentence) and a fault code when it may not."""
+
+    report: report.Report
+    age_s: float
+    code: int | None
+    reason: str
+
+    @property
+    def usable(self) -> bool:
+        return self.code is None
+
+
+class FixtureService:
+    """The XML-RPC functions over the reports in ``folder``; ``clock`` gives the time (s since the epoch)."""
+
+    def __init__(self, folder: str | Path, max_age_s: float, clock: Callable[[], float] = time.time) -> None:
+        self.folder = Path(folder)
+        self.max_age_s = max_age_s
+        self.clock = clock
+        self._lock = threading.Lock()
+        self._state: tuple | None = None
+        self._reports = CellReports()
+
+    # --- the reports ---
+
+    def reports(self) -> CellReports:
+        """The newest report of each name, read again when the folder changed since the last call."""
+        with self._lock:
+            state = folder_state(self.folder)
+            if state != self._state:
+                first = self._state is None
+                self._reports, self._state = scan(self.folder), state
+                names = ", ".join(self._reports.names) or "none"
+                LOG.info("%s reports in %s: %s", "read" if first else "reloaded", self.folder, names)
+                for unreadable in self._reports.unreadable:
+                    LOG.warning("skipped %s: %s", unreadable.path, unreadable.problem)
+            return self._reports
+
+    def judge(self, name: object) -> Judgement:
+        """The newest report of fixture ``name`` and whether it may be served; Refused for an unknown name."""
+        if not isinstance(name, str):
+            raise Refused(BAD_CALL, f"fixwizard: give the fixture's name as text, e.g. \"bracket\", not {name!r}")
+        reports = self.reports()
+        loaded = reports.newest.get(name)
+        if loaded is None:
+            known = ", ".join(reports.names) or "none yet"
+            raise Refused(NO_SUCH_FIXTURE, f"fixwizard: no report of a fixture named '{name}' in {self.folder} "
+                          f"(fixtures: {known}); calibrate it, or check the name")
+        age_s = self.clock() - loaded.created.timestamp()
+        what = f"the newest report of '{name}' ({loaded.path.name})"
+        if loaded.status != "unique":
+            return Judgement(loaded, age_s, NOT_UNIQUE, f"fixwizard: {what} is {loaded.status}, not unique: its pose "
+                             "must not be used; calibrate the fixture again")
+        if loaded.simulated:
+            return Judgement(loaded, age_s, SIMULATED, f"fixwizard: {what} comes from the simulated cell, not from "
+                             "this fixture: calibrate the fixture on the robot")
+        if age_s < -FUTURE_TOLERANCE_S:
+            return Judgement(loaded, age_s, FROM_THE_FUTURE, f"fixwizard: {what} is dated {age_text(-age_s)} in the "
+                             "future: check the clocks of the PCs, then calibrate again")
+        if age_s > self.max_age_s:
+            return Judgement(loaded, age_s, TOO_OLD, f"fixwizard: {what} is {age_text(age_s)} old, older than "
+                             f"{age_text(self.max_age_s)}: check the fixture (fixwizard verify) and calibrate it again")
+        return Judgement(loaded, age_s, None, f"fixwizard: {what} is unique, {age_text(max(age_s, 0.0))} old: usable")
+
+    def _usable(self, name: object) -> report.Report:
+        judgement = self.judge(name)
+        if judgement.code is not None:
+            raise Refused(judgement.code, judgement.reason)
+        return judgement.report
+
+    # --- the XML-RPC functions ---
+
+    def get_pose(self, name: object) -> dict[str, float]:
+        """The pose to use as a UR pose struct (m, rad), with every digit the report holds."""
+        values = self._usable(name).ur_pose_to_use()
+        assert values is not None  # a unique report has a pose
+        return dict(zip(("x", "y", "z", "rx", "ry", "rz"), values, strict=True))
+
+    def get_bounds(self, name: object) -> list[float]:
+        """``[position_m, rotation_deg, max_point_displacement_m]``: the guarantee of the served pose."""
+        pose = self._usable(name).pose_to_use()
+        assert pose is not None
+        guarantee = pose[1]
+        return [guarantee.position_m, guarantee.rotation_deg, guarantee.max_point_displacement_m]
+
+    def get_status(self, name: object) -> dict[str, Any]:
+        judgement = self.judge(name)
+        loaded = judgement.report
+        return {"status": loaded.status, "age_s": float(judgement.age_s), "simulated": loaded.simulated,
+                "usable": judgement.usable, "reason": judgement.reason, "report": str(loaded.path),
+                "created": loaded.created.isoformat()}
+
+    def is_usable(self, name: object) -> bool:
+        try:
+            return self.judge(name).usable
+        except Refused:
+            return False
+
+    def get_status_text(self, name: object) -> str:
+        try:
+            return self.judge(name).reason
+        except Refused as refused:
+            return refused.faultString
+
+    def list_fixtures(self) -> list[str]:
+        return self.reports().names
+
+    FUNCTIONS = ("get_pose", "get_bounds", "get_status", "is_usable", "get_status_text", "list_fixtures")
+
+
+_CALLER = threading.local()
+
+
+class _Handler(SimpleXMLRPCRequestHandler):
+    """Requests on ``/`` (as ``rpc_factory`` sends them) or ``/RPC2``; a stalled client is dropped."""
+
+    rpc_paths = ("/", "/RPC2")
+    timeout = REQUEST_TIMEOUT_S
+
+    def do_POST(self) -> None:
+        _CALLER.address = self.client_address[0]
+        super().do_POST()
+
+
+class FixtureServer(socketserver.ThreadingMixIn, SimpleXMLRPCServer):
+    """The XML-RPC server: one thread per request, so a slow client never holds up the robot's calls."""
+
+    daemon_threads = True
+    allow_reuse_address = True
+
+
+def _logged(service: FixtureService, function: str) -> Callable[..., Any]:
+    """``function`` of the service with each call logged and every error a plain fault."""
+    method = getattr(service, function)
+
+    def call(*args: object) -> Any:
+        caller = getattr(_CALLER, "address", "?")
+        shown = f"{function}({', '.join(repr(arg) for arg in args)})"
+        try:
+            result = method(*args)
+        except xmlrpc.client.Fault as fault:
+            LOG.info("%s %s -> refused (%d): %s", caller, shown, fault.faultCode, fault.faultString)
+            raise
+        except TypeError:
+            needs = "no arguments" if function == "list_fixtures" else "the fixture's name, e.g. \"bracket\""
+            LOG.info("%s %s -> refused: wrong arguments", caller, shown)
+            raise xmlrpc.client.Fault(BAD_CALL, f"fixwizard: {function} takes {needs}") from None
+        except Exception as error:  # a bug: the caller gets a fault, the log the traceback
+            LOG.exception("%s %s -> internal error", caller, shown)
+            raise xmlrpc.client.Fault(INTERNAL, f"fixwizard: internal error in {function} ({type(error).__name__}); "
+                                      "see the serve log") from None
+        LOG.info("%s %s -> %r", caller, shown, result)
+        return result
+
+    return call
+
+
+def make_server(service: FixtureService, host: str, port: int) -> FixtureServer:
+    """A server (bound, not yet serving) offering the service's functions."""
+    server = FixtureServer((host, port), requestHandler=_Handler, logRequests=False, allow_none=False)
+    for function in FixtureService.FUNCTIONS:
+        server.register_function(_logged(service, function), function)
+    server.register_introspection_functions()
+    return server
+
+
+def serve_command(args: argparse.Namespace) -> int:
+    folder = Path(args.reports)
+    if not folder.is_dir():
+        raise InputError(f"there is no reports folder {folder}: give the folder the wizard writes reports to with "
+                         "--reports DIR")
+    handler = logging.StreamHandler(sys.stderr)
+    handlers: list[logging.Handler] = [handler]
+    if args.log:
+        handlers.append(logging.FileHandler(args.log, encoding="utf-8"))
+    for each in handlers:
+        each.setFormatter(logging.Formatter("%(asctime)s %(message)s"))
+        LOG.addHandler(each)
+    LOG.setLevel(logging.INFO)
+    service = FixtureService(folder, parse_duration_s(args.max_age))
+    try:
+        server = make_server(service, args.host, args.port)
+    except (OSError, OverflowError) as error:
+        problem = getattr(error, "strerror", None) or error
+        raise InputError(f"cannot serve on {args.host}:{args.port}: {problem} (another fixwizard "
+                         "serve? give another --port, or --host an address of this PC)") from None
+    host, port = str(server.server_address[0]), int(server.server_address[1])
+    names = service.list_fixtures()
+    print(f"fixwizard serve: {len(names)} fixture{'s' if len(names) != 1 else ''} ({', '.join(names) or 'none yet'}) "
+          f"from {folder} on http://{host}:{port} (reports older than {age_text(service.max_age_s)} refused); "
+          "Ctrl+C stops", flush=True)
+    try:
+        server.serve_forever()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.server_close()
+        for each in handlers:
+            LOG.removeHandler(each)
+    print("fixwizard serve: stopped", flush=True)
+    return 0
+

@@ -1,0 +1,260 @@
+"""Is the fixture still where the report says? A few new taps tested against the report's guaranteed set.
+
+The report's guaranteed set is every pose that explains the report's own taps (``inputs.points_m``, with its ball
+and sample bound), and it lies within the report's bounds about ``bounds.center``. So a pose of that set that
+explains the new taps is a pose of the bounds region that explains the report's taps and the new ones together:
+``verify`` searches the region (``solver.verify_search``) with both. No cell survives: no pose the report allows
+explains the new taps, so the fixture has moved (or the new taps are off): a proof, exit 2. Some cells survive:
+the taps are consistent with the report, exit 0. One sample bound serves all taps in the search, the larger of
+the report's (plus the 0.1 um its taps were rounded to) and the new taps' one: a larger bound keeps more poses,
+so an empty set stays a proof. When the new taps were measured with another ball than the report's, the report's
+taps cannot join the search (one ball radius for all); then only the new taps are tested against the bounds
+region, a weaker test that the verdict says it is.
+
+How far off the taps are: each new tap's distance from the surface at the report's pose, and, for a moved
+fixture, the sample bound up to which no pose explains the taps (proved) and one with which some pose does.
+
+``fixwizard verify REPORT POINTS`` prints the verdict; the wizard's "Check a calibrated fixture" runs the same
+on taps it records, after suggesting 3-5 spread over the fixture (``suggest_check_points``).
+"""
+
+import argparse
+import datetime as dt
+import hashlib
+import math
+import sys
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from fixwizard import report
+from fixwizard.errors import InputError, MeshError, file_problem
+from fixwizard.fixture import Fixture, load_fixture
+from fixwizard.geometry.se3 import transform_points
+from fixwizard.points import load_points
+from fixwizard.solver.verify_search import (
+    AllowedRegion,
+    BoundBracket,
+    RegionSearch,
+    search_region,
+    smallest_sample_bound,
+)
+from fixwizard.synthetic import touching_ball_contacts
+from fixwizard.units import parse_length_m
+from fixwizard.workflow.live import tap_surface_distances_m
+
+EXIT_CONSISTENT, EXIT_BAD_INPUT, EXIT_MOVED = 0, 1, 2
+MAX_TAPS = 200
+SUGGESTED_TAPS = (3, 5)
+REPORT_TAPS_ROUNDING_M = 1e-7  # the report writes its taps to 0.1 um: their error grows by at most this
+SAME_BALL_M = 1e-9
+REACHABLE_NORMAL_Z = -0.2  # a face the tool reaches from above or the side points at least this much up (base frame)
+SUGGESTION_CANDIDATES = 400
+
+
+def fixture_of(loaded: report.Report, mesh: str | Path | None = None) -> Fixture:
+    """The report's mesh (or ``mesh``, its copy elsewhere), loaded in the report's units and checked to be the
+    very file the report was made from (its sha256); InputError saying what to do otherwise."""
+    path = Path(mesh) if mesh is not None else loaded.mesh
+    if not path.is_file():
+        where = "you gave" if mesh is not None else f"named by the report {loaded.path}"
+        raise InputError(f"the mesh {path} {where} is missing: put it back, or give where it is now with "
+                         "--mesh PATH")
+    try:
+        sha256 = hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError as error:
+        raise InputError(f"cannot read the report's mesh: {file_problem(error, path)}") from error
+    if sha256 != loaded.mesh_sha256:
+        raise InputError(f"the mesh {path} is not the one the report {loaded.path} was made with (its content "
+                         "changed: sha256 differs): put the original mesh back, or calibrate the fixture again with "
+                         "this one")
+    try:
+        return load_fixture(path, loaded.mesh_units)
+    except MeshError as error:
+        raise InputError(f"the report's mesh cannot be used: {error}") from error
+
+
+def region_of(loaded: report.Report) -> AllowedRegion:
+    """The poses the report's bounds allow; InputError for a report without them (inconsistent)."""
+    if (loaded.center_base_T_cad is None or loaded.position_bound_m is None
+            or loaded.rotation_bound_deg is None):
+        raise InputError(f"the report {loaded.path} is {loaded.status}: it has no pose to check taps against; "
+                         "calibrate the fixture again")
+    return AllowedRegion(loaded.center_base_T_cad, loaded.position_bound_m, math.radians(loaded.rotation_bound_deg))
+
+
+def _checked_taps(base_p_taps: np.ndarray) -> np.ndarray:
+    taps = np.asarray(base_p_taps, float)
+    if taps.ndim != 2 or taps.shape[1] != 3 or len(taps) == 0:
+        raise InputError("give at least one tap as [x, y, z] in metres (3-5 spread over the fixture are best)")
+    if len(taps) > MAX_TAPS:
+        raise InputError(f"{len(taps)} taps are far more than a check needs: give 3-5 spread over the fixture")
+    bad = np.flatnonzero(~np.all(np.isfinite(taps), axis=1))
+    if len(bad):
+        raise InputError(f"tap {bad[0] + 1} has a coordinate that is not a finite number; fix or remove it")
+    return taps
+
+
+def _report_taps(loaded: report.Report) -> np.ndarray:
+    """The report's own taps (N, 3, m); InputError for damaged ones."""
+    try:
+        taps = np.array(loaded.data["inputs"].get("points_m") or [], float).reshape(-1, 3)
+    except (TypeError, ValueError):
+        raise InputError(f"{loaded.path}: inputs.points_m must list the taps as [x, y, z] in metres") from None
+    if not np.all(np.isfinite(taps)):
+        raise InputError(f"{loaded.path}: inputs.points_m holds numbers that are not finite")
+    return taps
+
+
+@dataclass(frozen=True)
+class VerifyResult:
+    """The verdict on new taps (N, 3, base frame, m). ``distances_m``: each new tap's distance from the surface at
+    the report's pose (positive: short of it); ``with_report_taps``: the report's own taps were searched too (the
+    full test); ``bracket``: for a moved fixture, how large a sample bound some pose needs (None otherwise);
+    ``sample_bound_m`` and ``ball_diameter_m``: what the new taps were tested with."""
+
+    report: report.Report
+    base_p_taps: np.ndarray
+    search: RegionSearch
+    distances_m: np.ndarray
+    with_report_taps: bool
+    sample_bound_m: float
+    ball_diameter_m: float
+    bracket: BoundBracket | None
+
+    @property
+    def moved(self) -> bool:
+        return self.search.moved
+
+
+def verify(loaded: report.Report, fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float | None = None,
+           sample_bound_m: float | None = None, cancel: threading.Event | None = None) -> VerifyResult:
+    """Test new taps against the report (see the module doc); the ball and the sample bound of the new taps default
+    to the report's. Raises ``SearchCancelled`` when ``cancel`` is set meanwhile."""
+    taps = _checked_taps(base_p_taps)
+    ball_m = loaded.ball_diameter_m if ball_diameter_m is None else ball_diameter_m
+    bound_m = loaded.sample_bound_m if sample_bound_m is None else sample_bound_m
+    if not (math.isfinite(ball_m) and 0.0 <= ball_m <= 0.05 and math.isfinite(bound_m) and 0.0 < bound_m <= 0.02):
+        raise InputError(f"a {ball_m * 1e3:g} mm ball and a {bound_m * 1e3:g} mm sample bound are implausible; give "
+                         "them with their units, e.g. --ball-diameter 3mm --sample-bound 1mm")
+    region = region_of(loaded)
+    report_taps = _report_taps(loaded)
+    with_report_taps = abs(ball_m - loaded.ball_diameter_m) <= SAME_BALL_M and len(report_taps) > 0
+    if with_report_taps:
+        searched = np.vstack([report_taps, taps])
+        bound_m = max(bound_m, loaded.sample_bound_m + REPORT_TAPS_ROUNDING_M)
+    else:
+        searched = taps
+    found = search_region(fixture, region, searched, ball_m, bound_m, cancel=cancel)
+    bracket = smallest_sample_bound(fixture, region, searched, ball_m, bound_m, cancel) if found.moved else None
+    assert loaded.base_T_cad is not None  # region_of refused a report without a pose
+    distances = tap_surface_distances_m(fixture, taps, ball_m, loaded.base_T_cad)
+    return VerifyResult(loaded, taps, found, distances, with_report_taps, bound_m, ball_m, bracket)
+
+
+def verdict_lines(result: VerifyResult) -> list[str]:
+    """The verdict in words, mm and s: moved (a proof) or consistent, how far the taps are off, what was tested."""
+    count = len(result.base_p_taps)
+    taps = f"{count} tap{'s' if count != 1 else ''}"
+    distances_mm = np.abs(result.distances_m) * 1e3
+    worst = int(np.argmax(distances_mm))
+    lines = []
+    if result.moved:
+        lines.append(f"MOVED: no pose the report allows explains the {taps} (this is a proof): the fixture has moved "
+                     "since the report, or the taps are off (another fixture, the wrong tip). Calibrate it again.")
+    else:
+        lines.append(f"consistent with the report: poses the report allows explain the {taps}.")
+    lines.append(f"At the report's pose the taps lie up to {distances_mm[worst]:.2f} mm off the surface (tap "
+                 f"{worst + 1}; RMS {float(np.sqrt(np.mean(distances_mm**2))):.2f} mm); sample bound "
+                 f"{result.sample_bound_m * 1e3:.2f} mm.")
+    bracket = result.bracket
+    explained_m = None if bracket is None else bracket.explained_m
+    if bracket is not None and explained_m is None:
+        lines.append(f"Not even a {bracket.ruled_out_m * 1e3:.0f} mm sample bound lets a pose the report allows explain "
+                     "them.")
+    elif bracket is not None and explained_m is not None:
+        lines.append(f"Up to a sample bound of {bracket.ruled_out_m * 1e3:.2f} mm no allowed pose explains them "
+                     f"(proved); with {explained_m * 1e3:.2f} mm some pose does.")
+    search = result.search
+    tested = ("with the report's own taps" if result.with_report_taps else
+              "against the report's bounds only (the new ball differs from the report's, so its taps could not "
+              "join: a weaker test)")
+    lines.append(f"Tested {tested}, down to cells of {search.slack_m * 1e3:.2f} mm, in {search.elapsed_s:.1f} s.")
+    if not result.moved and count < SUGGESTED_TAPS[0]:
+        lines.append(f"Only {taps}: tap {SUGGESTED_TAPS[0]}-{SUGGESTED_TAPS[1]} points spread over the fixture for a "
+                     "check that can see a small move.")
+    return lines
+
+
+def report_lines(loaded: report.Report, now_age_s: float) -> list[str]:
+    """What report is checked: fixture, status, age and SIMULATED."""
+    simulated = "SIMULATED " if loaded.simulated else ""
+    region = region_of(loaded)
+    return [(f"{simulated}report {loaded.path} of '{loaded.name}': {loaded.status}, {age_text(now_age_s)} old, "
+             f"guaranteed within {region.position_m * 1e3:.2f} mm and {math.degrees(region.rotation_rad):.2f} deg")]
+
+
+def age_text(age_s: float) -> str:
+    """An age in the largest unit that keeps it readable: s, min, h or days."""
+    for unit, seconds in (("days", 86400.0), ("h", 3600.0), ("min", 60.0)):
+        if abs(age_s) >= seconds:
+            return f"{age_s / seconds:.1f} {unit}"
+    return f"{age_s:.0f} s"
+
+
+@dataclass(frozen=True)
+class CheckPoint:
+    """A suggested tap: the ball centre touching the surface (base frame, m) at the report's pose, the outward
+    normal there (base frame) and where it is, in words."""
+
+    base_p_ball_m: np.ndarray
+    base_n: np.ndarray
+    where: str
+
+
+def _facing(base_n: np.ndarray) -> str:
+    if base_n[2] >= 0.9:
+        return "a face pointing up"
+    axis = int(np.argmax(np.abs(base_n[:2])))
+    return f"a face pointing {'+-'[int(base_n[axis] < 0)]}{'xy'[axis]}{' and up' if base_n[2] > 0.3 else ''}"
+
+
+def suggest_check_points(fixture: Fixture, base_T_cad: np.ndarray, ball_diameter_m: float,
+                         count: int = 4) -> list[CheckPoint]:
+    """``count`` points to tap for a check at the report's pose, on faces the tool reaches (not facing down), spread
+    over the fixture and over the directions its faces point in, so that a move in any direction shows: farthest
+    points in position and normal (scaled by the fixture's radius) among random surface points (the same points
+    for the same inputs)."""
+    base_R_cad = base_T_cad[:3, :3]
+    reachable = (fixture.mesh.face_normals @ base_R_cad.T)[:, 2] >= REACHABLE_NORMAL_Z
+    mask = reachable if np.any(reachable) else None
+    cad_p_balls, cad_n = touching_ball_contacts(fixture.mesh, SUGGESTION_CANDIDATES, ball_diameter_m / 2.0,
+                                                np.random.default_rng(0), mask)
+    base_p = transform_points(base_T_cad, cad_p_balls)
+    base_n = cad_n @ base_R_cad.T
+    features = np.hstack([base_p, fixture.radius_m * base_n])
+    chosen = [int(np.argmax(base_n[:, 2]))]
+    while len(chosen) < min(count, len(base_p)):
+        distance = np.min(np.linalg.norm(features[:, None] - features[chosen][None], axis=2), axis=1)
+        chosen.append(int(np.argmax(distance)))
+    return [CheckPoint(base_p[index], base_n[index],
+                       f"{_facing(base_n[index])} at x {base_p[index, 0] * 1e3:.0f}, y {base_p[index, 1] * 1e3:.0f}, "
+                       f"z {base_p[index, 2] * 1e3:.0f} mm") for index in chosen]
+
+
+def verify_command(args: argparse.Namespace) -> int:
+    """``fixwizard verify``: exit 0 when the taps are consistent with the report, 2 when the fixture has moved."""
+    loaded = report.load(args.report)
+    region_of(loaded)  # refuse an inconsistent report before loading the mesh
+    taps = _checked_taps(load_points(args.points))
+    fixture = fixture_of(loaded, args.mesh)
+    age_s = (dt.datetime.now(dt.UTC) - loaded.created).total_seconds()
+    print("\n".join(report_lines(loaded, age_s)))
+    result = verify(loaded, fixture, taps, parse_length_m(args.ball_diameter) if args.ball_diameter else None,
+                    parse_length_m(args.sample_bound) if args.sample_bound else None)
+    print("\n".join(verdict_lines(result)))
+    sys.stdout.flush()
+    return EXIT_MOVED if result.moved else EXIT_CONSISTENT
+

@@ -1,0 +1,138 @@
+"""`fixwizard export`: the pose to use as URScript, as a ROS 2 static transform and as JSON, each read back the
+way its user reads it; reports a robot must not use are refused."""
+
+import argparse
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from scipy.spatial.transform import Rotation
+
+from fixwizard import report
+from fixwizard.cli import main
+from test_report import V1_REPORT
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "report.yaml"
+UR_FLOAT = r"-?\d+(?:\.\d+)?(?:e-?\d+)?"
+
+
+@pytest.fixture
+def real_report(tmp_path) -> Path:
+    """The example report as if from a real cell, fixture named 'cell2-bracket'."""
+    data = yaml.safe_load(EXAMPLE.read_text())
+    data["simulated"] = False
+    data["fixture"]["name"] = "cell2-bracket"
+    return report.write(tmp_path / "bracket.yaml", data)
+
+
+def exported(capsys, path: Path, *args) -> str:
+    assert main(["export", str(path), *args]) == 0
+    return capsys.readouterr().out
+
+
+def parse_urscript(text: str) -> dict[str, list[float]]:
+    """A tiny reader of what export writes: comment lines, and assignments ``name = p[six numbers]``; anything else
+    is a syntax error."""
+    variables = {}
+    for number, line in enumerate(text.splitlines(), start=1):
+        if line.startswith("#") or not line.strip():
+            continue
+        match = re.fullmatch(rf"([A-Za-z][A-Za-z0-9_]*) = p\[((?:{UR_FLOAT}, ){{5}}{UR_FLOAT})\]", line)
+        assert match, f"line {number} is no URScript pose assignment: {line!r}"
+        variables[match.group(1)] = [float(value) for value in match.group(2).split(", ")]
+    return variables
+
+
+def test_urscript_defines_the_pose_to_use_as_a_global(real_report, capsys):
+    text = exported(capsys, real_report, "--format", "urscript")
+    variables = parse_urscript(text)
+    loaded = report.load(real_report)
+    assert list(variables) == ["fixture_cell2_bracket"]
+    values = variables["fixture_cell2_bracket"]
+    assert values == loaded.data["pose"]["position_m"] + loaded.data["pose"]["rotvec_rad"]  # every digit of the report
+    assert "SIMULATED" not in text and "pose_trans(fixture_cell2_bracket" in text
+    guarantee = float(re.search(r"within (\d+\.\d\d) mm \(CAD origin\)", text).group(1))
+    assert guarantee * 1e-3 >= loaded.pose_guarantee.position_m  # stated rounded up, never below the guarantee
+
+
+def _static_transform_publisher_arguments() -> argparse.ArgumentParser:
+    """tf2_ros static_transform_publisher's named arguments (ROS 2 Humble and later)."""
+    parser = argparse.ArgumentParser()
+    for name in ("--x", "--y", "--z", "--qx", "--qy", "--qz", "--qw"):
+        parser.add_argument(name, type=float, required=True)
+    parser.add_argument("--frame-id", required=True)
+    parser.add_argument("--child-frame-id", required=True)
+    return parser
+
+
+def test_ros2_gives_a_transform_stamped_and_the_static_transform_publisher_arguments(real_report, capsys):
+    document = yaml.safe_load(exported(capsys, real_report, "--format", "ros2"))
+    loaded = report.load(real_report)
+    message = document["transform_stamped"]
+    assert set(message) == {"header", "child_frame_id", "transform"}
+    assert message["header"] == {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": "base"}
+    assert message["child_frame_id"] == "cell2_bracket"
+    translation, rotation = message["transform"]["translation"], message["transform"]["rotation"]
+    assert [translation[axis] for axis in "xyz"] == loaded.data["pose"]["position_m"]
+    quaternion = np.array([rotation[axis] for axis in "xyzw"])
+    assert np.linalg.norm(quaternion) == pytest.approx(1.0, abs=1e-12) and quaternion[3] >= 0
+    assert (Rotation.from_quat(quaternion).inv() * Rotation.from_matrix(loaded.base_T_cad[:3, :3])).magnitude() < 1e-9
+    publisher = document["static_transform_publisher"]
+    arguments = publisher["arguments"]
+    assert arguments[::2] == ["--x", "--y", "--z", "--qx", "--qy", "--qz", "--qw", "--frame-id", "--child-frame-id"]
+    assert all(isinstance(argument, str) for argument in arguments)  # launch files pass text
+    parsed = _static_transform_publisher_arguments().parse_args(arguments)
+    assert [parsed.x, parsed.y, parsed.z] == [translation[axis] for axis in "xyz"]
+    assert [parsed.qx, parsed.qy, parsed.qz, parsed.qw] == list(quaternion)
+    assert (parsed.frame_id, parsed.child_frame_id) == ("base", "cell2_bracket")
+    assert publisher["command"] == "ros2 run tf2_ros static_transform_publisher " + " ".join(arguments)
+
+
+def test_ros2_frames_can_be_named_and_bad_names_are_refused(real_report, capsys):
+    document = yaml.safe_load(exported(capsys, real_report, "--format", "ros2", "--frame-id", "ur/base",
+                                       "--child-frame-id", "jig"))
+    assert document["transform_stamped"]["header"]["frame_id"] == "ur/base"
+    assert document["static_transform_publisher"]["arguments"][-3:] == ["ur/base", "--child-frame-id", "jig"]
+    assert main(["export", str(real_report), "--format", "ros2", "--frame-id", "my base"]) == 1
+    assert "no ROS frame name" in capsys.readouterr().err
+
+
+def test_json_is_the_whole_report(real_report, capsys):
+    data = json.loads(exported(capsys, real_report, "--format", "json"))
+    assert data == yaml.safe_load(real_report.read_text())
+
+
+def test_a_report_a_robot_must_not_use_is_refused_but_json_exports_it(real_report, tmp_path, capsys):
+    for change, message in ((lambda data: data.update(simulated=True), "--allow-simulated"),
+                            (lambda data: data.update(status="ambiguous"), "is ambiguous")):
+        data = yaml.safe_load(real_report.read_text())
+        change(data)
+        path = report.write(tmp_path / "other.yaml", data)
+        for format_name in ("urscript", "ros2"):
+            assert main(["export", str(path), "--format", format_name]) == 1
+            err = capsys.readouterr().err
+            assert message in err and "Traceback" not in err
+        assert json.loads(exported(capsys, path, "--format", "json"))["status"] == data["status"]
+
+
+def test_a_simulated_report_is_exported_for_tests_marked_simulated(capsys):
+    text = exported(capsys, EXAMPLE, "--format", "urscript", "--allow-simulated")
+    assert text.startswith("# SIMULATED") and list(parse_urscript(text)) == ["fixture_bracket"]
+
+
+def test_a_version_1_report_exports_the_bounds_centre_the_bounds_hold_about(capsys):
+    variables = parse_urscript(exported(capsys, V1_REPORT, "--format", "urscript"))
+    centre = yaml.safe_load(V1_REPORT.read_text())["bounds"]["center"]
+    assert variables["fixture_demo_bracket"] == centre["position_m"] + centre["rotvec_rad"]
+
+
+def test_the_output_file_is_written_and_never_the_report(real_report, tmp_path, capsys):
+    target = tmp_path / "out" / "bracket.script"
+    assert main(["export", str(real_report), "--format", "urscript", "-o", str(target)]) == 0
+    assert "fixture_cell2_bracket" in parse_urscript(target.read_text())
+    before = real_report.read_text()
+    assert main(["export", str(real_report), "--format", "json", "-o", str(real_report)]) == 1
+    assert "is the report" in capsys.readouterr().err and real_report.read_text() == before

@@ -1,0 +1,247 @@
+"""`fixwizard serve`: a real XML-RPC server on a loopback address and xmlrpc.client as the robot program. The pose
+struct a URScript program receives, refusals as faults it sees, several fixtures, reload on a new report, a log
+line per call, a stalled client that holds nothing up, and the command itself."""
+
+import datetime as dt
+import logging
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+import xmlrpc.client
+from pathlib import Path
+
+import pytest
+import yaml
+from test_report import V1_REPORT
+
+from fixwizard import report
+from fixwizard.cli import main
+from fixwizard.errors import InputError
+from fixwizard.serve import FixtureService, make_server, parse_duration_s
+from fixwizard.workflow.cell_reports import scan
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "report.yaml"
+REPO = Path(__file__).resolve().parents[1]
+
+
+def write_report(folder: Path, file_name: str, name: str, created: dt.datetime | None = None, **changes) -> Path:
+    """The example report as fixture ``name``: from a real cell, created ``created`` (default now), with changes."""
+    data = yaml.safe_load(EXAMPLE.read_text())
+    data["fixture"]["name"] = name
+    data["simulated"] = False
+    data["created"] = (created or dt.datetime.now(dt.UTC)).isoformat(timespec="seconds")
+    data.update(changes)
+    return report.write(folder / file_name, data)
+
+
+@pytest.fixture
+def cell(tmp_path):
+    """A reports folder of a cell with five fixtures, one damaged file and a temporary file."""
+    folder = tmp_path / "reports"
+    folder.mkdir()
+    now = dt.datetime.now(dt.UTC)
+    write_report(folder, "bracket-1.yaml", "bracket", now - dt.timedelta(hours=2))
+    write_report(folder, "plate.yaml", "plate", simulated=True)
+    write_report(folder, "jig.yaml", "jig", status="ambiguous")
+    write_report(folder, "tray.yaml", "tray", now - dt.timedelta(days=40))
+    write_report(folder, "lid.yaml", "lid", now + dt.timedelta(days=1))
+    (folder / "notes.yaml").write_text("schema: something else\n")
+    (folder / ".bracket-2.yaml.123.abcdefgh.tmp").write_text("half a report")
+    return folder
+
+
+class Running:
+    """The service's server on a free port of a loopback address, serving in a thread."""
+
+    def __init__(self, folder: Path, max_age_s: float = 30 * 86400.0, clock=time.time) -> None:
+        self.service = FixtureService(folder, max_age_s, clock)
+        self.server = make_server(self.service, "127.0.0.1", 0)
+        self.port = self.server.server_address[1]
+        self.thread = threading.Thread(target=self.server.serve_forever, daemon=True)
+        self.thread.start()
+
+    def client(self) -> xmlrpc.client.ServerProxy:
+        return xmlrpc.client.ServerProxy(f"http://127.0.0.1:{self.port}")
+
+    def stop(self) -> None:
+        self.server.shutdown()
+        self.server.server_close()
+
+
+@pytest.fixture
+def running(cell):
+    served = Running(cell)
+    yield served
+    served.stop()
+
+
+def fault_of(call) -> xmlrpc.client.Fault:
+    with pytest.raises(xmlrpc.client.Fault) as caught:
+        call()
+    return caught.value
+
+
+def test_get_pose_is_a_ur_pose_struct_of_the_pose_to_use(running, cell):
+    fw = running.client()
+    pose = fw.get_pose("bracket")
+    assert list(pose) == ["x", "y", "z", "rx", "ry", "rz"]
+    written = report.load(cell / "bracket-1.yaml").data["pose"]
+    assert [pose[key] for key in ("x", "y", "z")] == written["position_m"]
+    assert [pose[key] for key in ("rx", "ry", "rz")] == written["rotvec_rad"]
+    guaranteed = written["guaranteed"]
+    assert fw.get_bounds("bracket") == [guaranteed["position_m"], guaranteed["rotation_deg"],
+                                        guaranteed["max_point_displacement_m"]]
+
+
+def test_every_fixture_of_the_cell_is_listed_and_has_a_status(running):
+    fw = running.client()
+    assert fw.list_fixtures() == ["bracket", "jig", "lid", "plate", "tray"]
+    status = fw.get_status("bracket")
+    assert status["status"] == "unique" and status["usable"] is True and status["simulated"] is False
+    assert 7190 < status["age_s"] < 7300 and status["report"].endswith("bracket-1.yaml")
+    assert fw.is_usable("bracket") is True and "usable" in fw.get_status_text("bracket")
+    assert fw.get_status("plate")["simulated"] is True and fw.get_status("jig")["status"] == "ambiguous"
+
+
+@pytest.mark.parametrize("name, code, words", [("plate", 3, "simulated cell"), ("jig", 2, "is ambiguous, not unique"),
+                                               ("tray", 4, "40.0 days old"), ("lid", 5, "in the future"),
+                                               ("cupboard", 1, "no report of a fixture named 'cupboard'")])
+def test_a_report_that_must_not_be_used_is_refused_with_a_fault_the_program_sees(running, name, code, words):
+    fw = running.client()
+    for call in (lambda: fw.get_pose(name), lambda: fw.get_bounds(name)):
+        fault = fault_of(call)
+        assert fault.faultCode == code and words in fault.faultString and fault.faultString.startswith("fixwizard: ")
+    assert fw.is_usable(name) is False and words in fw.get_status_text(name)
+
+
+def test_the_largest_age_is_configurable(cell):
+    served = Running(cell, max_age_s=parse_duration_s("1h"))
+    try:
+        assert "older than 1.0 h" in fault_of(lambda: served.client().get_pose("bracket")).faultString
+    finally:
+        served.stop()
+    assert parse_duration_s("90") == 90 and parse_duration_s("30min") == 1800 and parse_duration_s("7d") == 604800
+    for bad in ("soon", "-1h", "0", "1 week"):
+        with pytest.raises(InputError):
+            parse_duration_s(bad)
+
+
+def test_bad_calls_are_faults_in_plain_words(running):
+    fw = running.client()
+    assert "takes the fixture's name" in fault_of(lambda: fw.get_pose()).faultString
+    assert "takes the fixture's name" in fault_of(lambda: fw.get_pose("a", "b")).faultString
+    assert "as text" in fault_of(lambda: fw.get_pose(3)).faultString
+    assert "not supported" in fault_of(lambda: fw.launch_missiles()).faultString
+    assert fw.get_pose("bracket")  # still serving
+
+
+def test_a_new_report_is_served_from_the_next_call_on(running, cell):
+    fw = running.client()
+    before = fw.get_pose("bracket")
+    data = yaml.safe_load((cell / "bracket-1.yaml").read_text())
+    data["pose"]["position_m"] = [0.5, -0.1, 0.02]
+    data["created"] = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
+    report.write(cell / "bracket-2.yaml", data)
+    after = fw.get_pose("bracket")
+    assert (after["x"], after["y"], after["z"]) == (0.5, -0.1, 0.02) and after != before
+    assert fw.get_status("bracket")["report"].endswith("bracket-2.yaml")
+    data["status"] = "inconsistent"
+    data.update(pose=None, bounds=None, intervals=None, created=dt.datetime.now(dt.UTC).isoformat())
+    report.write(cell / "bracket-3.yaml", data)
+    assert fault_of(lambda: fw.get_pose("bracket")).faultCode == 2  # the newest, not an older good one
+    for path in cell.glob("bracket-*.yaml"):
+        path.unlink()
+    assert fault_of(lambda: fw.get_pose("bracket")).faultCode == 1
+    write_report(cell, "new-fixture.yaml", "gripper-2")
+    assert "gripper-2" in fw.list_fixtures() and fw.is_usable("gripper-2")
+
+
+def test_each_call_is_logged_and_unreadable_reports_are_named(cell, caplog):
+    with caplog.at_level(logging.INFO, logger="fixwizard.serve"):
+        served = Running(cell)
+        try:
+            fw = served.client()
+            fw.get_pose("bracket")
+            fault_of(lambda: fw.get_pose("plate"))
+        finally:
+            served.stop()
+    messages = [record.getMessage() for record in caplog.records]
+    assert any("notes.yaml" in message and "not a fixwizard report" in message for message in messages)
+    assert not any(".tmp" in message for message in messages)
+    assert any(message.startswith("127.0.0.1 get_pose('bracket') -> {'x': ") for message in messages)
+    assert any(message.startswith("127.0.0.1 get_pose('plate') -> refused (3)") for message in messages)
+
+
+def test_a_client_that_stalls_holds_up_no_other(running):
+    stalled = socket.create_connection(("127.0.0.1", running.port))
+    stalled.sendall(b"POST / HTTP/1.1\r\nContent-Length: 500\r\n\r\n<?xml")  # and then nothing
+    try:
+        started = time.monotonic()
+        assert running.client().is_usable("bracket") is True
+        assert time.monotonic() - started < 2.0
+    finally:
+        stalled.close()
+
+
+def test_a_version_1_report_is_served_by_the_centre_its_bounds_hold_about(tmp_path):
+    folder = tmp_path / "reports"
+    folder.mkdir()
+    (folder / "old.yaml").write_text(V1_REPORT.read_text())
+    created = report.load(folder / "old.yaml").created.timestamp()
+    served = Running(folder, clock=lambda: created + 60.0)
+    try:
+        fw = served.client()
+        centre = yaml.safe_load(V1_REPORT.read_text())["bounds"]
+        pose = fw.get_pose("demo_bracket")
+        assert [pose[key] for key in ("x", "y", "z")] == centre["center"]["position_m"]
+        assert fw.get_bounds("demo_bracket") == [centre["position_m"], centre["rotation_deg"],
+                                                 centre["max_point_displacement_m"]]
+    finally:
+        served.stop()
+
+
+def test_the_newest_report_of_each_name_wins_by_its_creation_time(tmp_path):
+    now = dt.datetime.now(dt.UTC)
+    write_report(tmp_path, "b.yaml", "bracket", now - dt.timedelta(days=1))
+    write_report(tmp_path, "a.yaml", "bracket", now)  # written first by name, created last
+    time.sleep(0.01)
+    write_report(tmp_path, "c.yaml", "bracket", now - dt.timedelta(days=2))  # changed last, created first
+    assert scan(tmp_path).newest["bracket"].path.name == "a.yaml"
+
+
+def test_the_serve_command_serves_until_interrupted(cell):
+    process = subprocess.Popen([sys.executable, "-m", "fixwizard.cli", "serve", "--reports", str(cell), "--host",
+                                "127.0.0.1", "--port", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True, cwd=REPO, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    try:
+        first = process.stdout.readline()
+        assert "5 fixtures (bracket, jig, lid, plate, tray)" in first and "30.0 days" in first
+        port = int(first.split("http://127.0.0.1:")[1].split()[0])
+        assert xmlrpc.client.ServerProxy(f"http://127.0.0.1:{port}").get_status("bracket")["usable"] is True
+    finally:
+        process.send_signal(signal.SIGINT)
+        out, err = process.communicate(timeout=30)
+    assert process.returncode == 0 and "stopped" in out
+    assert "get_status('bracket') -> {'status': 'unique'" in err and "Traceback" not in err
+
+
+def test_the_serve_command_refuses_what_cannot_work(cell, tmp_path, capsys):
+    assert main(["serve", "--reports", str(tmp_path / "nowhere")]) == 1
+    assert "no reports folder" in capsys.readouterr().err
+    taken = socket.socket()
+    taken.bind(("127.0.0.1", 0))
+    taken.listen()
+    try:
+        assert main(["serve", "--reports", str(cell), "--host", "127.0.0.1", "--port",
+                     str(taken.getsockname()[1])]) == 1
+        assert "another fixwizard serve? give another --port" in capsys.readouterr().err
+    finally:
+        taken.close()
+    assert main(["serve", "--reports", str(cell), "--port", "70000"]) == 1
+    assert main(["serve", "--reports", str(cell), "--max-age", "forever"]) == 1
+    err = capsys.readouterr().err
+    assert "cannot read the age" in err and "Traceback" not in err

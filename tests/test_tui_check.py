@@ -1,0 +1,202 @@
+"""The wizard's "Check a calibrated fixture" on the simulated cell: from the start screen, pick the fixture of a
+report, tap the suggested points with the simulated hands, check: untouched it is consistent, pushed by 4 mm it
+has moved; every tap is journaled; a changed mesh and a missing report are explained."""
+
+import asyncio
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pilot_wait import until
+from textual.widgets import DataTable, Select, Static
+from tui_cell import SAMPLE_BOUND_M, ScreenHost, spread_taps, truth_calibration
+
+from fixwizard import report
+from fixwizard.demo import demo_cell, demo_fixture
+from fixwizard.robot.sim import SimulatedCell
+from fixwizard.robot.sim_hands import SimulatedHands
+from fixwizard.solver.solve import solve
+from fixwizard.tui.app import FixwizardApp
+from fixwizard.tui.check import CheckScreen
+from fixwizard.tui.context import WizardContext
+from fixwizard.tui.launch import simulated_context
+from fixwizard.tui.start import StartScreen
+
+SIZE = (80, 24)
+SEED = 3
+EXAMPLE_CALIBRATION = Path(__file__).resolve().parents[1] / "calibrations" / "example_matlab_logo.yaml"
+
+
+@pytest.fixture(scope="module")
+def calibrated():
+    """The demo cell of SEED calibrated: its report (as the wizard writes it, SIMULATED) and the cell."""
+    cell = demo_cell(SEED)
+    cell.connect()
+    taps = spread_taps(cell, 14)
+    fixture = demo_fixture()
+    solution = solve(fixture, taps, cell.truth.ball_diameter_m, SAMPLE_BOUND_M, max_cells=2e6, max_samples=2000)
+    assert solution.status == "unique"
+    return report.report_dict(solution, fixture, taps, cell.truth.ball_diameter_m, SAMPLE_BOUND_M,
+                              SAMPLE_BOUND_M / 3, simulated=True), cell
+
+
+def context_for(tmp_path, calibrated, push_m: float = 0.0) -> WizardContext:
+    """The calibrated cell (its fixture pushed along x by ``push_m``), its report in reports/, the true tip."""
+    data, cell = calibrated
+    (tmp_path / "reports").mkdir(exist_ok=True)
+    report.write(tmp_path / "reports" / "demo_bracket-1.yaml", data)
+    base_T_cad = cell.truth.base_T_cad.copy()
+    base_T_cad[0, 3] += push_m
+    checked = SimulatedCell.with_fixture(cell.fixture, seed=5, base_T_cad=base_T_cad, tcp_p_tip_m=cell.truth.tcp_p_tip_m)
+    checked.connect()
+    return WizardContext(robot=checked, robot_name="simulated cell", simulated=True,
+                         hands=SimulatedHands(checked, seed=2), reports_dir=tmp_path / "reports",
+                         sessions_dir=tmp_path / "sessions", calibration=truth_calibration(cell))
+
+
+class CheckHost(ScreenHost):
+    """The screen alone, with the two app services its workers use: the status refresh and the error modal
+    (here, the errors are kept)."""
+
+    def __init__(self, make_screen) -> None:
+        super().__init__(make_screen)
+        self.errors: list[Exception] = []
+
+    def refresh_robot_status(self) -> None:
+        pass
+
+    def show_error(self, error: Exception) -> None:
+        self.errors.append(error)
+
+
+def text_of(screen, selector: str) -> str:
+    return str(screen.query_one(selector, Static).content)
+
+
+async def tap_suggested(pilot, screen: CheckScreen, count: int) -> None:
+    await until(pilot, lambda: screen.fixture is not None and not screen.busy)
+    for _ in range(count):
+        for key in "mt":
+            await pilot.press(key)
+            await until(pilot, lambda: not screen.busy)
+
+
+async def check(pilot, screen: CheckScreen) -> str:
+    await pilot.press("c")
+    await until(pilot, lambda: screen.result is not None)
+    return text_of(screen, "#check-verdict")
+
+
+@pytest.mark.parametrize("push_m, verdict", [(0.0, "consistent with the report"),
+                                             (0.004, "MOVED: no pose the report allows explains the 4 taps")])
+def test_four_suggested_taps_tell_whether_the_fixture_moved(tmp_path, calibrated, push_m, verdict):
+    context = context_for(tmp_path, calibrated, push_m)
+
+    async def run():
+        app = CheckHost(lambda: CheckScreen(context, context.calibration))
+        async with app.run_test(size=SIZE) as pilot:
+            screen = app.screen
+            await until(pilot, lambda: "Tap 3-5 points spread over the fixture" in text_of(screen, "#check-suggest"))
+            assert "SIMULATED" in text_of(screen, "#check-title")
+            assert "demo_bracket-1.yaml: unique" in text_of(screen, "#check-report")
+            assert context.robot.status().mode == "freedrive"
+            await tap_suggested(pilot, screen, 4)
+            assert screen.query_one(DataTable).row_count == 4
+            shown = await check(pilot, screen)
+            assert shown.startswith(verdict)
+            assert screen.query_one("#check-verdict").has_class("-moved") is (push_m > 0)
+            await pilot.press("u")
+            assert screen.result is None and screen.query_one(DataTable).row_count == 3
+            await until(pilot, lambda: not screen.busy)
+            await pilot.press("t")  # the ball is still above the last point
+            await until(pilot, lambda: not screen.busy and screen.query_one(DataTable).row_count == 4)
+            assert (await check(pilot, screen)).startswith(verdict)
+            journal = screen.journal.path
+            await pilot.press("escape")
+            await until(pilot, lambda: app.results == [None])
+        assert app.errors == []
+        return journal
+
+    journal = asyncio.run(run())
+    assert journal.parent == tmp_path / "sessions" / "checks"
+    records = [json.loads(line) for line in journal.read_text().splitlines()]
+    assert [record.get("kind") for record in records[1:]] == ["tap"] * 4 + ["undo", "tap", "closed"]
+    assert records[-1]["verify"] == ("moved" if push_m else "consistent")
+    assert records[0]["fixture"]["report"].endswith("demo_bracket-1.yaml")
+
+
+def test_the_start_screen_opens_the_check_with_a_stored_tip_calibration(tmp_path, calibrated):
+    context = simulated_context(SEED, pace_s=0.0, folder=tmp_path)
+    context_for(tmp_path, calibrated)  # the report in reports/
+    path = tmp_path / "calibrations" / "example.yaml"
+    path.parent.mkdir()
+    shutil.copy(EXAMPLE_CALIBRATION, path)
+
+    async def run():
+        app = FixwizardApp(context)
+        async with app.run_test(size=SIZE) as pilot:
+            await until(pilot, lambda: isinstance(app.screen, StartScreen) and app.context.fixture is not None)
+            app.screen.query_one("#calibration", Select).value = "new"
+            await pilot.pause()
+            app.screen.query_one("#check").focus()
+            notified = []
+            app.screen.notify = lambda message, **_: notified.append(message)
+            await pilot.press("enter")
+            await pilot.pause()
+            assert isinstance(app.screen, StartScreen) and "needs a stored tip calibration" in notified[0]
+            app.screen.query_one("#calibration", Select).value = str(path)
+            button = app.screen.query_one("#check")
+            await until(pilot, lambda: not button.has_class("-active"))  # a button ignores a second press at once
+            button.focus()
+            await pilot.press("enter")
+            await until(pilot, lambda: isinstance(app.screen, CheckScreen) and app.screen.fixture is not None)
+            assert app.context.calibration.name == "example_matlab_logo"
+            assert "demo_bracket" in str(app.screen.query_one("#check-fixture", Select).value)
+            await pilot.press("escape")
+            await until(pilot, lambda: isinstance(app.screen, StartScreen))
+            await pilot.press("ctrl+q")
+
+    asyncio.run(run())
+
+
+def test_without_reports_the_check_says_to_calibrate_first(tmp_path, calibrated):
+    context = context_for(tmp_path, calibrated)
+    (tmp_path / "reports" / "demo_bracket-1.yaml").unlink()
+
+    async def run():
+        app = CheckHost(lambda: CheckScreen(context, context.calibration))
+        async with app.run_test(size=SIZE) as pilot:
+            screen = app.screen
+            await pilot.pause()
+            assert "No report with a pose" in text_of(screen, "#check-note")
+            await pilot.press("t")
+            assert "Choose a fixture" in text_of(screen, "#check-note")
+            await pilot.press("c")
+            assert "Tap at least one point first" in text_of(screen, "#check-note")
+            await pilot.press("escape")
+            await until(pilot, lambda: app.results == [None])
+
+    asyncio.run(run())
+
+
+def test_a_report_whose_mesh_changed_is_explained_and_nothing_is_tapped(tmp_path, calibrated):
+    context = context_for(tmp_path, calibrated)
+    data = dict(calibrated[0])
+    mesh = tmp_path / "bracket.stl"
+    mesh.write_bytes(demo_fixture().path.read_bytes() + b"\0")
+    data["fixture"] = {**data["fixture"], "mesh": str(mesh)}
+    report.write(tmp_path / "reports" / "demo_bracket-1.yaml", data)
+
+    async def run():
+        app = CheckHost(lambda: CheckScreen(context, context.calibration))
+        async with app.run_test(size=SIZE) as pilot:
+            screen = app.screen
+            await until(pilot, lambda: "not the one the report" in text_of(screen, "#check-suggest"))
+            await pilot.press("t")
+            assert "Choose a fixture whose mesh loads" in text_of(screen, "#check-note")
+            assert screen.journal is None and not (tmp_path / "sessions").exists()
+
+    asyncio.run(run())
+    assert np.isfinite(calibrated[0]["bounds"]["position_m"])

@@ -1,0 +1,230 @@
+"""`fixwizard verify`: new taps tested against the poses a report's guaranteed set allows. On the paper's real expert
+run its own taps are consistent and the same taps moved by 3 mm or turned by 2 deg are proved moved; on the
+simulated cell a moved fixture is found from four suggested taps; the start cells cover the bounds region, a true
+pose is never called moved, and a user's mistake gets a message."""
+
+import datetime as dt
+import shutil
+
+import numpy as np
+import pytest
+import yaml
+from conftest import real_taps
+from scipy.spatial.transform import Rotation
+from shapes import as_fixture
+from test_report import V1_REPORT
+from tui_cell import spread_taps
+
+from fixwizard import report
+from fixwizard.calibration.taps import ball_centres_m
+from fixwizard.cli import main
+from fixwizard.demo import DEMO_MESH, DEMO_TAPS, demo_fixture
+from fixwizard.errors import InputError
+from fixwizard.fixture import load_fixture
+from fixwizard.geometry.se3 import invert, make_transform, transform_points
+from fixwizard.points import write_points
+from fixwizard.robot.sim import SimulatedCell
+from fixwizard.robot.sim_hands import SimulatedHands
+from fixwizard.solver.solve import solve
+from fixwizard.solver.verify_search import AllowedRegion, search_region, start_cells
+from fixwizard.synthetic import bounded_noise, touching_ball_centres
+from fixwizard.workflow.verify import fixture_of, suggest_check_points, verify
+
+BALL_M, BOUND_M = 0.003, 0.001
+
+
+@pytest.fixture(scope="module")
+def expert(real_data, tmp_path_factory):
+    """The expert run's report (1e7 cells) in a folder, its taps, and the fixture centre in the base frame."""
+    folder = tmp_path_factory.mktemp("expert")
+    fixture = load_fixture(real_data / "meshes" / "matlab_logo.ply")
+    taps = real_taps(real_data, "expert")
+    solution = solve(fixture, taps, BALL_M, BOUND_M, max_cells=1e7)
+    assert solution.status == "unique"
+    path = report.write(folder / "logo.yaml", report.report_dict(solution, fixture, taps, BALL_M, BOUND_M, BOUND_M / 3))
+    centre = transform_points(solution.base_T_cad, fixture.cad_p_center[None])[0]
+    return folder, path, taps, centre
+
+
+def run_verify(folder, report_path, taps, *extra) -> int:
+    points = folder / "new.yaml"
+    write_points(points, taps)
+    return main(["verify", str(report_path), str(points), *extra])
+
+
+def test_the_expert_runs_own_taps_are_consistent_with_its_report(expert, capsys):
+    folder, path, taps, _ = expert
+    assert run_verify(folder, path, taps) == 0
+    out = capsys.readouterr().out
+    assert "consistent with the report" in out and "with the report's own taps" in out and "MOVED" not in out
+
+
+@pytest.mark.parametrize("offset_mm", [(3, 0, 0), (0, 3, 0), (0, 0, 3), (-2.1, 2.1, 0)])
+def test_the_expert_taps_moved_by_3_mm_prove_the_fixture_moved(expert, capsys, offset_mm):
+    folder, path, taps, _ = expert
+    assert run_verify(folder, path, taps + np.array(offset_mm) * 1e-3) == 2
+    out = capsys.readouterr().out
+    assert "MOVED: no pose the report allows explains the 20 taps (this is a proof)" in out
+    assert "no allowed pose explains them (proved)" in out
+
+
+@pytest.mark.parametrize("axis", ["x", "y", "z"])
+def test_the_expert_taps_turned_by_2_deg_prove_the_fixture_moved(expert, capsys, axis):
+    folder, path, taps, centre = expert
+    turned = Rotation.from_euler(axis, 2.0, degrees=True).apply(taps - centre) + centre
+    assert run_verify(folder, path, turned) == 2
+    assert "MOVED" in capsys.readouterr().out
+
+
+def test_four_spread_taps_are_enough_to_check(expert, capsys):
+    folder, path, taps, _ = expert
+    spread = taps[[0, 6, 12, 18]]
+    assert run_verify(folder, path, spread) == 0
+    assert run_verify(folder, path, spread + [0.0, 0.0, 0.003]) == 2
+    assert "4 taps" in capsys.readouterr().out
+
+
+def test_a_changed_or_missing_mesh_is_refused_and_a_copy_elsewhere_is_taken(expert, real_data, tmp_path, capsys):
+    _, path, taps, _ = expert
+    copy = shutil.copy(real_data / "meshes" / "matlab_logo.ply", tmp_path / "logo.ply")
+    data = yaml.safe_load(path.read_text())
+    data["fixture"]["mesh"] = str(tmp_path / "logo.ply")
+    moved_report = report.write(tmp_path / "r.yaml", data)
+    assert run_verify(tmp_path, moved_report, taps[:4]) == 0
+    with open(copy, "ab") as stream:
+        stream.write(b"\n")
+    assert run_verify(tmp_path, moved_report, taps[:4]) == 1
+    assert "not the one the report" in capsys.readouterr().err
+    (tmp_path / "logo.ply").unlink()
+    assert run_verify(tmp_path, moved_report, taps[:4]) == 1
+    err = capsys.readouterr().err
+    assert "is missing" in err and "--mesh" in err and "Traceback" not in err
+    assert run_verify(tmp_path, moved_report, taps[:4], "--mesh", str(real_data / "meshes" / "matlab_logo.ply")) == 0
+
+
+def test_a_version_1_report_is_checked_with_its_mesh_given(tmp_path, capsys):
+    taps = np.array(yaml.safe_load(DEMO_TAPS.read_text())["points_m"])
+    assert run_verify(tmp_path, V1_REPORT, taps[:5]) == 1
+    assert "fixtures/demo_bracket.stl" in capsys.readouterr().err
+    assert run_verify(tmp_path, V1_REPORT, taps[:5], "--mesh", str(DEMO_MESH)) == 0
+    assert run_verify(tmp_path, V1_REPORT, taps[:5] + [0.004, 0.0, 0.0], "--mesh", str(DEMO_MESH)) == 2
+
+
+def test_mistakes_get_a_message_not_a_traceback(expert, tmp_path, capsys):
+    folder, path, taps, _ = expert
+    (tmp_path / "empty.csv").write_text("")
+    assert main(["verify", str(path), str(tmp_path / "empty.csv")]) == 1
+    assert "at least one tap" in capsys.readouterr().err
+    (tmp_path / "nan.csv").write_text("0.1,0.2,0.3\n0.1,nan,0.3\n")
+    assert main(["verify", str(path), str(tmp_path / "nan.csv")]) == 1
+    assert main(["verify", str(tmp_path / "nan.csv"), str(tmp_path / "nan.csv")]) == 1
+    assert run_verify(folder, path, taps[:3], "--sample-bound", "1") == 1
+    assert "implausible" in capsys.readouterr().err
+    data = yaml.safe_load(path.read_text())
+    data.update(status="inconsistent", pose=None, bounds=None, intervals=None)
+    inconsistent = report.write(tmp_path / "bad.yaml", data)
+    assert run_verify(tmp_path, inconsistent, taps[:3]) == 1
+    err = capsys.readouterr().err
+    assert "no pose to check taps against" in err and "Traceback" not in err
+
+
+def test_another_ball_is_tested_against_the_bounds_alone_and_says_so(expert, capsys):
+    folder, path, taps, _ = expert
+    assert run_verify(folder, path, taps, "--ball-diameter", "3.2mm") == 0
+    assert "a weaker test" in capsys.readouterr().out
+
+
+def _random_region(rng, base_T_cad: np.ndarray) -> AllowedRegion:
+    """A region that holds ``base_T_cad`` (anywhere in it, often near its edge)."""
+    position_m, rotation_rad = rng.uniform(1e-4, 5e-3), rng.uniform(1e-4, 0.1)
+    axis, direction = rng.normal(size=3), rng.normal(size=3)
+    turn = Rotation.from_rotvec(axis / np.linalg.norm(axis) * rotation_rad * rng.uniform(0, 1) ** 0.3)
+    centre = make_transform(turn * Rotation.from_matrix(base_T_cad[:3, :3]), base_T_cad[:3, 3]
+                            + position_m * rng.uniform(0, 1) ** 0.3 * direction / np.linalg.norm(direction))
+    return AllowedRegion(centre, position_m, rotation_rad)
+
+
+def test_the_start_cells_hold_every_pose_of_the_region():
+    """Random regions and poses inside them (many at their edge): each pose's internal frame lies in a start cell."""
+    fixture = as_fixture("l_prism")
+    rng = np.random.default_rng(5)
+    fix_T_cad = fixture.fix_T_cad
+    for _ in range(60):
+        region = _random_region(rng, make_transform(Rotation.random(random_state=rng), rng.uniform(-0.5, 0.5, 3)))
+        cells = start_cells(region, fixture)
+        for _ in range(30):
+            edge = rng.random() < 0.5
+            pose = _random_region(rng, region.base_T_cad_center)  # a pose near the centre, at up to its bounds
+            turn = Rotation.from_matrix(pose.base_T_cad_center[:3, :3] @ region.base_T_cad_center[:3, :3].T)
+            angle = region.rotation_rad * (1.0 if edge else rng.uniform(0, 1))
+            rotation = Rotation.from_rotvec(turn.as_rotvec() / max(turn.magnitude(), 1e-12) * angle)
+            shift = rng.normal(size=3)
+            position = region.base_T_cad_center[:3, 3] + shift / np.linalg.norm(shift) * region.position_m * (
+                1.0 if edge else rng.uniform(0, 1))
+            base_T_cad = make_transform(rotation * Rotation.from_matrix(region.base_T_cad_center[:3, :3]), position)
+            assert cells.contains(base_T_cad @ invert(fix_T_cad))
+
+
+def test_taps_at_a_pose_the_region_holds_are_never_called_moved():
+    """Random shapes, regions holding the true pose, taps with errors up to the bound (some exactly at it):
+    consistent, every time; the same taps 4 bounds off along the fixture's normal directions are proved moved."""
+    rng = np.random.default_rng(9)
+    moved = 0
+    for trial in range(24):
+        fixture = as_fixture(["l_prism", "polytope", "brick", "cone"][trial % 4])
+        truth = make_transform(Rotation.random(random_state=rng), rng.uniform(-0.3, 0.3, 3))
+        bound = rng.uniform(3e-4, 1.5e-3)
+        count = int(rng.integers(1, 9))
+        taps = transform_points(truth, touching_ball_centres(fixture.mesh, count, BALL_M / 2, rng))
+        taps += bounded_noise(count, bound, rng)
+        region = _random_region(rng, truth)
+        assert not search_region(fixture, region, taps, BALL_M, bound, max_cells=2e5).moved
+        shifted = taps + [0.0, 0.0, 4 * bound + region.position_m + fixture.radius_m * region.rotation_rad]
+        moved += search_region(fixture, region, shifted, BALL_M, bound, max_cells=2e5).moved
+    assert moved >= 12  # a shift far beyond the region is found most of the time, even from one tap
+
+
+def test_on_the_simulated_cell_four_suggested_taps_tell_a_moved_fixture(tmp_path):
+    """Calibrate the demo cell, then check it: untouched the taps are consistent, the fixture pushed by 4 mm or
+    turned by 3 deg on the table is found moved."""
+    fixture = demo_fixture()
+    cell = SimulatedCell.with_fixture(fixture, seed=3)
+    cell.connect()
+    taps = spread_taps(cell, 14)
+    solution = solve(fixture, taps, BALL_M, 0.00035, max_cells=2e6, max_samples=2000)
+    assert solution.status == "unique"
+    path = report.write(tmp_path / "r.yaml", report.report_dict(solution, fixture, taps, BALL_M, 0.00035, 0.00035 / 3,
+                                                                simulated=True))
+    loaded = report.load(path)
+    checked = fixture_of(loaded)
+    points = suggest_check_points(checked, loaded.base_T_cad, BALL_M)
+    assert len(points) == 4 and all("face pointing" in point.where for point in points)
+    truth = cell.truth.base_T_cad
+    pushed = truth.copy()
+    pushed[:3, 3] += [0.004, 0.0, 0.0]
+    turn = make_transform(Rotation.from_euler("z", 3, degrees=True), np.zeros(3))
+    centre = transform_points(truth, fixture.cad_p_center[None])[0]
+    turned = make_transform(np.eye(3), centre) @ turn @ make_transform(np.eye(3), -centre) @ truth
+    for base_T_cad, expected in ((truth, False), (pushed, True), (turned, True)):
+        moved_cell = SimulatedCell.with_fixture(fixture, seed=4, base_T_cad=base_T_cad,
+                                                tcp_p_tip_m=cell.truth.tcp_p_tip_m)
+        moved_cell.connect()
+        moved_hands = SimulatedHands(moved_cell, seed=2)
+        contacts = []
+        for point in points:
+            moved_hands.near_fixture(point.base_p_ball_m)
+            contacts.append(moved_cell.tap().base_T_tcp_contact)
+        new_taps = ball_centres_m(np.array(contacts), cell.truth.tcp_p_tip_m)
+        result = verify(loaded, checked, new_taps, BALL_M, 0.00035)
+        assert result.moved is expected
+        assert result.with_report_taps and (result.bracket is not None) is expected
+    assert dt.datetime.now(dt.UTC) - loaded.created < dt.timedelta(minutes=10)
+
+
+def test_a_mistaken_argument_to_verify_is_an_input_error(expert):
+    path = expert[1]
+    loaded = report.load(path)
+    with pytest.raises(InputError, match="at least one tap"):
+        verify(loaded, None, np.zeros((0, 3)))
+    with pytest.raises(InputError, match="far more"):
+        verify(loaded, None, np.zeros((500, 3)))
