@@ -54,7 +54,8 @@ async def choose(pilot: Pilot, selector: str, value: str) -> None:
 
 
 async def press_button(pilot: Pilot, selector: str) -> None:
-    """Tab to the button and press Enter."""
+    """Tab to the button (once it is mounted) and press Enter."""
+    await until(pilot, lambda: bool(pilot.app.screen.query(selector)))
     pilot.app.screen.query_one(selector, Button).focus()
     await pilot.press("enter")
 
@@ -334,7 +335,7 @@ def test_an_unreachable_ur_arm_is_explained_and_nothing_says_simulated(tmp_path)
         context = ur_context("ur-arm.invalid", folder=tmp_path)
         app = FixwizardApp(context)
         async with app.run_test(size=SIZE) as pilot:
-            await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+            await until(pilot, lambda: isinstance(app.screen, ErrorModal) and bool(app.screen.query("#reconnect")))
             message = text_of(app, "#dialog-message")
             assert message.startswith("Cannot connect to the robot at ur-arm.invalid: port 29999 does not accept")
             assert app.screen.query("#reconnect") and not app.screen.query("#unlock")

@@ -23,6 +23,7 @@ command and may be called from any thread while a tap or move runs.
 import multiprocessing
 import signal
 import socket
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -86,6 +87,18 @@ class _LinkProcess:
         self.conn.close()
 
 
+@contextmanager
+def _real_stderr() -> Iterator[None]:
+    """The process's own standard error for the duration: starting a process hands its file descriptor on, and the
+    wizard's Textual app replaces ``sys.stderr`` by a capture without one (fd -1: 'bad value(s) in fds_to_keep')."""
+    captured = sys.stderr
+    sys.stderr = sys.__stderr__
+    try:
+        yield
+    finally:
+        sys.stderr = captured
+
+
 class URRobot:
     """A UR arm at ``host`` implementing ``fixwizard.robot.base.Robot``; ``connect`` before anything else.
 
@@ -122,7 +135,8 @@ class URRobot:
             conn, child_conn = self._context.Pipe()
             process = self._context.Process(target=serve, name="fixwizard-ur-link", daemon=True,
                                             args=(self.host, self.watchdog_hz, child_conn, shared, stop_count))
-            process.start()
+            with _real_stderr():
+                process.start()
             child_conn.close()
             link = self._link = _LinkProcess(process, conn, shared, stop_count)
             self._call(link, "connect", (), CONNECT_DEADLINE_S, " while connecting", watch_state=False)
