@@ -47,9 +47,9 @@ def write_points(folder: Path) -> dict[str, Path]:
 
 def solve_process(checkout: Path, points: Path, report: Path, max_cells: float) -> tuple[float, float]:
     """Wall time (s) and peak memory (MB) of one whole `fixwizard solve` process of ``checkout``."""
-    command = [str(checkout / ".venv" / "bin" / "python"), "-c", WRAPPER, "solve", str(DATA / "meshes" / "matlab_logo.ply"),
-               str(points), "--sample-bound", "1mm", "--ball-diameter", "3mm", "--max-cells", f"{max_cells:g}", "-q",
-               "-o", str(report)]
+    command = [str(checkout / ".venv" / "bin" / "python"), "-c", WRAPPER, "solve",
+               str(DATA / "meshes" / "matlab_logo.ply"), str(points), "--sample-bound", "1mm", "--ball-diameter", "3mm",
+               "--max-cells", f"{max_cells:g}", "-q", "-o", str(report)]
     started = time.perf_counter()
     result = subprocess.run(command, cwd=checkout, capture_output=True, text=True)
     seconds = time.perf_counter() - started
@@ -112,7 +112,7 @@ def main() -> None:
     walls: dict[str, list[float]] = {name: [] for name in checkouts}
     for run in RUNS:
         timings: dict[str, list[tuple[float, float]]] = {name: [] for name in checkouts}
-        for repeat in range(args.repeat):
+        for _ in range(args.repeat):
             for name, checkout in checkouts.items():
                 timings[name].append(solve_process(checkout, points[run], folder / f"{run}-{name}.yaml",
                                                    args.max_cells))
@@ -126,7 +126,8 @@ def main() -> None:
             position, rotation, displacement = figures["bounds"]
             print(f"{run:10} {name:8} {figures['status']:8} {wall:6.1f} {peak:7.0f} {position:6.2f} {rotation:7.2f} "
                   f"{displacement:7.2f} | {reach[0]:5.2f} {reach[1]:5.2f} {reach[2]:5.2f} | "
-                  f"{ratios[0]:5.2f} {ratios[1]:5.2f} {ratios[2]:5.2f} | {REFERENCE[run][0]:.2f} / {REFERENCE[run][1]:.2f}")
+                  f"{ratios[0]:5.2f} {ratios[1]:5.2f} {ratios[2]:5.2f} | "
+                  f"{REFERENCE[run][0]:.2f} / {REFERENCE[run][1]:.2f}")
     for name, values in walls.items():
         print(f"{name}: median whole-process wall time over the runs {statistics.median(values):.1f} s")
 

@@ -22,7 +22,6 @@ from scipy.spatial.transform import Rotation
 
 from fixwizard import report
 from fixwizard.atomic import check_output, write_text_atomic
-from fixwizard.cli import EXPORT_FORMATS as FORMATS  # the parser is the one home of the choices
 from fixwizard.cli import ROS_BASE_FRAME_ID as BASE_FRAME_ID
 from fixwizard.errors import InputError
 

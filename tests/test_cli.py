@@ -204,7 +204,8 @@ def test_help_and_argument_errors_answer_without_loading_the_heavy_libraries():
 
     probe = ("import sys; from fixwizard.cli import main\n"
              "try:\n    main(sys.argv[1:])\nexcept SystemExit:\n    pass\n"
-             "heavy = [name for name in ('numpy', 'open3d', 'scipy', 'textual', 'fixwizard.solver') if name in sys.modules]\n"
+             "heavy = [name for name in ('numpy', 'open3d', 'scipy', 'textual', 'fixwizard.solver')\n"
+             "         if name in sys.modules]\n"
              "print(heavy)")
     for argv in (["--help"], ["solve", "--help"], ["solve", "m.stl", "p.yaml", "--sample-bound", "-1mm"],
                  ["identify", "p.yaml", "m.stl", "--sample-bound", "1mm", "--ball-diameter", "3mm",

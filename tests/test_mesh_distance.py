@@ -139,7 +139,8 @@ def test_open3d_float32_errs_on_the_same_slivers_so_the_test_above_can_tell():
     rail = _rail(1.0, 0.001)
     points = _points_above_long_faces(rail, np.random.default_rng(3), 3000)
     scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(rail.vertices.astype(np.float32)), o3d.core.Tensor(rail.faces.astype(np.uint32)))
+    scene.add_triangles(o3d.core.Tensor(rail.vertices.astype(np.float32)),
+                        o3d.core.Tensor(rail.faces.astype(np.uint32)))
     closest = scene.compute_closest_points(o3d.core.Tensor(points.astype(np.float32)))["points"].numpy()
     float32_error = np.abs(np.linalg.norm(points - closest, axis=1) - exact_distances_m(rail, points))
     assert np.max(float32_error) > 1e-5

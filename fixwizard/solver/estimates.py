@@ -111,7 +111,6 @@ def _hull_displacements_m(base_R_fix: np.ndarray, rotation_index: np.ndarray, po
     displacement is convex in ``p``, so the hull's vertices hold its maximum over the fixture). The hull bound is
     computed from the largest ball bound down, and no more once the ball bounds fall below
     ``HULL_SCREEN_FRACTION`` of the largest bound found (those cells keep their ball bound)."""
-    count = len(rotation_index)
     out = ball_m.copy()
     norms = np.sqrt(np.sum(fix_p_hull**2, axis=1))
     largest = 0.0
