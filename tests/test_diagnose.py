@@ -50,7 +50,7 @@ def test_a_sample_bound_too_small_is_bracketed(expert):
     assert _codes(solution) == ["sample_bound"]
     ruled_out, not_ruled_out = solution.diagnosis.smallest_bound_m
     assert 0.0002 <= ruled_out < not_ruled_out <= 0.001
-    proof = search(replace(solution.problem, sample_bound_m=ruled_out), 3e5, exhaustive=True)
+    proof = search(replace(solution.problem, sample_bound_m=ruled_out), 3e5, descent="exhaustive")
     assert proof is None or len(proof.final) == 0
 
 

@@ -71,7 +71,7 @@ class Diagnosis:
 
 def _fits(problem: SearchProblem, max_cells: float, cancel: threading.Event | None) -> SearchTree | None:
     """The search tree when some pose is not ruled out, else None."""
-    tree = search(problem, max_cells, cancel=cancel, exhaustive=True)
+    tree = search(problem, max_cells, cancel=cancel, descent="exhaustive")
     return tree if tree is not None and len(tree.final) else None
 
 

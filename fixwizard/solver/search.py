@@ -25,6 +25,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -43,14 +44,16 @@ CHUNK_CELL_TAPS = 1 << 23  # at most this many cell-tap pairs per batch (~100 MB
 RESTART_ROOT_SHRINK = 0.95
 # The uniform descent stops before a level would evaluate more than UNIFORM_SHARE of the cell budget
 # (refining the hull takes over from there), unless its cells are still coarse (a cell spans more than
-# COARSE_FRACTION of the fixture radius) while the taps still prune hard (under PRUNING_RATIO of the level's
-# cells survived): such a bottleneck level may use what is left of the budget, since stopping there would leave
-# bounds of centimetres that the next few levels shrink to millimetres. A set the taps do not prune is
-# undetermined whatever the budget: descending further only costs time. All levels together evaluate at most the
-# budget.
+# COARSE_FRACTION of the fixture radius): such a level may use the whole budget, since stopping there would leave
+# bounds of centimetres (or sets spanning every rotation) that the next few levels shrink to millimetres. An
+# exhaustive search (to prove a set empty) descends as long as its levels together stay within the budget; a quick
+# one (the live check after each tap) goes on at coarse levels only while the taps still prune hard (under
+# PRUNING_RATIO of a level's cells survive): a set of a few taps, which they barely prune, is then answered in
+# seconds, as undetermined.
 UNIFORM_SHARE = 1 / 12
 COARSE_FRACTION = 0.05
 PRUNING_RATIO = 0.25
+Descent = Literal["thorough", "quick", "exhaustive"]
 _KERNEL_LOCK = threading.Lock()  # one parallel kernel at a time, whichever thread searches
 
 
@@ -310,26 +313,29 @@ def search_budget(max_cells: float) -> float:
     return max_cells * UNIFORM_SHARE
 
 
-def _descends(problem: SearchProblem, tree: SearchTree, max_cells: float, exhaustive: bool) -> bool:
-    """Whether the uniform descent splits the finest survivors once more within the cell budget (``exhaustive``:
-    whenever the budget allows, to tell an empty set from a non-empty one)."""
+def _descends(problem: SearchProblem, tree: SearchTree, max_cells: float, descent: Descent) -> bool:
+    """Whether the uniform descent splits the finest survivors once more within the cell budget (see ``Descent``)."""
     cells = tree.final.cells
-    if len(cells) == 0 or tree.spent + 8 * len(cells) > max_cells or not splittable(cells):
+    if len(cells) == 0 or not splittable(cells):
         return False
-    if exhaustive or 8 * len(cells) <= search_budget(max_cells):
+    if descent == "exhaustive":  # as long as the budget allows, as a total over the levels
+        return tree.spent + 8 * len(cells) <= max_cells
+    if 8 * len(cells) > max_cells:
+        return False
+    if 8 * len(cells) <= search_budget(max_cells):
         return True
     gamma = float(np.max(cells.rotation_grid.gamma(cells.rotation_level, cells.rotation_ids)))
     span_m = cells.position_bound_m + problem.fixture_radius_m * chord(gamma)
     coarse = span_m > COARSE_FRACTION * problem.fixture_radius_m
-    return coarse and len(cells) < PRUNING_RATIO * tree.evaluated
+    return coarse and (descent == "thorough" or len(cells) < PRUNING_RATIO * tree.evaluated)
 
 
 def _descend(problem: SearchProblem, tree: SearchTree, max_cells: float, started: float,
              progress: Callable[[SearchProgress], None] | None, cancel: threading.Event | None,
-             exhaustive: bool = False) -> SearchTree:
+             descent: Descent = "thorough") -> SearchTree:
     """Split and filter level after level while ``_descends`` says so; reports every level."""
     while True:
-        descends = _descends(problem, tree, max_cells, exhaustive)
+        descends = _descends(problem, tree, max_cells, descent)
         _report(progress, tree.evaluated, tree.final, started, final=not descends)
         if not descends:
             return tree
@@ -351,10 +357,9 @@ def _report(progress: Callable[[SearchProgress], None] | None, evaluated: int, s
 
 def search(problem: SearchProblem, max_cells: float = 1e7,
            progress: Callable[[SearchProgress], None] | None = None,
-           cancel: threading.Event | None = None, exhaustive: bool = False) -> SearchTree | None:
+           cancel: threading.Event | None = None, descent: Descent = "thorough") -> SearchTree | None:
     """Survivors of every level down to the finest the cell budget allows (the finest empty if no pose fits).
-    ``exhaustive``: descend as long as the whole budget allows (to prove a set empty), not only as far as the
-    estimates need.
+    ``descent``: how far to go (see ``Descent`` above UNIFORM_SHARE).
 
     Returns None when the taps are too far apart for any pose (no possible fixture centre).
     """
@@ -365,7 +370,7 @@ def search(problem: SearchProblem, max_cells: float = 1e7,
     cells = root_cells(position_grid)
     survivors = filter_cells(problem, cells, cancel=cancel)
     return _descend(problem, SearchTree([survivors], len(cells), len(cells)), max_cells, started, progress, cancel,
-                    exhaustive)
+                    descent)
 
 
 def worth_extending(problem: SearchProblem, previous: SearchTree) -> bool:
@@ -379,7 +384,7 @@ def worth_extending(problem: SearchProblem, previous: SearchTree) -> bool:
 
 def add_taps(problem: SearchProblem, previous: SearchTree, max_cells: float = 1e7,
              progress: Callable[[SearchProgress], None] | None = None,
-             cancel: threading.Event | None = None) -> SearchTree:
+             cancel: threading.Event | None = None, descent: Descent = "thorough") -> SearchTree:
     """The search tree for ``problem``, whose taps extend those ``previous`` was searched with.
 
     New taps can only remove poses: level by level from the root, the previous survivors whose parent
@@ -412,5 +417,6 @@ def add_taps(problem: SearchProblem, previous: SearchTree, max_cells: float = 1e
     final.faces[:, :known] = previous.final.faces[level_alive]
     final.tap_order = np.concatenate([final.tap_order, previous.final.tap_order])
     evaluated = 8 * len(levels[-2]) if len(levels) > 1 else len(levels[0])  # the children a search tests
-    spent = sum(len(level) for level in previous.levels[1:]) * 8 + len(previous.levels[0])  # as a search would have
-    return _descend(problem, SearchTree(levels, evaluated, spent), max_cells, started, progress, cancel)
+    # what a search from scratch with every tap would have evaluated to reach these levels
+    spent = len(previous.levels[0]) + 8 * sum(len(level) for level in levels[:-1])
+    return _descend(problem, SearchTree(levels, evaluated, spent), max_cells, started, progress, cancel, descent)

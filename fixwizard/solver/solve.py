@@ -218,7 +218,7 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
           sigma_m: float | None = None, max_cells: float = DEFAULT_MAX_CELLS,
           progress: Callable[[SearchProgress], None] | None = None, cancel: threading.Event | None = None,
           max_samples: int = DEFAULT_MAX_SAMPLES, seed: int = 0, previous: Solution | None = None,
-          hull_cells: float | None = None, diagnose_inconsistent: bool = True) -> Solution:
+          hull_cells: float | None = None, diagnose_inconsistent: bool = True, quick: bool = False) -> Solution:
     """All poses of ``fixture`` that explain the taps, with estimates; raises InputError for bad input.
 
     ``base_p_taps`` (N, 3): measured ball centres in the robot base frame (m). ``sigma_m``
@@ -228,7 +228,8 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
     taken as it is: only the estimates and the hull refinement run again (with a larger ``hull_cells``, to
     tighten the bounds). ``hull_cells``: the cells hull
     refinement may evaluate (default ``HULL_SHARE`` of ``max_cells``). ``diagnose_inconsistent``: look for why no
-    pose explains the taps (``diagnose``, seconds of searches) when none does.
+    pose explains the taps (``diagnose``, seconds of searches) when none does. ``quick``: the search
+    goes on at coarse levels only while the taps prune hard (``search.Descent``; for the live check after each tap).
     """
     base_p_taps = np.asarray(base_p_taps, dtype=float)
     sigma_m = sample_bound_m / 3.0 if sigma_m is None else sigma_m
@@ -247,9 +248,9 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
     if previous is not None and previous.extends_to(problem) and len(base_p_taps) == len(previous.problem.base_p_taps):
         tree = previous.tree
     elif previous is not None and previous.extends_to(problem) and worth_extending(problem, previous.tree):
-        tree = add_taps(problem, previous.tree, max_cells, progress, cancel)
+        tree = add_taps(problem, previous.tree, max_cells, progress, cancel, "quick" if quick else "thorough")
     else:
-        tree = search(problem, max_cells, progress, cancel)
+        tree = search(problem, max_cells, progress, cancel, "quick" if quick else "thorough")
     survivors = None if tree is None else tree.final
     cells = None if survivors is None else survivors.cells
     warnings = [SolveWarning(code, message) for code, message in fixture.warnings] + budget_warnings

@@ -57,13 +57,14 @@ def quick_check(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: floa
                 previous: LiveCheck | None = None) -> LiveCheck | None:
     """A quick solve of the taps (None with fewer than the solver's minimum); raises ``SearchCancelled``
     when ``cancel`` is set meanwhile. With the ``previous`` check of fewer of the same taps, the solve goes
-    on from its set (a new tap can only remove poses) instead of starting over."""
+    on from its set (a new tap can only remove poses) instead of starting over. The search is a quick one (coarse
+    levels only while the taps prune hard: a few taps are answered in seconds)."""
     base_p_taps = np.asarray(base_p_taps, float).reshape(-1, 3)
     if len(base_p_taps) < MIN_TAPS:
         return None
     solution = solve(fixture, base_p_taps, ball_diameter_m, sample_bound_m, max_cells=max_cells, cancel=cancel,
                      max_samples=LIVE_MAX_SAMPLES, previous=None if previous is None else previous.solution,
-                     hull_cells=LIVE_HULL_CELLS)
+                     hull_cells=LIVE_HULL_CELLS, quick=True)
     return LiveCheck(solution, len(base_p_taps))
 
 
