@@ -6,7 +6,8 @@ the cells whose figures lie within ``OUTER_FRACTION`` of a current maximum and f
 children against every tap (inheriting the parents' intervals); the children replace their
 parents. Every pose of the consistent set stays in some kept cell, so the maxima stay guaranteed
 while they shrink. Rounds go on, deeper and deeper on the hull only, until the cell budget is
-spent, ``MAX_ROUNDS`` have run, or a round no longer tightens any maximum by ``MIN_GAIN``. A refined
+spent (a last round then splits the outermost cells the rest affords), ``MAX_ROUNDS`` have run, or a round no
+longer tightens any maximum by ``MIN_GAIN``. A refined
 cell whose children all fail keeps figures of zero: when no cell is left, the set holds no pose.
 """
 
@@ -22,6 +23,15 @@ MAX_ROUNDS = 40
 MIN_GAIN = 0.003
 
 
+def _outermost(ratios: list[np.ndarray], outer: list[np.ndarray], count: int) -> list[np.ndarray]:
+    """The ``outer`` cells whose ratio (figure / current maximum) exceeds that of all but at most ``count`` of them."""
+    every = np.concatenate([ratio[mask] for ratio, mask in zip(ratios, outer, strict=True)])
+    if count <= 0:
+        return [np.zeros_like(mask) for mask in outer]
+    threshold = np.partition(every, len(every) - count)[len(every) - count] if count < len(every) else -np.inf
+    return [mask & (ratio > threshold) for ratio, mask in zip(ratios, outer, strict=True)]
+
+
 def refined_largest_figures(problem: SearchProblem, survivors: Survivors, centre: BoundCentre, fix_p_origin: np.ndarray,
                             budget: float, cancel: threading.Event | None = None) -> np.ndarray | None:
     """Largest (CAD-origin distance, rotation angle, point displacement) over the set, refined (see module doc);
@@ -33,11 +43,17 @@ def refined_largest_figures(problem: SearchProblem, survivors: Survivors, centre
     pools = [pool_of(survivors)]
     largest = pools[0][1].max(axis=1)
     for _ in range(MAX_ROUNDS):
-        outer = [(np.max(figures / np.maximum(largest[:, None], 1e-300), axis=0) > OUTER_FRACTION)
-                 & splittable(cells.cells) for cells, figures in pools]
+        ratios = [np.where(splittable(cells.cells), np.max(figures / np.maximum(largest[:, None], 1e-300), axis=0),
+                           0.0) for cells, figures in pools]
+        outer = [ratio > OUTER_FRACTION for ratio in ratios]
         wanted = 8 * sum(int(np.count_nonzero(mask)) for mask in outer)
-        if wanted == 0 or wanted > budget:
+        if wanted == 0:
             break
+        if wanted > budget:  # a last round on the outermost cells the budget still affords
+            outer = _outermost(ratios, outer, int(budget // 8))
+            wanted = 8 * sum(int(np.count_nonzero(mask)) for mask in outer)
+            if wanted == 0:
+                break
         budget -= wanted
         by_level: dict[tuple[int, int], list[Survivors]] = {}
         for (cells, figures), mask in zip(pools, outer):
