@@ -307,15 +307,21 @@ def test_the_start_screen_preselects_the_newest_calibration_of_this_robot_only(t
         save_calibration(dataclasses.replace(example, name=name, created=created, robot=context.robot_name),
                          tmp_path / "calibrations" / f"{name}.yaml")
 
-    async def preselected(context: WizardContext) -> str:
+    async def preselected(context: WizardContext) -> tuple[str, str, str]:
         async with FixwizardApp(context).run_test(size=SIZE) as pilot:
             await at_start(pilot)
-            return str(pilot.app.screen.query_one("#calibration", Select).value)
+            select = pilot.app.screen.query_one("#calibration", Select)
+            return (str(select.value), str(select.query_one("SelectCurrent #label", Static).render()),
+                    text_of(pilot.app, "#calibration-info"))
 
-    assert asyncio.run(preselected(context)) == str(tmp_path / "calibrations" / "newer.yaml")
+    value, label, info = asyncio.run(preselected(context))
+    assert value == str(tmp_path / "calibrations" / "newer.yaml")
+    assert label == "newer.yaml (3.0 mm ball, 2026-11-21)"
+    assert info.startswith("Ball diameter 3.0 mm (check it is the ball on the tool), calibrated 2026-11-21 08:00 on "
+                           "SIMULATED demo cell (seed 3)\nGood: the ball centre is known to about 0.28 mm")
     for name in ("older", "newer"):
         (tmp_path / "calibrations" / f"{name}.yaml").unlink()
-    assert asyncio.run(preselected(wizard(tmp_path))) == NEW
+    assert asyncio.run(preselected(wizard(tmp_path)))[0] == NEW
 
 
 def test_resume_opens_the_session_with_its_fixture_and_calibration(tmp_path):
