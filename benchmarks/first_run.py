@@ -13,7 +13,7 @@ unique with the full solve's bounds and at least ``--min-taps`` taps are in, the
 Before each tap it waits for the live check to settle, as an operator waiting for the suggestion would.
 
 It prints the operator's keys, the total time, the longest unresponsive interval (from sending a key to the
-first change of the screen, polled every ``POLL_S``) and the longest wait without visible progress (the screen
+first change of the screen, colours included, polled every ``POLL_S``) and the longest wait without visible progress (the screen
 unchanged while the script waits for the wizard). Targets (issue 19): the whole run under 4 minutes, no key
 unanswered over 100 ms, no wait over 1 s without progress. Nothing asserts them; a step that never comes
 stops the run with the screen it shows.
@@ -60,9 +60,12 @@ TARGETS = {"total_s": 240.0, "unresponsive_s": 0.1, "no_progress_s": 1.0}
 FIXWIZARD = Path(sys.executable).parent / "fixwizard"
 
 
+ESCAPES = re.compile(r"\x1b\[[0-9;:?]*[A-Za-z]")
+
+
 def flat(screen: str) -> str:
-    """The screen's text as one line (wrapped sentences joined), for finding phrases."""
-    return re.sub(r"\s+", " ", screen)
+    """The screen's text without colours as one line (wrapped sentences joined), for finding phrases."""
+    return re.sub(r"\s+", " ", ESCAPES.sub("", screen))
 
 
 class Stuck(Exception):
@@ -95,9 +98,10 @@ class Run:
         self.doing = "launch"
 
     def capture(self) -> str:
-        """Read the screen; a change ends the current interval without progress."""
-        screen = subprocess.run([*self.tmux, "capture-pane", "-p", "-t", "wizard"], check=True, capture_output=True,
-                                text=True).stdout
+        """Read the screen with its colours (focus moves show only in them); a change ends the current interval
+        without progress."""
+        screen = subprocess.run([*self.tmux, "capture-pane", "-p", "-e", "-t", "wizard"], check=True,
+                                capture_output=True, text=True).stdout
         now = time.monotonic()
         if screen != self.screen:
             self._stalled(now)
@@ -107,8 +111,11 @@ class Run:
     def _stalled(self, now: float) -> None:
         self.stalls.append(Interval(now - self.changed, self.doing, self.where()))
 
+    def text(self) -> str:
+        return ESCAPES.sub("", self.screen)
+
     def where(self) -> str:
-        lines = [line.strip() for line in self.screen.splitlines() if line.strip()]
+        lines = [line.strip() for line in self.text().splitlines() if line.strip()]
         return lines[1][:60] if len(lines) > 1 else "(blank)"
 
     def press(self, name: str) -> None:
@@ -121,7 +128,7 @@ class Run:
         self.keys.append(key)
         while self.capture() == before:
             if time.monotonic() - sent > KEY_TIMEOUT_S:
-                raise Stuck(f"{key!r} ({name}) changed nothing in {KEY_TIMEOUT_S:.0f} s:\n{self.screen}")
+                raise Stuck(f"{key!r} ({name}) changed nothing in {KEY_TIMEOUT_S:.0f} s:\n{self.text()}")
             time.sleep(POLL_S)
         self.responses.append(Interval(self.changed - sent, f"{key!r} ({name})", self.where()))
 
@@ -131,7 +138,7 @@ class Run:
         deadline = time.monotonic() + timeout_s
         while not condition(flat(self.capture())):
             if time.monotonic() > deadline:
-                raise Stuck(f"waited {timeout_s:.0f} s for {what}; the screen:\n{self.screen}")
+                raise Stuck(f"waited {timeout_s:.0f} s for {what}; the screen:\n{self.text()}")
             time.sleep(POLL_S)
         return flat(self.screen)
 
@@ -183,7 +190,7 @@ def sample(run: Run, min_taps: int) -> int:
         if taps >= min_taps and "unique so far" in screen and "as tight as the full solve's" in screen:
             return taps
         if taps >= MAX_TAPS or "INCONSISTENT" in screen or "NO POSE FITS" in screen:
-            raise Stuck(f"{taps} taps and no unique pose; the screen:\n{run.screen}")
+            raise Stuck(f"{taps} taps and no unique pose; the screen:\n{run.text()}")
         if "Press g to go above it" in screen:
             run.press("go_above_suggestion")
             run.wait_for("the move question", lambda s: "Move the robot?" in s)
