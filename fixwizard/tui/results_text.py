@@ -61,7 +61,7 @@ def mode_line(number: int, mode: Mode) -> str:
 
 def modes_lines(solution: Solution, advice: TapAdvice | None) -> list[str]:
     """The candidate poses, most probable first, and one sentence on where to tap to tell the first two apart."""
-    lines = ["Candidate poses that explain the taps (probability, pose, guaranteed bounds):",
+    lines = ["Candidate poses that fit the taps (probability, pose, guaranteed bounds):",
              *(mode_line(number, mode) for number, mode in enumerate(solution.modes, start=1))]
     if advice is not None:
         lines.append(f"Next: {advice.sentence()} Then press r to tap it and solve again.")
