@@ -139,7 +139,9 @@ def test_a_new_tip_calibration_through_the_screens_is_saved_and_finds_the_hidden
             await calibrate_by_hand(pilot)
             await pilot.press("g")
             await until(pilot, lambda: isinstance(app.screen, CalibrationResultScreen) and not app.screen.busy)
-            assert "Proposed sample bound" in text_of(app, "#result-figures")
+            figures = text_of(app, "#result-figures")
+            assert figures.startswith("GOOD: use this calibration.") and "Each tap will be trusted to" in figures
+            assert "condition number" not in figures and "scatter" not in figures  # those are on Details
             await pilot.press("shift+tab", "shift+tab", "end", "ctrl+u", *"sim-tip", "tab", "tab", "enter")
             await until(pilot, lambda: context.session is not None)
             return context, context.session
@@ -305,15 +307,21 @@ def test_the_start_screen_preselects_the_newest_calibration_of_this_robot_only(t
         save_calibration(dataclasses.replace(example, name=name, created=created, robot=context.robot_name),
                          tmp_path / "calibrations" / f"{name}.yaml")
 
-    async def preselected(context: WizardContext) -> str:
+    async def preselected(context: WizardContext) -> tuple[str, str, str]:
         async with FixwizardApp(context).run_test(size=SIZE) as pilot:
             await at_start(pilot)
-            return str(pilot.app.screen.query_one("#calibration", Select).value)
+            select = pilot.app.screen.query_one("#calibration", Select)
+            return (str(select.value), str(select.query_one("SelectCurrent #label", Static).render()),
+                    text_of(pilot.app, "#calibration-info"))
 
-    assert asyncio.run(preselected(context)) == str(tmp_path / "calibrations" / "newer.yaml")
+    value, label, info = asyncio.run(preselected(context))
+    assert value == str(tmp_path / "calibrations" / "newer.yaml")
+    assert label == "newer.yaml (3.0 mm ball, 2026-11-21)"
+    assert info.startswith("Ball diameter 3.0 mm (check it is the ball on the tool), calibrated 2026-11-21 08:00 on "
+                           "SIMULATED demo cell (seed 3)\nGood: the ball centre is known to about 0.28 mm")
     for name in ("older", "newer"):
         (tmp_path / "calibrations" / f"{name}.yaml").unlink()
-    assert asyncio.run(preselected(wizard(tmp_path))) == NEW
+    assert asyncio.run(preselected(wizard(tmp_path)))[0] == NEW
 
 
 def test_resume_opens_the_session_with_its_fixture_and_calibration(tmp_path):

@@ -49,7 +49,11 @@ async def test_solve_shows_progress_then_results_write_a_report_holding_the_true
         await until(pilot, lambda: screen.progress is not None)
         await pilot.pause(0.3)
         figures = text_of(screen, "#figures")
-        assert "Elapsed:" in figures and "Level: rotation" in figures and "Surviving cells:" in figures
+        assert "Elapsed:" in figures and "Looking closer: pass" in figures and "Candidate poses left:" in figures
+        assert "cells" not in figures and "level" not in figures  # the search's own figures are on d
+        await pilot.press("d")
+        if not app.results:  # still solving
+            assert "Details: rotation level" in text_of(screen, "#figures")
         await until(pilot, lambda: app.results)
         solution = app.results[0]
         assert isinstance(solution, Solution) and tapped.solution is solution
@@ -148,6 +152,24 @@ async def test_an_inconsistent_result_names_the_suspect_and_dropping_it_solves(t
         assert again.status == "unique" and again.contains(cell_of(tapped).truth.base_T_cad)
 
 
+async def test_a_wrong_ball_diameter_is_said_plainly_instead_of_blaming_a_tap(tapped):
+    tapped.calibration = dataclasses.replace(tapped.calibration, ball_diameter_m=0.006)  # the ball is 3 mm
+    solved(tapped)
+    app = ScreenHost(lambda: ResultsScreen(tapped))
+    async with app.run_test(size=SIZE) as pilot:
+        results = app.screen
+        assert "INCONSISTENT" in text_of(results, "#headline")
+        summary = text_of(results, "#summary-text")
+        fitted_mm = tapped.solution.diagnosis.ball_diameter_m * 1e3
+        assert abs(fitted_mm - 3.0) < 0.5
+        assert summary.startswith(f"The taps fit a ball of about {fitted_mm:.1f} mm, the tip calibration says 6.0 mm: "
+                                  "check the ball (measure it) and calibrate the tip again")
+        assert "Press d to drop tap" not in summary
+        await pilot.press("v", "v", "v")
+        details = text_of(results, "#details-text")
+        assert f"Ball diameter fitted with the pose: {fitted_mm:.2f} mm." in details and "cells survive" in details
+
+
 async def test_an_ambiguous_result_lists_the_modes_and_says_where_to_tap_next(tmp_path):
     context = wizard_context(tmp_path, cell=symmetric_cell())
     record_spread_taps(context, 12)
@@ -157,7 +179,7 @@ async def test_an_ambiguous_result_lists_the_modes_and_says_where_to_tap_next(tm
     async with app.run_test(size=SIZE) as pilot:
         summary = text_of(app.screen, "#summary-text")
         assert "AMBIGUOUS: 4 distinct poses explain the 12 taps" in text_of(app.screen, "#headline")
-        assert "Poses that explain the taps (probability, pose, guaranteed bounds):" in summary
+        assert "Candidate poses that fit the taps (probability, pose, guaranteed bounds):" in summary
         assert "  1. " in summary and "  2. " in summary
         assert "Next: Tap the " in summary and "mm apart there" in summary
         scroll = app.screen.query_one("#summary VerticalScroll")

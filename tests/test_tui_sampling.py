@@ -4,13 +4,14 @@ the next tap is suggested (and reached on confirmation when the way there is saf
 against every fixture."""
 
 import asyncio
+import dataclasses
 import json
 
 import numpy as np
 import pytest
 from textual.widgets import DataTable, Static
 from pilot_wait import until
-from tui_cell import ScreenHost, cell_of, wizard_context
+from tui_cell import ScreenHost, cell_of, record_spread_taps, wizard_context
 
 from fixwizard.demo import disc_fixture
 from fixwizard.tui.confirm import ConfirmMove
@@ -251,3 +252,23 @@ async def test_which_fixture_checks_the_taps_against_every_offered_mesh(context,
         assert conclusion in text
         await pilot.press("enter")
         await until(pilot, lambda: app.screen is screen)
+
+
+async def test_the_live_check_says_the_ball_diameter_is_wrong_when_the_taps_fit_another_ball(context):
+    context.calibration = dataclasses.replace(context.calibration, ball_diameter_m=0.006)  # the ball is 3 mm
+    record_spread_taps(context, 12)
+    app = ScreenHost(lambda: SamplingScreen(context))
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        await until(pilot, lambda: screen.live is not None, timeout_s=120)
+        live = text_of(screen, "#live")
+        fitted_mm = screen.live.solution.diagnosis.ball_diameter_m * 1e3
+        assert abs(fitted_mm - 3.0) < 0.5
+        assert live == (f"Live check of 12 taps: NO POSE FITS these taps with this ball. The taps fit a ball of about "
+                        f"{fitted_mm:.1f} mm, the tip calibration says 6.0 mm: check the ball (measure it) and "
+                        "calibrate the tip again with its diameter. The taps themselves are probably fine.")
+        await pilot.press("d")
+        await until(pilot, lambda: isinstance(app.screen, Dialog))
+        details = str(app.screen.query_one("#dialog-message", Static).content)
+        assert details.startswith("12 taps; bounds from a quick hull refinement.\nSolver status: inconsistent.")
+        assert f"Ball diameter fitted with the pose: {fitted_mm:.2f} mm." in details

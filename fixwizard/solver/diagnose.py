@@ -34,7 +34,6 @@ PROBE_MAX_CELLS = 1e6
 MAX_RELAXED_BOUND_M = 0.02
 BISECTIONS = 2
 SUSPECTS_TRIED = 3  # the taps with the largest residuals at the best fit, left out in turn
-OFF_FACTOR = 3.0  # a tap this many sample bounds off at the others' best pose has clearly missed
 FIT_CELLS = 20_000  # cell centres whose residuals pick the starts of the best fit
 FIT_STARTS = 3
 BALL_FIT_ROUNDS = 4
@@ -193,9 +192,10 @@ def diagnose(problem: SearchProblem, max_cells: float, cancel: threading.Event |
     residuals = _residuals_m(problem, pose)
     bound = problem.sample_bound_m
     suspect = _suspect(problem, residuals, extent_m, probe_cells, cancel)
-    clearly_off = suspect is not None and abs(suspect.distance_m) > OFF_FACTOR * bound
-    ball_diameter = None if clearly_off else _ball_diameter(replace(problem, sample_bound_m=high), pose, extent_m,
-                                                              probe_cells, bound, cancel)
+    # Tried even when a suspect tap is far off: a wrong ball leaves every tap off by the same amount, so the others'
+    # best pose may put one tap far off (and a 6 mm ball on a 3 mm tip was blamed on a tap). A ball with which all
+    # taps fit explains more than dropping one; one tap far off moves the residuals' median too little to try one.
+    ball_diameter = _ball_diameter(replace(problem, sample_bound_m=high), pose, extent_m, probe_cells, bound, cancel)
     causes = []
     if suspect is not None:
         where = "short of" if suspect.distance_m > 0 else "inside"

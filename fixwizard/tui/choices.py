@@ -7,6 +7,7 @@ from pathlib import Path
 
 from fixwizard.calibration.errors import CalibrationFileError
 from fixwizard.calibration.store import TipCalibration, load_calibration
+from fixwizard.calibration.verdict import tip_verdict
 from fixwizard.demo import DEMO_MESH, DEMO_MESH_UNITS, DISC_MESH
 from fixwizard.fixture import MESH_SUFFIXES, Fixture
 from fixwizard.workflow.session import find_unfinished
@@ -53,12 +54,12 @@ def calibration_choices(calibrations_dir: Path) -> list[CalibrationChoice]:
 
 
 def describe_calibration(calibration: TipCalibration) -> str:
-    """Date, robot, residuals and proposed sample bound in one or two lines."""
+    """The ball diameter, date and robot, then the verdict with its first reason."""
     created = calibration.created.replace("T", " ")[:16]
-    return (f"{created} on {calibration.robot or 'an unknown robot'}\n"
-            f"residuals: pivot max {calibration.pivot_residuals.max_m * 1e3:.2f} mm, table max "
-            f"{calibration.table_residuals.max_m * 1e3:.2f} mm, tip max {calibration.tip_residuals.max_m * 1e3:.2f} "
-            f"mm; proposed sample bound {calibration.sample_bound_m * 1e3:.1f} mm")
+    verdict = tip_verdict(calibration)
+    return (f"Ball diameter {calibration.ball_diameter_m * 1e3:.1f} mm (check it is the ball on the tool), "
+            f"calibrated {created} on {calibration.robot or 'an unknown robot'}\n"
+            f"{verdict.level.capitalize()}: {verdict.reasons[0]}")
 
 
 def describe_fixture(fixture: Fixture) -> str:

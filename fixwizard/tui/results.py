@@ -1,5 +1,5 @@
 """The results screen: the solution in words and numbers, pictures of the rotation set and of the taps on
-the fixture, the report (default path shown, editable) and what to do next. Dismisses with "resample"
+the fixture, the solver's own figures (Details), the report (default path shown, editable) and what to do next. Dismisses with "resample"
 (back to sampling, after dropping the suspect tap of an inconsistent result if asked) or "done"."""
 
 import datetime as dt
@@ -19,9 +19,9 @@ from fixwizard.tui.context import WizardContext
 from fixwizard.tui.errors import error_message
 from fixwizard.tui.picture_view import PictureView
 from fixwizard.tui.results_text import (
+    details_lines,
     headline,
     modes_lines,
-    search_line,
     summary_lines,
     suspect_lines,
     warning_lines,
@@ -30,7 +30,7 @@ from fixwizard.workflow.advice import distinguishing_tap
 from fixwizard.workflow.wizard_report import default_report_path, write_session_report
 
 Outcome = Literal["resample", "done"]
-TABS = ("summary", "rotations", "taps")
+TABS = ("summary", "rotations", "taps", "details")
 
 
 class ResultsScreen(Screen[Outcome]):
@@ -81,6 +81,8 @@ class ResultsScreen(Screen[Outcome]):
             with TabPane("Taps on fixture", id="taps"):
                 yield PictureView(lambda width, height: taps_view_for_solution(
                     solution, context.fixture, context.session.base_p_taps, width, height), id="taps-view")
+            with TabPane("Details", id="details"):
+                yield VerticalScroll(Static("\n".join(details_lines(solution)), id="details-text", markup=False))
         with Horizontal(id="report-row"):
             yield Label("Report:")
             path = default_report_path(context.reports_dir, context.fixture, self.now())
@@ -100,7 +102,7 @@ class ResultsScreen(Screen[Outcome]):
             if solution.status == "ambiguous":
                 first, second = solution.modes[0].base_T_cad, solution.modes[1].base_T_cad
                 lines += modes_lines(solution, distinguishing_tap(self.context.fixture, first, second))
-        return [*lines, *warning_lines(solution), search_line(solution)]
+        return [*lines, *warning_lines(solution), "The solver's own figures: View (v) > Details."]
 
     def _rotations_view(self) -> PictureView | Static:
         if self.solution.status == "inconsistent":

@@ -1,6 +1,6 @@
 """The results screen's text: the pose in mm and degrees with its UR literal, the guaranteed bounds and
-intervals, warnings, the modes of an ambiguous result with what to tap next, and the suspect tap of an
-inconsistent one."""
+intervals, warnings, the candidate poses of an ambiguous result with what to tap next, and the cause of an
+inconsistent one (a wrong ball diameter, or a suspect tap); the solver's own figures in ``details_lines``."""
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -9,6 +9,7 @@ from fixwizard.geometry.se3 import format_ur_pose
 from fixwizard.solver.estimates import Bounds
 from fixwizard.solver.solve import Mode, Solution
 from fixwizard.workflow.advice import TapAdvice
+from fixwizard.workflow.ball_check import ball_mismatch
 
 HEADLINES = {"unique": "UNIQUE: one pose of the fixture explains the {taps} taps.",
              "ambiguous": "AMBIGUOUS: {modes} distinct poses explain the {taps} taps.",
@@ -23,11 +24,11 @@ def headline(solution: Solution, tap_count: int) -> str:
 
 
 def pose_lines(base_T_cad: np.ndarray) -> list[str]:
-    """Position (mm), rotation vector (deg, as the UR pendant shows it) and the UR pose literal."""
+    """Position (mm), turn (rotation vector in deg, as the UR pendant shows it) and the UR pose literal."""
     x, y, z = base_T_cad[:3, 3] * 1e3
     rx, ry, rz = np.degrees(Rotation.from_matrix(base_T_cad[:3, :3]).as_rotvec())
     return [f"  position  x {x:.2f}  y {y:.2f}  z {z:.2f} mm",
-            f"  rotation  rx {rx:.2f}  ry {ry:.2f}  rz {rz:.2f} deg (rotation vector)",
+            f"  turn      rx {rx:.2f}  ry {ry:.2f}  rz {rz:.2f} deg (as the UR pendant shows it)",
             f"  UR pose   {format_ur_pose(base_T_cad)}"]
 
 
@@ -59,8 +60,8 @@ def mode_line(number: int, mode: Mode) -> str:
 
 
 def modes_lines(solution: Solution, advice: TapAdvice | None) -> list[str]:
-    """The modes, most probable first, and one sentence on where to tap to tell the first two apart."""
-    lines = ["Poses that explain the taps (probability, pose, guaranteed bounds):",
+    """The candidate poses, most probable first, and one sentence on where to tap to tell the first two apart."""
+    lines = ["Candidate poses that fit the taps (probability, pose, guaranteed bounds):",
              *(mode_line(number, mode) for number, mode in enumerate(solution.modes, start=1))]
     if advice is not None:
         lines.append(f"Next: {advice.sentence()} Then press r to tap it and solve again.")
@@ -68,13 +69,22 @@ def modes_lines(solution: Solution, advice: TapAdvice | None) -> list[str]:
 
 
 def suspect_lines(solution: Solution) -> list[str]:
-    """What to do about an inconsistent result: its causes, most likely first, and how to drop the suspect tap."""
+    """What to do about an inconsistent result: a wrong ball diameter said plainly when the diagnosis finds one,
+    else its causes, most likely first; and how to drop the suspect tap."""
     diagnosis = solution.diagnosis
     causes = [] if diagnosis is None else [f"  {number}. {cause.message}"
                                            for number, cause in enumerate(diagnosis.causes, start=1)]
     lines = ["Why, most likely cause first:", *causes] if causes else [
         "Check the mesh and its units, the tip calibration and the sample bound."]
     suspect = solution.suspect_tap
+    mismatch = ball_mismatch(solution)
+    if mismatch is not None:
+        lines = [mismatch.sentence(), "Less likely causes:", *causes[1:]]
+        if suspect is not None:
+            lines.append(f"Dropping tap {suspect.index + 1} (d) would not fix a wrong ball: drop it only if you saw it "
+                         "miss the fixture.")
+        lines.append("Press r to go back to sampling.")
+        return lines
     if suspect is not None:
         lines.append(f"Press d to drop tap {suspect.index + 1} (the journal keeps it, marked dropped), then solve "
                      "again.")
@@ -91,7 +101,27 @@ def warning_lines(solution: Solution) -> list[str]:
     return ["Warnings:", *(f"  - {warning.message}" for warning in warnings)]
 
 
-def search_line(solution: Solution) -> str:
+def details_lines(solution: Solution) -> list[str]:
+    """The solver's own figures, for the Details view: status, search, likelihood samples, the diagnosis."""
     stats = solution.stats
-    return (f"Search: {stats.cells:,} cells survive of a budget of {stats.max_cells:,.0f}, "
-            f"{stats.elapsed_s:.1f} s.")
+    lines = [f"Solver status: {solution.status}.",
+             f"Search: {stats.cells:,} cells survive of a budget of {stats.max_cells:,.0f} (rotation level "
+             f"{stats.rotation_level}, position level {stats.position_level}), {stats.elapsed_s:.1f} s.",
+             f"Effective likelihood samples: {solution.effective_samples:,.0f}.",
+             *(f"Mode {number}: probability {mode.probability:.1%}, within {mode.bounds.position_m * 1e3:.2f} mm, "
+               f"{np.degrees(mode.bounds.rotation_rad):.2f} deg" for number, mode in enumerate(solution.modes, start=1))]
+    if solution.bounds is not None:
+        bounds = solution.bounds
+        lines.append(f"Bounds: position {bounds.position_m * 1e3:.3f} mm, rotation "
+                     f"{np.degrees(bounds.rotation_rad):.3f} deg, any point {bounds.max_point_displacement_m * 1e3:.3f} "
+                     "mm.")
+    diagnosis = solution.diagnosis
+    if diagnosis is not None:
+        if diagnosis.smallest_bound_m is not None:
+            low, high = diagnosis.smallest_bound_m
+            lines.append(f"Smallest sample bound that explains the taps: between {low * 1e3:.2f} and {high * 1e3:.2f} "
+                         "mm.")
+        if diagnosis.ball_diameter_m is not None:
+            lines.append(f"Ball diameter fitted with the pose: {diagnosis.ball_diameter_m * 1e3:.2f} mm.")
+        lines += [f"Cause {cause.code}: {cause.message}" for cause in diagnosis.causes]
+    return lines

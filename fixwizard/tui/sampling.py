@@ -35,6 +35,7 @@ from fixwizard.tui.sampling_text import (
     guide_text,
     hover_question,
     identify_text,
+    live_details,
     live_text,
     robot_problem_text,
 )
@@ -89,6 +90,7 @@ class SamplingScreen(Screen[bool]):
         Binding("s", "solve", "Solve"),
         Binding("m", "simulated_move", "SIM: move arm"),
         Binding("k", "simulated_unlock", "SIM: unlock"),
+        Binding("d", "details", "Details"),
         Binding("escape", "leave", "Leave"),
     ]
 
@@ -215,6 +217,10 @@ class SamplingScreen(Screen[bool]):
         if not cancel.is_set() and self.is_attached:
             self._say("")
             self.app.push_screen(Dialog("Which fixture is this?", text))
+
+    def action_details(self) -> None:
+        """The live check's technical figures in a dialog."""
+        self.app.push_screen(Dialog("Live check: details", live_details(self.live)))
 
     def action_simulated_move(self) -> None:
         index = self._spread_index

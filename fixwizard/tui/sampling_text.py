@@ -1,4 +1,5 @@
-"""The sampling screen's sentences: the live check in words, and a robot problem with the next step."""
+"""The sampling screen's sentences: the live check in plain words (its figures in ``live_details``, on demand),
+and a robot problem with the next step."""
 
 from pathlib import Path
 
@@ -6,10 +7,12 @@ import numpy as np
 
 from fixwizard.solver.solve import MIN_TAPS
 from fixwizard.tui.choices import FixtureChoice
+from fixwizard.tui.results_text import details_lines
 from fixwizard.workflow.advice import TapAdvice
+from fixwizard.workflow.ball_check import ball_mismatch
 from fixwizard.workflow.hover import CLEARANCE_M, HoverPlan
 from fixwizard.workflow.identify import MeshVerdict, ranked
-from fixwizard.workflow.live import LIVE_MAX_CELLS, LiveCheck
+from fixwizard.workflow.live import LiveCheck
 
 
 def bounds_text(check: LiveCheck) -> str:
@@ -24,9 +27,12 @@ def live_text(check: LiveCheck | None, tap_count: int, running: bool) -> str:
         return (f"Live check: starts at {MIN_TAPS} taps ({MIN_TAPS - tap_count} to go). 10-20 taps over several "
                 "faces give tight bounds.")
     if check is None:
-        return f"Live check of {tap_count} taps: solving quickly ({LIVE_MAX_CELLS:.0e} cells)..."
+        return f"Live check of {tap_count} taps: finding the poses that fit your taps..."
     head = f"Live check of {check.tap_count} taps{' (updating...)' if running else ''}: "
     solution = check.solution
+    mismatch = ball_mismatch(solution)
+    if mismatch is not None:
+        return head + f"NO POSE FITS these taps with this ball. {mismatch.sentence()}"
     if check.verdict == "inconsistent":
         diagnosis = solution.diagnosis
         cause = diagnosis.causes[0].message if diagnosis is not None else "check the mesh, its units and the tip " \
@@ -37,10 +43,19 @@ def live_text(check: LiveCheck | None, tap_count: int, running: bool) -> str:
                 f"{bounds_text(check)}.")
     if check.verdict == "ambiguous":
         top = solution.modes[0]
-        return (head + f"AMBIGUOUS so far, {len(solution.modes)} poses fit (most likely {top.probability:.0%}); tap "
-                f"features that tell them apart. Guaranteed now: {bounds_text(check)}.")
+        return (head + f"AMBIGUOUS so far, {len(solution.modes)} candidate poses fit (most likely "
+                f"{top.probability:.0%}); tap features that tell them apart. Guaranteed now: {bounds_text(check)}.")
     tightness = "as tight as the full solve's" if check.refined else "tightening them..."
     return head + f"unique so far. Guaranteed now: {bounds_text(check)}; {tightness}"
+
+
+def live_details(check: LiveCheck | None) -> str:
+    """The live check's technical figures, for the details dialog (those of the results' Details view)."""
+    if check is None:
+        return f"No live check yet: it starts at {MIN_TAPS} taps."
+    refinement = "the full solve's" if check.refined else "a quick"
+    return "\n".join([f"{check.tap_count} taps; bounds from {refinement} hull refinement.",
+                      *details_lines(check.solution)])
 
 
 NO_SAFE_HOVER = ("The possible poses still differ too much for the robot to go there on its own: guide the ball "

@@ -1,5 +1,5 @@
-"""The solve screen: the full solve of the session's taps in a thread worker, with its level, surviving cells,
-elapsed time and how much of the cell budget the search has used; Esc cancels. Dismisses with the
+"""The solve screen: the full solve of the session's taps in a thread worker, with the candidate poses left,
+elapsed time and how far the search has got (its grid levels and cell budget on ``d``); Esc cancels. Dismisses with the
 ``Solution`` (also stored in ``context.solution``), or None when cancelled or after an input problem."""
 
 import threading
@@ -45,7 +45,7 @@ class SolveScreen(Screen[Solution | None]):
     SolveScreen #problem { height: auto; margin-top: 1; text-style: bold; border: heavy $error; }
     SolveScreen #problem.-empty { display: none; }
     """
-    BINDINGS = [Binding("escape", "cancel", "Cancel")]
+    BINDINGS = [Binding("escape", "cancel", "Cancel"), Binding("d", "details", "Details")]
     clock: Callable[[], float] = staticmethod(time.monotonic)
 
     def __init__(self, context: WizardContext, solver: Solver = solve) -> None:
@@ -56,14 +56,15 @@ class SolveScreen(Screen[Solution | None]):
         self.progress: SearchProgress | None = None
         self._started = 0.0
         self._budget_shown = 0.0
+        self._details = False
 
     def compose(self) -> ComposeResult:
         context = self.context
-        yield Static(f"Solving{' (SIMULATED)' if context.simulated else ''}: {len(context.session.taps)} taps on "
-                     f"{context.fixture.path.name}, cell budget {context.max_cells:,.0f}", id="title", markup=False)
-        yield Static("Every fixture pose that explains the taps survives the search; each level splits the cells "
-                     "finer until the budget is used. The bar shows how much of it is used.", id="about",
+        yield Static(f"Solving{' (SIMULATED)' if context.simulated else ''}: every pose of "
+                     f"{context.fixture.path.name} that fits your {len(context.session.taps)} taps", id="title",
                      markup=False)
+        yield Static("The search keeps every pose that fits the taps and looks closer at each pass. The bar shows "
+                     "how far it has got; d shows the search's own figures.", id="about", markup=False)
         yield ProgressBar(total=1.0, show_eta=False, id="budget")
         yield Static("", id="figures", markup=False)
         yield Static("", id="problem", classes="-empty", markup=False)
@@ -77,6 +78,10 @@ class SolveScreen(Screen[Solution | None]):
 
     def on_unmount(self) -> None:
         self.cancel.set()  # nobody is left to show the result
+
+    def action_details(self) -> None:
+        self._details = not self._details
+        self._show()
 
     def action_cancel(self) -> None:
         self.cancel.set()
@@ -115,11 +120,14 @@ class SolveScreen(Screen[Solution | None]):
         elapsed_s = self.clock() - self._started
         progress, max_cells = self.progress, self.context.max_cells
         if progress is None:
-            lines = ["Level: starting (building the distance lattice)", "Surviving cells: -"]
+            lines = ["Preparing the fixture's distance map...", "Candidate poses left: -"]
         else:
             self._budget_shown = max(self._budget_shown, budget_used(progress, max_cells))
-            lines = [f"Level: rotation {progress.rotation_level}, position {progress.position_level}",
-                     f"Surviving cells: {progress.survivors:,} of {progress.evaluated:,} tested"]
+            lines = [f"Looking closer: pass {progress.rotation_level + progress.position_level}",
+                     f"Candidate poses left: {progress.survivors:,} of {progress.evaluated:,} checked"]
+            if self._details:
+                lines.append(f"Details: rotation level {progress.rotation_level}, position level "
+                             f"{progress.position_level}; {progress.survivors:,} cells of a budget of {max_cells:,.0f}")
             if progress.final:
                 lines.append("No pose fits all taps: looking for the tap that does not fit..."
                              if progress.survivors == 0 else "Search done: computing bounds and estimates...")

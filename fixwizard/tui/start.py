@@ -124,7 +124,8 @@ class StartScreen(Screen[bool]):
     def _calibration_label(choice: CalibrationChoice) -> str:
         if choice.calibration is None:
             return f"{choice.path.name} (unreadable)"
-        return f"{choice.path.name} ({choice.calibration.created[:10]})"
+        calibration = choice.calibration
+        return f"{choice.path.name} ({calibration.ball_diameter_m * 1e3:.1f} mm ball, {calibration.created[:10]})"
 
     # --- fixture ---
 

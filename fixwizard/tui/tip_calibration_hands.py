@@ -86,8 +86,9 @@ class PivotScreen(CalibrationStepScreen):
             lines.append(f"Not enough yet: {problem}" if count < MIN_POSES else str(problem))
         else:
             self._fit_ok = True
-            lines.append(f"Pivot fit: residuals max {fit.stats.max_m * 1e3:.2f} mm, rms {fit.stats.rms_m * 1e3:.2f} "
-                         f"mm; weakest tilt {fit.tilt_spread_deg[-1]:.0f} degrees.")
+            lines.append(f"The ball centre stays within {fit.stats.max_m * 1e3:.2f} mm of one point over these poses "
+                         f"(typically {fit.stats.rms_m * 1e3:.2f} mm); the tool turned by at least "
+                         f"{fit.tilt_spread_deg[-1]:.0f} degrees.")
             lines.append("Capture more poses to check it, or press N for the table points.")
         self.query_one("#pivot-state", Static).update("\n".join(lines))
         self.refresh_bindings()

@@ -1,5 +1,6 @@
-"""The last tip-calibration step: residuals and the proposed sample bound; accept (name, ball diameter,
-saved under ``calibrations_dir``) or redo from the pivot."""
+"""The last tip-calibration step: a plain verdict (good / usable / redo, and why), the tip and how far each tap
+is trusted, the fit's own figures on Details; accept (name, ball diameter, saved under ``calibrations_dir``) or
+redo from the pivot."""
 
 import re
 from datetime import datetime
@@ -11,6 +12,8 @@ from textual.widgets import Button, Input, Static
 
 from fixwizard.calibration.calibrate import MAX_BALL_DIAMETER_M
 from fixwizard.calibration.store import TipCalibration, save_calibration
+from fixwizard.calibration.verdict import tip_verdict
+from fixwizard.tui.dialog import Dialog
 from fixwizard.tui.tip_calibration_step import CalibrationStepScreen
 from fixwizard.workflow.tip_calibration import summary_lines
 
@@ -23,6 +26,16 @@ def default_name(simulated: bool) -> str:
 
 
 def result_lines(calibration: TipCalibration) -> list[str]:
+    """The verdict and why, the tip, and how far each tap will be trusted, in plain words."""
+    verdict = tip_verdict(calibration)
+    x, y, z = calibration.tcp_p_tip_m * 1e3
+    return [verdict.headline(), *(f"- {reason[0].upper()}{reason[1:]}." for reason in verdict.reasons),
+            f"Ball centre from the flange: x {x:.2f}, y {y:.2f}, z {z:.2f} mm.",
+            f"Each tap will be trusted to {calibration.sample_bound_m * 1e3:.1f} mm (the sample bound). Details shows "
+            "the fit's own figures."]
+
+
+def details_lines(calibration: TipCalibration) -> list[str]:
     """The residual figures, then the proposed sample bound with its reason."""
     figures = [line for line in summary_lines(calibration) if not line.startswith("proposed sample bound")]
     return [*figures, f"Proposed sample bound {calibration.sample_bound_reason}"]
@@ -42,6 +55,8 @@ class CalibrationResultScreen(CalibrationStepScreen):
     CalibrationResultScreen Button { margin-right: 2; }
     """
 
+    calibration: TipCalibration | None = None
+
     def body(self) -> ComposeResult:
         yield Static("Computing...", id="result-figures", markup=False)
         with Horizontal(classes="field"):
@@ -54,6 +69,7 @@ class CalibrationResultScreen(CalibrationStepScreen):
         with Horizontal(classes="buttons"):
             yield Button("Accept and save", id="accept", variant="primary", compact=True)
             yield Button("Redo from the pivot", id="redo", compact=True)
+            yield Button("Details", id="details", compact=True, disabled=True)
 
     def on_mount(self) -> None:
         self.query_one("#accept", Button).disabled = True
@@ -62,7 +78,9 @@ class CalibrationResultScreen(CalibrationStepScreen):
         self.query_one("#accept", Button).focus()
 
     def _show_result(self, calibration: TipCalibration) -> None:
+        self.calibration = calibration
         self.query_one("#result-figures", Static).update("\n".join(result_lines(calibration)))
+        self.query_one("#details", Button).disabled = False
         accept = self.query_one("#accept", Button)
         accept.disabled = False
         accept.focus()
@@ -76,6 +94,8 @@ class CalibrationResultScreen(CalibrationStepScreen):
             return
         if event.button.id == "redo":
             self.dismiss("redo")
+        elif event.button.id == "details" and self.calibration is not None:
+            self.app.push_screen(Dialog("Tip calibration: details", "\n".join(details_lines(self.calibration))))
         elif event.button.id == "accept":
             self._accept()
 

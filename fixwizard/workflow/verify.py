@@ -181,7 +181,7 @@ def verdict_lines(result: VerifyResult) -> list[str]:
     tested = ("with the report's own taps" if result.with_report_taps else
               "against the report's bounds only (the new ball differs from the report's, so its taps could not "
               "join: a weaker test)")
-    lines.append(f"Tested {tested}, down to cells of {search.slack_m * 1e3:.2f} mm, in {search.elapsed_s:.1f} s.")
+    lines.append(f"Tested {tested}, to within {search.slack_m * 1e3:.2f} mm, in {search.elapsed_s:.1f} s.")
     if not result.moved and count < SUGGESTED_TAPS[0]:
         lines.append(f"Only {taps}: tap {SUGGESTED_TAPS[0]}-{SUGGESTED_TAPS[1]} points spread over the fixture for a "
                      "check that can see a small move.")
