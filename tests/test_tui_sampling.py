@@ -13,7 +13,7 @@ from pilot_wait import until
 from tui_cell import ScreenHost, cell_of, wizard_context
 
 from fixwizard.demo import disc_fixture
-from fixwizard.tui.confirm import ConfirmMove
+from fixwizard.tui.confirm import Confirm, ConfirmMove
 from fixwizard.tui.dialog import Dialog
 from fixwizard.tui.sampling import SamplingScreen
 from fixwizard.workflow import hover
@@ -150,7 +150,7 @@ async def test_a_real_cell_has_no_simulated_keys(context):
     app = ScreenHost(lambda: SamplingScreen(context))
     async with app.run_test(size=SIZE) as pilot:
         await until(pilot, lambda: not app.screen.busy)
-        assert app.screen.check_action("simulated_move", ()) is False
+        assert app.screen.check_action("simulated_hands", ()) is False
         assert app.screen.check_action("simulated_unlock", ()) is False
         assert app.screen.check_action("tap", ()) is True
 
@@ -160,6 +160,9 @@ async def test_leaving_turns_freedrive_off_and_keeps_the_session_open(context):
     async with app.run_test(size=SIZE) as pilot:
         await tap(pilot, app.screen)
         await pilot.press("escape")
+        await until(pilot, lambda: isinstance(app.screen, Confirm))
+        assert "stays saved; it is selected there to resume" in str(app.screen.query_one("#dialog-message").render())
+        await pilot.press("y")
         await until(pilot, lambda: app.results == [False])
         assert cell_of(context).status().mode == "idle"
         assert not context.session.closed and len(context.session.taps) == 1
@@ -242,7 +245,8 @@ async def test_which_fixture_checks_the_taps_against_every_offered_mesh(context,
         for _ in range(11):
             await tap(pilot, screen)
         await pilot.press("i")
-        await until(pilot, lambda: isinstance(app.screen, Dialog), timeout_s=120)
+        await until(pilot, lambda: isinstance(app.screen, Dialog) and bool(app.screen.query("#dialog-message")),
+                    timeout_s=120)
         text = str(app.screen.query_one("#dialog-message", Static).content)
         bracket_mark = " (the chosen one)" if chosen == "bracket" else ""
         plate_mark = " (the chosen one)" if chosen == "plate" else ""

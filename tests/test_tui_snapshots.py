@@ -29,7 +29,7 @@ async def pivot_with_three_poses(pilot: Pilot) -> None:
     await press_button(pilot, "#continue")
     await until(pilot, lambda: isinstance(pilot.app.screen, PivotScreen) and not pilot.app.screen.busy)
     for _ in range(3):
-        await pilot.press("s")
+        await pilot.press("m")
         await until(pilot, lambda: not pilot.app.screen.busy)
     await settled(pilot)
 
@@ -55,7 +55,7 @@ def test_table_points_screen_after_point_a(snap_compare, tmp_path):
         await pivot_with_three_poses(pilot)
         await pilot.press("n")
         await until(pilot, lambda: isinstance(pilot.app.screen, TablePointsScreen) and not pilot.app.screen.busy)
-        await pilot.press("s")
+        await pilot.press("m")
         await settled(pilot)
 
     assert snap_compare(snapshot_app(tmp_path), terminal_size=SIZE, run_before=run_before)
@@ -89,7 +89,7 @@ def test_protective_stop_message(snap_compare, tmp_path):
         await pilot.press("n")
         await until(pilot, lambda: isinstance(pilot.app.screen, TablePointsScreen) and not pilot.app.screen.busy)
         pilot.app.context.robot.inject_fault("protective_stop_during_tap")
-        await pilot.press("s")
+        await pilot.press("m")
         await until(pilot, lambda: isinstance(pilot.app.screen, ErrorModal))
         await until(pilot, lambda: pilot.app.robot_status.protective_stop)
         await pilot.pause()

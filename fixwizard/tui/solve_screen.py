@@ -8,7 +8,6 @@ from collections.abc import Callable
 
 import numpy as np
 from textual.app import ComposeResult
-from textual.binding import Binding
 from textual.screen import Screen
 from textual.widgets import Footer, ProgressBar, Static
 from textual.worker import Worker, WorkerState
@@ -16,6 +15,7 @@ from textual.worker import Worker, WorkerState
 from fixwizard.errors import FixwizardError
 from fixwizard.solver.search import SearchCancelled, SearchProgress, search_budget
 from fixwizard.solver.solve import Solution, solve
+from fixwizard.tui import keys
 from fixwizard.tui.context import WizardContext
 from fixwizard.tui.errors import error_message
 
@@ -36,16 +36,10 @@ def budget_used(progress: SearchProgress, max_cells: float) -> float:
 class SolveScreen(Screen[Solution | None]):
     """Runs the full solve; ``solver`` is ``fixwizard.solver.solve.solve`` (another for tests)."""
 
-    DEFAULT_CSS = """
-    SolveScreen { layout: vertical; padding: 0 1; }
-    SolveScreen #title { text-style: bold; margin-bottom: 1; }
-    SolveScreen #about { color: $text-muted; margin-bottom: 1; }
-    SolveScreen ProgressBar { margin-bottom: 1; }
-    SolveScreen #figures { height: auto; }
-    SolveScreen #problem { height: auto; margin-top: 1; text-style: bold; border: heavy $error; }
-    SolveScreen #problem.-empty { display: none; }
-    """
-    BINDINGS = [Binding("escape", "cancel", "Cancel")]
+    BINDINGS = [keys.binding(keys.BACK, "Cancel")]
+    HELP_TITLE = "solving"
+    HELP_ABOUT = ("The full solve searches every fixture pose that explains the taps; the bar shows how far it is. "
+                  "Wait for the result, or press Esc to cancel and go back to sampling (the taps are kept).")
     clock: Callable[[], float] = staticmethod(time.monotonic)
 
     def __init__(self, context: WizardContext, solver: Solver = solve) -> None:
@@ -78,7 +72,7 @@ class SolveScreen(Screen[Solution | None]):
     def on_unmount(self) -> None:
         self.cancel.set()  # nobody is left to show the result
 
-    def action_cancel(self) -> None:
+    def action_back(self) -> None:
         self.cancel.set()
         self.dismiss(None)
 
