@@ -153,7 +153,7 @@ def test_stop_shows_stopped_refuses_motion_until_a_confirmed_rearm(tmp_path):
             await pilot.press("m")
             await until(pilot, lambda: len(app.screen.workflow.poses("pivot")) == 1 and not app.screen.busy)
             await pilot.press("f12")
-            await until(pilot, lambda: " STOPPED: Ctrl+R re-arms " in status_of(app))
+            await until(pilot, lambda: status_of(app).startswith(" SIMULATED   STOPPED  ^R re-arms | demo cell"))
             assert "F12 STOP" not in status_of(app)
             await pilot.press("m")  # a motion key: refused, with why
             await pilot.pause()
@@ -187,6 +187,7 @@ def test_a_protective_stop_makes_the_wizard_stopped_and_rearm_waits_for_the_unlo
             await until(pilot, lambda: app.robot_status.protective_stop)
             if app.screen is not sampling:  # the error dialog
                 await pilot.press("escape")
+            await assert_in_view(pilot, "escape", "ctrl+q")  # also with the unlock and re-arm keys shown
             await pilot.press("ctrl+r")
             await pilot.pause()
             assert not isinstance(app.screen, Confirm) and app.stopped  # still locked: unlock first

@@ -11,6 +11,7 @@ from textual.widgets import Input
 
 from fixwizard.tui.app import FixwizardApp
 from fixwizard.tui.errors import ErrorModal
+from fixwizard.tui.help import HelpScreen
 from fixwizard.tui.tip_calibration_hands import PivotScreen, TablePointsScreen
 from fixwizard.tui.tip_calibration_result import CalibrationResultScreen
 
@@ -93,5 +94,25 @@ def test_protective_stop_message(snap_compare, tmp_path):
         await until(pilot, lambda: isinstance(pilot.app.screen, ErrorModal))
         await until(pilot, lambda: pilot.app.robot_status.protective_stop)
         await pilot.pause()
+
+    assert snap_compare(snapshot_app(tmp_path), terminal_size=SIZE, run_before=run_before)
+
+
+def test_help_on_the_pivot_screen(snap_compare, tmp_path):
+    async def run_before(pilot: Pilot) -> None:
+        await pivot_with_three_poses(pilot)
+        await pilot.press("question_mark")
+        await until(pilot, lambda: isinstance(pilot.app.screen, HelpScreen))
+        await pilot.pause()
+
+    assert snap_compare(snapshot_app(tmp_path), terminal_size=SIZE, run_before=run_before)
+
+
+def test_stopped_pivot_screen(snap_compare, tmp_path):
+    async def run_before(pilot: Pilot) -> None:
+        await pivot_with_three_poses(pilot)
+        await pilot.press("f12")
+        await until(pilot, lambda: pilot.app.stopped)
+        await settled(pilot)
 
     assert snap_compare(snapshot_app(tmp_path), terminal_size=SIZE, run_before=run_before)

@@ -94,7 +94,7 @@ class CheckScreen(Screen[None]):
         yield DataTable(id="check-taps", cursor_type="row", zebra_stripes=True)
         yield Static("", id="check-note", markup=False)
         yield Static("", id="check-verdict", classes="-empty", markup=False)
-        yield Footer()
+        yield Footer(compact=True)
 
     def on_mount(self) -> None:
         table = self.query_one(DataTable)

@@ -98,6 +98,11 @@ def name(key: Key) -> str:
     return key.shown
 
 
+def short_name(key: Key) -> str:
+    """The key in the fewest columns, as terminals write control keys (``^R`` for Ctrl+R)."""
+    return key.shown.replace("Ctrl+", "^")
+
+
 def key_of(action: str) -> Key | None:
     """The key-map entry of a screen or app ``action`` (None for a widget's own key)."""
     return next((key for key in (*GLOBAL_KEYS, *SCREEN_KEYS, *DIALOG_KEYS) if key.action == action), None)

@@ -79,7 +79,7 @@ class ResultsScreen(Screen[Outcome]):
             path = default_report_path(context.reports_dir, context.fixture, self.now())
             yield Input(str(path), id="report-path", compact=True)
         yield Static("Press w to write the report there (e to edit the path first).", id="written", markup=False)
-        yield Footer()
+        yield Footer(compact=True)
 
     def on_mount(self) -> None:
         self.action_leave_path()

@@ -104,7 +104,7 @@ class SamplingScreen(Screen[bool]):
         yield Static("", id="guide", classes="-empty", markup=False)
         yield Static("", id="note", classes="-empty", markup=False)
         yield Static("", id="problem", classes="-empty", markup=False)
-        yield Footer()
+        yield Footer(compact=True)
 
     def on_mount(self) -> None:
         self.query_one("#top-view").add_class("-empty")
@@ -183,8 +183,8 @@ class SamplingScreen(Screen[bool]):
                 self.app.refuse_motion()
             elif move:
                 self._run_robot(lambda: self._move_above(plan), lambda _: self._say(
-                    f"The ball hovers above the suggested point (freedrive is on again): press {keys.name(keys.TAP)} to "
-                    "tap it."))
+                    "The ball hovers above the suggested point (freedrive is on again): press "
+                    f"{keys.name(keys.TAP)} to tap it."))
 
         self.app.push_screen(ConfirmMove("Move the robot?", hover_question(plan, self.context.simulated)), answered)
 
@@ -311,7 +311,8 @@ class SamplingScreen(Screen[bool]):
         self.refresh_bindings()
         text = robot_problem_text(error_message(error), len(self.context.session.taps), self.context.session.path)
         if isinstance(error, NoContact) and self.context.hands is not None:
-            text += f"\nSIMULATED: press {keys.name(keys.HANDS)} and the simulated hands bring the ball above the fixture."
+            text += (f"\nSIMULATED: press {keys.name(keys.HANDS)} and the simulated hands bring the ball above the "
+                     "fixture.")
         self._problem(text)
 
     # --- the live check ---

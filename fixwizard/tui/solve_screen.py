@@ -61,7 +61,7 @@ class SolveScreen(Screen[Solution | None]):
         yield ProgressBar(total=1.0, show_eta=False, id="budget")
         yield Static("", id="figures", markup=False)
         yield Static("", id="problem", classes="-empty", markup=False)
-        yield Footer()
+        yield Footer(compact=True)
 
     def on_mount(self) -> None:
         self._started = self.clock()

@@ -17,6 +17,9 @@ def status_text(status: RobotStatus | None, robot_name: str, simulated: bool, st
         text.append(" SIMULATED ", "bold reverse")
         text.append(" ")
         robot_name = robot_name.removeprefix("SIMULATED ")
+    if stopped:  # first, so that a narrow terminal never cuts it off
+        text.append(" STOPPED ", "bold reverse")
+        text.append(f" {keys.short_name(keys.REARM)} re-arms | ")
     text.append(robot_name, "bold")
     if status is None:
         text.append(" | status unknown")
@@ -31,10 +34,7 @@ def status_text(status: RobotStatus | None, robot_name: str, simulated: bool, st
             text.append(" PROTECTIVE STOP ", "bold reverse")
         else:
             text.append(status.mode)
-    if stopped:
-        text.append(" | ")
-        text.append(f" STOPPED: {keys.name(keys.REARM)} re-arms ", "bold reverse")
-    else:
+    if not stopped:
         text.append(f" | {keys.name(keys.STOP)} {keys.STOP.label}")
     return text
 
