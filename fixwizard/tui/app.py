@@ -9,11 +9,13 @@ is in ``wizard.tcss``."""
 
 import asyncio
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TypeVar
 
+from textual.actions import ActionParseResult
 from textual.app import App
+from textual.dom import DOMNode
 from textual.reactive import var
 from textual.screen import ModalScreen, Screen
 from textual.widgets import Footer
@@ -124,10 +126,11 @@ class FixwizardApp(App[None]):
         self.notify(f"STOP sent: the robot halts. Check the cell, then re-arm with {keys.name(keys.REARM)}.",
                     severity="warning")
 
-    async def run_action(self, action, default_namespace=None, namespaces=None) -> bool:
+    async def run_action(self, action: "str | ActionParseResult", default_namespace: DOMNode | None = None,
+                         namespaces: Mapping[str, DOMNode] | None = None) -> bool:
         """Every action, as Textual runs it; while STOPPED a key that moves the robot is refused, with why."""
-        if self.stopped and isinstance(action, str) and action.split("(", 1)[0].rsplit(".", 1)[-1] in \
-                keys.MOTION_ACTIONS:
+        if self.stopped and isinstance(action, str) and \
+                action.split("(", 1)[0].rsplit(".", 1)[-1] in keys.MOTION_ACTIONS:
             self.refuse_motion()
             return True
         return await super().run_action(action, default_namespace, namespaces)
