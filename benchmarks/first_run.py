@@ -37,8 +37,8 @@ from pathlib import Path
 KEYS = {
     "next_field": "Tab",
     "press_button": "Enter",
-    "pivot_simulated_hands": "s",
-    "table_simulated_hands": "s",
+    "pivot_simulated_hands": "m",
+    "table_simulated_hands": "m",
     "next_step": "n",
     "start_automatic_taps": "g",
     "accept_calibration": "Enter",

@@ -13,7 +13,9 @@ from textual.widgets import Button, Input, Select, Static
 from pilot_wait import until
 from fixwizard.calibration.store import load_calibration, save_calibration
 from fixwizard.demo import DEMO_MESH, demo_fixture
+from fixwizard.tui import keys
 from fixwizard.tui.app import FixwizardApp
+from fixwizard.tui.confirm import Confirm
 from fixwizard.tui.context import WizardContext
 from fixwizard.tui.errors import ErrorModal
 from fixwizard.tui.launch import simulated_context, ur_context
@@ -66,15 +68,23 @@ async def calibrate_by_hand(pilot: Pilot) -> None:
     await press_button(pilot, "#continue")
     await until(pilot, lambda: isinstance(app.screen, PivotScreen) and not app.screen.busy)
     for _ in range(app.context.hands.pivot_count):
-        await pilot.press("s")
+        await pilot.press(keys.HANDS.keys)
         await until(pilot, lambda: not app.screen.busy)
     await pilot.press("n")
     await until(pilot, lambda: isinstance(app.screen, TablePointsScreen) and not app.screen.busy)
     for _ in range(3):
-        await pilot.press("s")
+        await pilot.press(keys.HANDS.keys)
         await until(pilot, lambda: not app.screen.busy)
     await pilot.press("n")
     await until(pilot, lambda: isinstance(app.screen, AutoTapsScreen))
+
+
+async def rearm(pilot: Pilot) -> None:
+    """Re-arm after a STOP: the key, then yes in its confirmation."""
+    await pilot.press(keys.REARM.keys)
+    await until(pilot, lambda: isinstance(pilot.app.screen, Confirm))
+    await pilot.press("y")
+    await until(pilot, lambda: not pilot.app.stopped)
 
 
 def test_launch_shows_the_start_screen_marked_simulated(tmp_path):
@@ -170,7 +180,7 @@ def test_cancel_during_the_automatic_taps_keeps_the_taps_and_going_on_continues(
             screen = app.screen
             await pilot.press("g")
             await until(pilot, lambda: recorded(screen.workflow)["table"] >= 2)
-            await pilot.press("c")
+            await pilot.press("escape")
             await until(pilot, lambda: not screen.busy)
             kept = recorded(screen.workflow)
             assert kept["table"] >= 2 and sum(kept.values()) < 56
@@ -193,12 +203,12 @@ def test_a_protective_stop_during_a_tap_is_explained_and_unlocking_recovers(tmp_
             await press_button(pilot, "#continue")
             await until(pilot, lambda: isinstance(app.screen, PivotScreen) and not app.screen.busy)
             for _ in range(3):
-                await pilot.press("s")
+                await pilot.press("m")
                 await until(pilot, lambda: not app.screen.busy)
             await pilot.press("n")
             await until(pilot, lambda: isinstance(app.screen, TablePointsScreen) and not app.screen.busy)
             context.robot.inject_fault("protective_stop_during_tap")
-            await pilot.press("s")
+            await pilot.press("m")
             await until(pilot, lambda: isinstance(app.screen, ErrorModal))
             message = text_of(app, "#dialog-message")
             assert message.startswith("Table point A: the robot made a protective stop during the tap: unlock")
@@ -208,7 +218,12 @@ def test_a_protective_stop_during_a_tap_is_explained_and_unlocking_recovers(tmp_
             await until(pilot, lambda: isinstance(app.screen, TablePointsScreen)
                         and not app.robot_status.protective_stop)
             assert "press F and place the ball again" in text_of(app, "#points-state")
-            await pilot.press("s")
+            assert app.stopped  # unlocked on the pendant, but the wizard waits for a deliberate re-arm
+            await pilot.press("m")
+            await pilot.pause()
+            assert "A: next" in text_of(app, "#points-state")
+            await rearm(pilot)
+            await pilot.press("m")
             await until(pilot, lambda: "A: tapped   B: next" in text_of(app, "#points-state"))
     asyncio.run(run())
 
@@ -237,6 +252,7 @@ def test_the_stop_key_halts_the_robot_from_any_screen_and_keeps_the_taps(tmp_pat
             await at_start(pilot)
             await pilot.press("f12")
             await until(pilot, lambda: context.robot.stops == 1)
+            await rearm(pilot)
             await calibrate_by_hand(pilot)
             screen = app.screen
             await pilot.press("g")
@@ -253,7 +269,7 @@ def test_the_stop_key_halts_the_robot_from_any_screen_and_keeps_the_taps(tmp_pat
 
 def test_quitting_during_the_automatic_taps_stops_them_after_the_current_tap(tmp_path):
     async def run():
-        app = FixwizardApp(wizard(tmp_path, pace_s=0.02))
+        app = FixwizardApp(wizard(tmp_path, pace_s=0.2))
         async with app.run_test(size=SIZE) as pilot:
             await at_start(pilot)
             await calibrate_by_hand(pilot)
@@ -261,6 +277,8 @@ def test_quitting_during_the_automatic_taps_stops_them_after_the_current_tap(tmp
             await pilot.press("g")
             await until(pilot, lambda: recorded(screen.workflow)["table"] >= 1)
             await pilot.press("ctrl+q")
+            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await pilot.press("y")
         return screen.workflow
 
     assert 1 <= sum(recorded(asyncio.run(run())).values()) < 56
@@ -289,7 +307,7 @@ def test_the_start_screen_describes_stored_calibrations_and_resumes_an_unfinishe
             await at_start(pilot)
             await choose(pilot, "#calibration", str(tmp_path / "calibrations" / "example_matlab_logo.yaml"))
             details = text_of(app, "#calibration-info")
-            assert details.startswith("2026-11-24 03:09 on Universal Robots arm")
+            assert "calibrated 2026-11-24 03:09 on Universal Robots arm" in details
             assert "tip max 0.34 mm; proposed sample bound 0.8 mm" in details
             await choose(pilot, "#session", str(path))
             await press_button(pilot, "#continue")

@@ -47,11 +47,11 @@ def test_launch_calibrate_tap_solve_and_write_a_report_holding_the_hidden_pose(t
 
             await until(pilot, lambda: isinstance(app.screen, PivotScreen))
             for _ in range(context.hands.pivot_count):
-                await press_when_ready(pilot, "s")
+                await press_when_ready(pilot, "m")
             await pilot.press("n")
             await until(pilot, lambda: isinstance(app.screen, TablePointsScreen))
             for _ in range(3):
-                await press_when_ready(pilot, "s")
+                await press_when_ready(pilot, "m")
             await pilot.press("n")
             await until(pilot, lambda: isinstance(app.screen, AutoTapsScreen))
             await pilot.press("g")

@@ -50,8 +50,8 @@ async def test_solve_shows_progress_then_results_write_a_report_holding_the_true
         await pilot.pause(0.3)
         figures = text_of(screen, "#figures")
         assert "Elapsed:" in figures and "Looking closer: pass" in figures and "Candidate poses left:" in figures
-        assert "cells" not in figures and "level" not in figures  # the search's own figures are on d
-        await pilot.press("d")
+        assert "cells" not in figures and "level" not in figures  # the search's own figures are on o (Details)
+        await pilot.press("o")
         if not app.results:  # still solving
             assert "Details: rotation level" in text_of(screen, "#figures")
         await until(pilot, lambda: app.results)

@@ -14,7 +14,7 @@ from pilot_wait import until
 from tui_cell import ScreenHost, cell_of, record_spread_taps, wizard_context
 
 from fixwizard.demo import disc_fixture
-from fixwizard.tui.confirm import ConfirmMove
+from fixwizard.tui.confirm import Confirm, ConfirmMove
 from fixwizard.tui.dialog import Dialog
 from fixwizard.tui.sampling import SamplingScreen
 from fixwizard.workflow import hover
@@ -151,7 +151,7 @@ async def test_a_real_cell_has_no_simulated_keys(context):
     app = ScreenHost(lambda: SamplingScreen(context))
     async with app.run_test(size=SIZE) as pilot:
         await until(pilot, lambda: not app.screen.busy)
-        assert app.screen.check_action("simulated_move", ()) is False
+        assert app.screen.check_action("simulated_hands", ()) is False
         assert app.screen.check_action("simulated_unlock", ()) is False
         assert app.screen.check_action("tap", ()) is True
 
@@ -161,6 +161,9 @@ async def test_leaving_turns_freedrive_off_and_keeps_the_session_open(context):
     async with app.run_test(size=SIZE) as pilot:
         await tap(pilot, app.screen)
         await pilot.press("escape")
+        await until(pilot, lambda: isinstance(app.screen, Confirm))
+        assert "stays saved; it is selected there to resume" in str(app.screen.query_one("#dialog-message").render())
+        await pilot.press("y")
         await until(pilot, lambda: app.results == [False])
         assert cell_of(context).status().mode == "idle"
         assert not context.session.closed and len(context.session.taps) == 1
@@ -243,7 +246,8 @@ async def test_which_fixture_checks_the_taps_against_every_offered_mesh(context,
         for _ in range(11):
             await tap(pilot, screen)
         await pilot.press("i")
-        await until(pilot, lambda: isinstance(app.screen, Dialog), timeout_s=120)
+        await until(pilot, lambda: isinstance(app.screen, Dialog) and bool(app.screen.query("#dialog-message")),
+                    timeout_s=120)
         text = str(app.screen.query_one("#dialog-message", Static).content)
         bracket_mark = " (the chosen one)" if chosen == "bracket" else ""
         plate_mark = " (the chosen one)" if chosen == "plate" else ""
@@ -267,7 +271,7 @@ async def test_the_live_check_says_the_ball_diameter_is_wrong_when_the_taps_fit_
         assert live == (f"Live check of 12 taps: NO POSE FITS these taps with this ball. The taps fit a ball of about "
                         f"{fitted_mm:.1f} mm, the tip calibration says 6.0 mm: check the ball (measure it) and "
                         "calibrate the tip again with its diameter. The taps themselves are probably fine.")
-        await pilot.press("d")
+        await pilot.press("o")
         await until(pilot, lambda: isinstance(app.screen, Dialog))
         details = str(app.screen.query_one("#dialog-message", Static).content)
         assert details.startswith("12 taps; bounds from a quick hull refinement.\nSolver status: inconsistent.")

@@ -11,6 +11,7 @@ from textual.widgets import Input
 
 from fixwizard.tui.app import FixwizardApp
 from fixwizard.tui.errors import ErrorModal
+from fixwizard.tui.help import HelpScreen
 from fixwizard.tui.tip_calibration_hands import PivotScreen, TablePointsScreen
 from fixwizard.tui.tip_calibration_result import CalibrationResultScreen
 
@@ -29,7 +30,7 @@ async def pivot_with_three_poses(pilot: Pilot) -> None:
     await press_button(pilot, "#continue")
     await until(pilot, lambda: isinstance(pilot.app.screen, PivotScreen) and not pilot.app.screen.busy)
     for _ in range(3):
-        await pilot.press("s")
+        await pilot.press("m")
         await until(pilot, lambda: not pilot.app.screen.busy)
     await settled(pilot)
 
@@ -55,7 +56,7 @@ def test_table_points_screen_after_point_a(snap_compare, tmp_path):
         await pivot_with_three_poses(pilot)
         await pilot.press("n")
         await until(pilot, lambda: isinstance(pilot.app.screen, TablePointsScreen) and not pilot.app.screen.busy)
-        await pilot.press("s")
+        await pilot.press("m")
         await settled(pilot)
 
     assert snap_compare(snapshot_app(tmp_path), terminal_size=SIZE, run_before=run_before)
@@ -89,9 +90,29 @@ def test_protective_stop_message(snap_compare, tmp_path):
         await pilot.press("n")
         await until(pilot, lambda: isinstance(pilot.app.screen, TablePointsScreen) and not pilot.app.screen.busy)
         pilot.app.context.robot.inject_fault("protective_stop_during_tap")
-        await pilot.press("s")
+        await pilot.press("m")
         await until(pilot, lambda: isinstance(pilot.app.screen, ErrorModal))
         await until(pilot, lambda: pilot.app.robot_status.protective_stop)
         await pilot.pause()
+
+    assert snap_compare(snapshot_app(tmp_path), terminal_size=SIZE, run_before=run_before)
+
+
+def test_help_on_the_pivot_screen(snap_compare, tmp_path):
+    async def run_before(pilot: Pilot) -> None:
+        await pivot_with_three_poses(pilot)
+        await pilot.press("question_mark")
+        await until(pilot, lambda: isinstance(pilot.app.screen, HelpScreen))
+        await pilot.pause()
+
+    assert snap_compare(snapshot_app(tmp_path), terminal_size=SIZE, run_before=run_before)
+
+
+def test_stopped_pivot_screen(snap_compare, tmp_path):
+    async def run_before(pilot: Pilot) -> None:
+        await pivot_with_three_poses(pilot)
+        await pilot.press("f12")
+        await until(pilot, lambda: pilot.app.stopped)
+        await settled(pilot)
 
     assert snap_compare(snapshot_app(tmp_path), terminal_size=SIZE, run_before=run_before)

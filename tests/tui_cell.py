@@ -17,6 +17,7 @@ from fixwizard.geometry.se3 import rotation_angle_rad, transform_points
 from fixwizard.report import Report
 from fixwizard.robot.sim import SimulatedCell
 from fixwizard.robot.sim_hands import SimulatedHands
+from fixwizard.tui.app import CSS_FILE
 from fixwizard.tui.context import WizardContext
 from fixwizard.workflow.session import SamplingSession
 
@@ -106,8 +107,9 @@ def bounds_contain(report: Report, cell: SimulatedCell, base_T_cad: np.ndarray) 
 
 class ScreenHost(App):
     """An app that shows one screen on start and keeps what it dismisses with in ``results``; like the wizard,
-    without the command palette."""
+    with its style sheet and without the command palette."""
 
+    CSS_PATH = CSS_FILE
     ENABLE_COMMAND_PALETTE = False
 
     def __init__(self, make_screen: Callable[[], Screen]) -> None:

@@ -3,7 +3,8 @@ over it, and learn whether it is still where the report says (``workflow.verify`
 
 The fixtures are the newest report of each name in the reports folder (``workflow.cell_reports``). Freedrive is
 on; ``t`` taps and journals the tap (fsynced) in ``sessions/checks/`` before it is shown, ``u`` undoes the last,
-``c`` checks the taps against the report, ``m`` (simulated cell) brings the ball above the next suggested point.
+``c`` checks the taps against the report, ``m`` (simulated cell) brings the ball above the next suggested point
+(keys from ``tui.keys``).
 Robot calls, loading the mesh and the check run in worker threads. Dismisses with None.
 """
 
@@ -15,7 +16,7 @@ from typing import Any, ClassVar, TypeVar
 import numpy as np
 from rich.text import Text
 from textual.app import ComposeResult
-from textual.binding import Binding, BindingType
+from textual.binding import BindingType
 from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Select, Static
 
@@ -25,6 +26,7 @@ from fixwizard.errors import FixwizardError
 from fixwizard.fixture import Fixture
 from fixwizard.robot.base import RobotError, TapResult
 from fixwizard.solver.search import SearchCancelled
+from fixwizard.tui import keys
 from fixwizard.tui.background import ShownError, run_in_thread
 from fixwizard.tui.context import WizardContext
 from fixwizard.tui.errors import error_message
@@ -43,7 +45,7 @@ from fixwizard.workflow.verify import (
 )
 
 T = TypeVar("T")
-ROBOT_ACTIONS = {"tap", "undo", "check", "simulated_move", "leave"}
+ROBOT_ACTIONS = {key.method for key in (keys.TAP, keys.UNDO, keys.CHECK, keys.HANDS, keys.BACK)}
 COLUMNS = ("#", "x mm", "y mm", "z mm", "off surface mm")
 CHECKS_FOLDER = "checks"
 
@@ -51,24 +53,17 @@ CHECKS_FOLDER = "checks"
 class CheckScreen(Screen[None]):
     """Check a calibrated fixture with a few new taps, on the context's robot and tip calibration."""
 
-    DEFAULT_CSS = """
-    CheckScreen { layout: vertical; }
-    CheckScreen #check-title { text-style: bold; padding: 0 1; }
-    CheckScreen #check-fixture { width: 60; margin: 0 1; }
-    CheckScreen #check-report, CheckScreen #check-suggest { height: auto; padding: 0 1; color: $text-muted; }
-    CheckScreen DataTable { height: 1fr; margin: 0 1; }
-    CheckScreen #check-note { height: auto; padding: 0 1; text-style: italic; }
-    CheckScreen #check-verdict { height: auto; padding: 0 1; text-style: bold; }
-    CheckScreen #check-verdict.-moved { border: heavy $error; }
-    CheckScreen #check-verdict.-empty { display: none; }
-    """
     BINDINGS: ClassVar[list[BindingType]] = [
-        Binding("t", "tap", "Tap"),
-        Binding("u", "undo", "Undo last"),
-        Binding("c", "check", "Check"),
-        Binding("m", "simulated_move", "SIM: move arm"),
-        Binding("escape", "leave", "Back"),
+        keys.binding(keys.BACK),
+        keys.binding(keys.TAP),
+        keys.binding(keys.UNDO),
+        keys.binding(keys.CHECK),
+        keys.binding(keys.HANDS),
     ]
+    HELP_TITLE = "check a calibrated fixture"
+    HELP_ABOUT = ("Choose the fixture, then tap 3-5 of the suggested points spread over it (freedrive is on; the "
+                  "ball 5-10 mm above the surface, then tap) and check: the taps either fit the report's pose, or "
+                  "prove the fixture has moved. Esc goes back to the start screen.")
 
     def __init__(self, context: WizardContext, calibration: TipCalibration) -> None:
         super().__init__()
@@ -99,7 +94,7 @@ class CheckScreen(Screen[None]):
         yield DataTable(id="check-taps", cursor_type="row", zebra_stripes=True)
         yield Static("", id="check-note", markup=False)
         yield Static("", id="check-verdict", classes="-empty", markup=False)
-        yield Footer()
+        yield Footer(compact=True)
 
     def on_mount(self) -> None:
         table = self.query_one(DataTable)
@@ -165,7 +160,7 @@ class CheckScreen(Screen[None]):
     # --- keys ---
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
-        if action == "simulated_move" and self.context.hands is None:
+        if action in keys.SIMULATED_ACTIONS and self.context.hands is None:
             return False
         if action in ROBOT_ACTIONS and self.busy:
             return None
@@ -215,7 +210,7 @@ class CheckScreen(Screen[None]):
 
         run_in_thread(self, work, done, group="check", modal=True)
 
-    def action_simulated_move(self) -> None:
+    def action_simulated_hands(self) -> None:
         hands = self.context.hands
         if not self.points or hands is None:
             self._say("No suggested point yet.")
@@ -226,7 +221,7 @@ class CheckScreen(Screen[None]):
                   lambda _: self._say(f"SIMULATED: the operator's hands brought the ball above {point.where}; press "
                                       "t to tap."))
 
-    def action_leave(self) -> None:
+    def action_back(self) -> None:
         self._cancel.set()
         self._run(lambda: self.context.robot.freedrive(False), lambda _: self._leave(),
                   on_failed=lambda _: self._leave())

@@ -1,23 +1,43 @@
-"""A yes/no question before the robot moves on its own: y or "Move" confirms, n, Escape or "Cancel" cancels."""
+"""Yes/no questions: before the robot moves on its own (``ConfirmMove``) and before anything that drops what was
+recorded, quits during motion or re-arms after a STOP (``Confirm``). y or the first button confirms; n, Escape
+or the second button cancels, and the second button has the focus."""
 
 from collections.abc import Iterable
 
-from textual.binding import Binding
 from textual.widgets import Button
 
+from fixwizard.tui import keys
 from fixwizard.tui.dialog import Dialog
 
 
-class ConfirmMove(Dialog[bool]):
-    """Asks before a robot motion; dismisses with True to move."""
+class Confirm(Dialog[bool]):
+    """Asks ``message``; dismisses with True for ``yes_label``, False for ``no_label`` (focused)."""
 
-    DEFAULT_CSS = "ConfirmMove > Vertical { border: thick $warning; }"
-    BINDINGS = [Binding("y", "dismiss(True)", "Move"), Binding("n,escape", "dismiss(False)", "Cancel")]
-    focused_id = "cancel"
+    BINDINGS = [keys.binding(keys.YES), keys.binding(keys.NO)]
+    focused_id = "no"
+    HELP_TITLE = "a question"
+    HELP_ABOUT = "Answer the question: y does what the first button says, n or Esc changes nothing."
+
+    def __init__(self, title: str, message: str, yes_label: str, no_label: str = "Cancel") -> None:
+        super().__init__(title, message)
+        self.yes_label, self.no_label = yes_label, no_label
 
     def buttons(self) -> Iterable[Button]:
-        yield Button("Move (y)", id="move", variant="warning")
-        yield Button("Cancel (n)", id="cancel", variant="primary")
+        yield Button(f"{self.yes_label} ({keys.name(keys.YES)})", id="yes", variant="warning")
+        yield Button(f"{self.no_label} ({keys.name(keys.NO)})", id="no", variant="primary")
+
+    def action_yes(self) -> None:
+        self.dismiss(True)
+
+    def action_no(self) -> None:
+        self.dismiss(False)
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
-        self.dismiss(event.button.id == "move")
+        self.dismiss(event.button.id == "yes")
+
+
+class ConfirmMove(Confirm):
+    """Asks before a robot motion; dismisses with True to move."""
+
+    def __init__(self, title: str, message: str) -> None:
+        super().__init__(title, message, "Move")

@@ -1,12 +1,15 @@
-"""A modal dialog: a title, a message and a row of buttons; subclasses choose the buttons and the result."""
+"""A modal dialog: a title, a message (scrolls when it is longer than the screen) and a row of buttons;
+subclasses choose the buttons and the result. n or Esc closes it as its first button would."""
 
 from collections.abc import Iterable
 from typing import TypeVar
 
 from textual.app import ComposeResult
-from textual.containers import Horizontal, Vertical
+from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.screen import ModalScreen
 from textual.widgets import Button, Static
+
+from fixwizard.tui import keys
 
 ResultType = TypeVar("ResultType")
 
@@ -14,15 +17,10 @@ ResultType = TypeVar("ResultType")
 class Dialog(ModalScreen[ResultType]):
     """Title in reverse video, the message, then ``buttons()``; the button with id ``focused_id`` has focus."""
 
-    DEFAULT_CSS = """
-    Dialog { align: center middle; }
-    Dialog > Vertical { width: 72; height: auto; max-height: 20; background: $surface; padding: 0 1; }
-    Dialog #dialog-title { text-style: bold reverse; width: 100%; }
-    Dialog #dialog-message { margin: 1 0; }
-    Dialog Horizontal { height: auto; }
-    Dialog Button { margin-right: 1; }
-    """
+    BINDINGS = [keys.binding(keys.NO, "Close")]
     focused_id = "ok"
+    HELP_TITLE = "a message"
+    HELP_ABOUT = "Read the message; Enter presses the focused button, Tab moves between the buttons."
 
     def __init__(self, title: str, message: str) -> None:
         super().__init__()
@@ -35,7 +33,8 @@ class Dialog(ModalScreen[ResultType]):
     def compose(self) -> ComposeResult:
         with Vertical():
             yield Static(f" {self.title_text} ", id="dialog-title", markup=False)
-            yield Static(self.message, id="dialog-message", markup=False)
+            yield VerticalScroll(Static(self.message, id="dialog-message", markup=False), id="dialog-scroll",
+                                 can_focus=False)
             with Horizontal():
                 yield from self.buttons()
 
@@ -44,3 +43,6 @@ class Dialog(ModalScreen[ResultType]):
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
         self.dismiss(event.button.id)
+
+    def action_no(self) -> None:
+        self.dismiss("ok")

@@ -5,7 +5,6 @@ simulated cell as the teach pendant would)."""
 from collections.abc import Iterable
 from typing import Literal
 
-from textual.binding import Binding
 from textual.widgets import Button
 
 from fixwizard.errors import FixwizardError, InputError, file_problem
@@ -46,8 +45,6 @@ def error_message(error: FixwizardError | OSError) -> str:
 class ErrorModal(Dialog[Recovery]):
     """Shows one error; dismisses with "ok", "reconnect" or "unlock" (the caller does the recovery)."""
 
-    DEFAULT_CSS = "ErrorModal > Vertical { border: thick $error; }"
-    BINDINGS = [Binding("escape", "dismiss('ok')", "Close")]
 
     def __init__(self, error: FixwizardError | OSError, simulated: bool, can_unlock: bool = False) -> None:
         super().__init__(error_title(error), error_message(error))

@@ -30,7 +30,6 @@ def picture_text(picture: Picture) -> Text:
 class PictureView(Widget):
     """Draws ``draw(width, height)`` at the widget's content size; ``problem`` text when it cannot."""
 
-    DEFAULT_CSS = "PictureView { height: 1fr; }"
 
     def __init__(self, draw: Callable[[int, int], Picture], *, id: str | None = None) -> None:
         super().__init__(id=id)

@@ -8,13 +8,13 @@ from pathlib import Path
 from typing import Literal
 
 from textual.app import ComposeResult
-from textual.binding import Binding
 from textual.containers import Horizontal, VerticalScroll
 from textual.screen import Screen
 from textual.widgets import Footer, Input, Label, Static, TabbedContent, TabPane, Tabs
 
 from fixwizard.errors import FixwizardError
 from fixwizard.plots import rotation_map_for_solution, taps_view_for_solution
+from fixwizard.tui import keys
 from fixwizard.tui.context import WizardContext
 from fixwizard.tui.errors import error_message
 from fixwizard.tui.picture_view import PictureView
@@ -36,30 +36,23 @@ TABS = ("summary", "rotations", "taps", "details")
 class ResultsScreen(Screen[Outcome]):
     """Shows ``context.solution`` for the session's taps and writes the report."""
 
-    DEFAULT_CSS = """
-    ResultsScreen { layout: vertical; }
-    ResultsScreen #headline { text-style: bold reverse; padding: 0 1; }
-    ResultsScreen TabbedContent { height: 1fr; }
-    ResultsScreen TabPane { padding: 0 1; }
-    ResultsScreen #report-row { height: 1; padding: 0 1; }
-    ResultsScreen #report-row Label { width: auto; padding-right: 1; }
-    ResultsScreen #report-path { width: 1fr; }
-    ResultsScreen #written { height: auto; padding: 0 1; }
-    ResultsScreen #written.-problem { text-style: bold; border: heavy $error; }
-    """
     BINDINGS = [
-        Binding("w", "write", "Write"),
-        Binding("e", "edit_path", "Edit path"),
-        Binding("v", "next_view", "View"),
-        Binding("d", "drop_suspect", "Drop tap"),
-        Binding("r", "resample", "Resample"),
-        Binding("q", "done", "Done"),
-        Binding("escape", "leave_path", "Done editing", show=False),
-        Binding("down", "scroll_summary(1)", "Scroll down", show=False),
-        Binding("up", "scroll_summary(-1)", "Scroll up", show=False),
-        Binding("pagedown", "scroll_summary(10)", "Page down", show=False),
-        Binding("pageup", "scroll_summary(-10)", "Page up", show=False),
+        keys.binding(keys.BACK),
+        keys.binding(keys.WRITE),
+        keys.binding(keys.EDIT_PATH, show=False),
+        keys.binding(keys.VIEW),
+        keys.binding(keys.DROP),
+        keys.binding(keys.RESAMPLE),
+        keys.binding(keys.DONE),
+        keys.binding(keys.SCROLL_DOWN, show=False),
+        keys.binding(keys.SCROLL_UP, show=False),
+        keys.binding(keys.PAGE_DOWN, show=False),
+        keys.binding(keys.PAGE_UP, show=False),
     ]
+    HELP_TITLE = "results"
+    HELP_ABOUT = ("The headline says whether one pose explains the taps. Read the pose and its guaranteed bounds in "
+                  "the summary, look at the pictures (View), then write the report (Write; Edit path first to put "
+                  "it elsewhere) and finish (Done). Resample, or Esc, goes back to sampling to add taps.")
     now: Callable[[], dt.datetime] = staticmethod(dt.datetime.now)
 
     def __init__(self, context: WizardContext) -> None:
@@ -88,7 +81,7 @@ class ResultsScreen(Screen[Outcome]):
             path = default_report_path(context.reports_dir, context.fixture, self.now())
             yield Input(str(path), id="report-path", compact=True)
         yield Static("Press w to write the report there (e to edit the path first).", id="written", markup=False)
-        yield Footer()
+        yield Footer(compact=True)
 
     def on_mount(self) -> None:
         self.action_leave_path()
@@ -128,6 +121,13 @@ class ResultsScreen(Screen[Outcome]):
 
     def action_edit_path(self) -> None:
         self.query_one("#report-path", Input).focus()
+
+    def action_back(self) -> None:
+        """Leave the report path when editing it; else back to sampling (the taps stay)."""
+        if self.query_one("#report-path", Input).has_focus:
+            self.action_leave_path()
+        else:
+            self.action_resample()
 
     def action_leave_path(self) -> None:
         """Focus the view tabs, where the screen's letter keys work."""

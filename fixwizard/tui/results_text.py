@@ -94,10 +94,11 @@ def suspect_lines(solution: Solution) -> list[str]:
 
 
 def warning_lines(solution: Solution) -> list[str]:
-    """The solver's warnings, except those ``suspect_lines`` already says in other words."""
+    """The solver's warnings, except those ``suspect_lines`` already says in other words ("none" only when the
+    solution has no warning at all, as the report then has none)."""
     warnings = [warning for warning in solution.warnings if warning.code not in SAID_BY_SUSPECT_LINES]
     if not warnings:
-        return ["Warnings: none."]
+        return [] if solution.warnings else ["Warnings: none."]
     return ["Warnings:", *(f"  - {warning.message}" for warning in warnings)]
 
 

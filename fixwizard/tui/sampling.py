@@ -14,18 +14,18 @@ from typing import TypeVar
 import numpy as np
 from rich.text import Text
 from textual.app import ComposeResult
-from textual.binding import Binding
 from textual.containers import Horizontal
 from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Static
 
 from fixwizard.errors import FixwizardError
 from fixwizard.plots.taps_view import taps_view
-from fixwizard.robot.base import ProtectiveStop, RobotError, TapResult
+from fixwizard.robot.base import NoContact, ProtectiveStop, RobotError, TapResult
 from fixwizard.solver.search import SearchCancelled
 from fixwizard.solver.solve import MIN_TAPS
+from fixwizard.tui import keys
 from fixwizard.tui.choices import fixture_choices
-from fixwizard.tui.confirm import ConfirmMove
+from fixwizard.tui.confirm import Confirm, ConfirmMove
 from fixwizard.tui.context import WizardContext
 from fixwizard.tui.dialog import Dialog
 from fixwizard.tui.errors import error_message
@@ -55,8 +55,7 @@ from fixwizard.workflow.live import (
 )
 from fixwizard.workflow.session import Tap
 
-SIMULATED_ACTIONS = {"simulated_move", "simulated_unlock"}
-ROBOT_ACTIONS = {"tap", "undo", "solve", "leave", "go_above", "simulated_move", "simulated_unlock"}
+ROBOT_ACTIONS = {key.method for key in (keys.TAP, keys.UNDO, keys.SOLVE, keys.BACK, keys.GO, keys.HANDS, keys.UNLOCK)}
 HOVER_SPEED_M_S = 0.1
 COLUMNS = ("#", "x mm", "y mm", "z mm", "off surface mm")
 T = TypeVar("T")
@@ -64,35 +63,25 @@ ShownError = FixwizardError | OSError
 
 
 class SamplingScreen(Screen[bool]):
-    """Tap the fixture; dismisses with True to solve, False to leave (the session stays resumable)."""
+    """Tap the fixture; dismisses with True to solve, False to leave (asks; the session stays resumable)."""
 
-    DEFAULT_CSS = """
-    SamplingScreen { layout: vertical; }
-    SamplingScreen #title { text-style: bold; padding: 0 1; }
-    SamplingScreen #help { padding: 0 1; color: $text-muted; }
-    SamplingScreen #middle { height: 1fr; }
-    SamplingScreen DataTable { height: 1fr; width: 1fr; margin: 0 1; }
-    SamplingScreen #top-view { width: 34; height: 1fr; }
-    SamplingScreen #top-view.-empty { display: none; }
-    SamplingScreen #live { height: auto; padding: 0 1; }
-    SamplingScreen #guide { height: auto; padding: 0 1; }
-    SamplingScreen #guide.-empty { display: none; }
-    SamplingScreen #note { height: auto; padding: 0 1; text-style: italic; }
-    SamplingScreen #note.-empty { display: none; }
-    SamplingScreen #problem { height: auto; padding: 0 1; text-style: bold; border: heavy $error; }
-    SamplingScreen #problem.-empty { display: none; }
-    """
     BINDINGS = [
-        Binding("t", "tap", "Tap"),
-        Binding("u", "undo", "Undo last"),
-        Binding("g", "go_above", "Go above next"),
-        Binding("i", "identify", "Which fixture?"),
-        Binding("s", "solve", "Solve"),
-        Binding("m", "simulated_move", "SIM: move arm"),
-        Binding("k", "simulated_unlock", "SIM: unlock"),
-        Binding("d", "details", "Details"),
-        Binding("escape", "leave", "Leave"),
+        keys.binding(keys.BACK),
+        keys.binding(keys.TAP),
+        keys.binding(keys.UNDO),
+        keys.binding(keys.GO),
+        keys.binding(keys.SOLVE),
+        keys.binding(keys.HANDS),
+        keys.binding(keys.UNLOCK),
+        keys.binding(keys.IDENTIFY, show=False),
+        keys.binding(keys.DETAILS, show=False),
     ]
+    HELP_TITLE = "sampling"
+    HELP_ABOUT = ("Freedrive is on: guide the ball 5-10 mm above the fixture, the tool pointing at the surface, and "
+                  "tap; every tap is saved at once. Spread 10-20 taps over several faces. After 3 taps a live check "
+                  "says how well the pose is pinned down and suggests where to tap next (the robot can go above it "
+                  "for you). Solve when the check says unique. Esc goes back to the start screen; the session "
+                  "stays there to resume.")
 
     def __init__(self, context: WizardContext) -> None:
         super().__init__()
@@ -117,7 +106,7 @@ class SamplingScreen(Screen[bool]):
         yield Static("", id="guide", classes="-empty", markup=False)
         yield Static("", id="note", classes="-empty", markup=False)
         yield Static("", id="problem", classes="-empty", markup=False)
-        yield Footer()
+        yield Footer(compact=True)
 
     def on_mount(self) -> None:
         self.query_one("#top-view").add_class("-empty")
@@ -135,9 +124,9 @@ class SamplingScreen(Screen[bool]):
     # --- keys ---
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
-        if action in SIMULATED_ACTIONS and self.context.hands is None:
+        if action in keys.SIMULATED_ACTIONS and self.context.hands is None:
             return False
-        if action == "simulated_unlock" and not self._stopped:
+        if action == keys.UNLOCK.action and not self._stopped:
             return False
         if action in ROBOT_ACTIONS and self.busy:
             return None
@@ -167,12 +156,22 @@ class SamplingScreen(Screen[bool]):
         self._run_robot(lambda: self.context.robot.freedrive(False), lambda _: self.dismiss(True),
                         on_failed=lambda _: self.dismiss(True))
 
-    def action_leave(self) -> None:
-        self._live_cancel.set()
-        self._run_robot(lambda: self.context.robot.freedrive(False), lambda _: self.dismiss(False),
-                        on_failed=lambda _: self.dismiss(False))
+    def action_back(self) -> None:
+        """Back to the start screen, after asking: the session stays resumable there (and is selected)."""
+        count = len(self.context.session.taps)
 
-    def action_go_above(self) -> None:
+        def answered(yes: bool | None) -> None:
+            if yes:
+                self._live_cancel.set()
+                self._run_robot(lambda: self.context.robot.freedrive(False), lambda _: self.dismiss(False),
+                                on_failed=lambda _: self.dismiss(False))
+
+        self.app.push_screen(Confirm("Leave sampling?", f"Back to the start screen. The session "
+                                     f"{self.context.session.path.name} with its {count} tap"
+                                     f"{'' if count == 1 else 's'} stays saved; it is selected there to resume.",
+                                     "Leave", "Stay"), answered)
+
+    def action_go(self) -> None:
         advice, plan = self.advice, self.hover_plan
         if advice is None:
             self._say("No suggestion yet: once the live check pins the pose down, it suggests where to tap next.")
@@ -182,9 +181,12 @@ class SamplingScreen(Screen[bool]):
             return
 
         def answered(move: bool | None) -> None:
-            if move:
+            if move and getattr(self.app, "stopped", False):
+                self.app.refuse_motion()
+            elif move:
                 self._run_robot(lambda: self._move_above(plan), lambda _: self._say(
-                    "The ball hovers above the suggested point (freedrive is on again): press t to tap it."))
+                    "The ball hovers above the suggested point (freedrive is on again): press "
+                    f"{keys.name(keys.TAP)} to tap it."))
 
         self.app.push_screen(ConfirmMove("Move the robot?", hover_question(plan, self.context.simulated)), answered)
 
@@ -222,18 +224,19 @@ class SamplingScreen(Screen[bool]):
         """The live check's technical figures in a dialog."""
         self.app.push_screen(Dialog("Live check: details", live_details(self.live)))
 
-    def action_simulated_move(self) -> None:
+    def action_simulated_hands(self) -> None:
         index = self._spread_index
         self._spread_index += 1
         self._run_robot(lambda: self.context.hands.near_spread_point(index),
                         lambda _: self._say("SIMULATED: the operator's hands brought the ball above the fixture; "
-                                            "press t to tap."))
+                                            f"press {keys.name(keys.TAP)} to tap."))
 
     def action_simulated_unlock(self) -> None:
         self.context.hands.cell.unlock()
         self._stopped = False
         self.refresh_bindings()
-        self._say("SIMULATED: the protective stop is unlocked, as on the teach pendant; press t to tap again.")
+        self._say("SIMULATED: the protective stop is unlocked, as on the teach pendant. Check the cell and re-arm "
+                  f"({keys.name(keys.REARM)}), then press {keys.name(keys.TAP)} to tap again.")
 
     # --- robot work in a thread ---
 
@@ -304,7 +307,7 @@ class SamplingScreen(Screen[bool]):
     def _tap_recorded(self, tap: Tap) -> None:
         self._stopped = False
         count = len(self.context.session.taps)
-        self._say(f"Tap {count} recorded and saved. Move to the next point and press t.")
+        self._say(f"Tap {count} recorded and saved. Move to the next point and press {keys.name(keys.TAP)}.")
         self._taps_changed()
 
     def _robot_failed(self, error: ShownError) -> None:
@@ -312,8 +315,11 @@ class SamplingScreen(Screen[bool]):
             self._taps_changed()
         self._stopped = self._stopped or isinstance(error, ProtectiveStop)
         self.refresh_bindings()
-        self._problem(robot_problem_text(error_message(error), len(self.context.session.taps),
-                                         self.context.session.path))
+        text = robot_problem_text(error_message(error), len(self.context.session.taps), self.context.session.path)
+        if isinstance(error, NoContact) and self.context.hands is not None:
+            text += (f"\nSIMULATED: press {keys.name(keys.HANDS)} and the simulated hands bring the ball above the "
+                     "fixture.")
+        self._problem(text)
 
     # --- the live check ---
 

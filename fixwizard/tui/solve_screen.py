@@ -1,5 +1,5 @@
 """The solve screen: the full solve of the session's taps in a thread worker, with the candidate poses left,
-elapsed time and how far the search has got (its grid levels and cell budget on ``d``); Esc cancels. Dismisses with the
+elapsed time and how far the search has got (its grid levels and cell budget on ``o``); Esc cancels. Dismisses with the
 ``Solution`` (also stored in ``context.solution``), or None when cancelled or after an input problem."""
 
 import threading
@@ -8,7 +8,6 @@ from collections.abc import Callable
 
 import numpy as np
 from textual.app import ComposeResult
-from textual.binding import Binding
 from textual.screen import Screen
 from textual.widgets import Footer, ProgressBar, Static
 from textual.worker import Worker, WorkerState
@@ -16,6 +15,7 @@ from textual.worker import Worker, WorkerState
 from fixwizard.errors import FixwizardError
 from fixwizard.solver.search import SearchCancelled, SearchProgress, search_budget
 from fixwizard.solver.solve import Solution, solve
+from fixwizard.tui import keys
 from fixwizard.tui.context import WizardContext
 from fixwizard.tui.errors import error_message
 
@@ -36,16 +36,10 @@ def budget_used(progress: SearchProgress, max_cells: float) -> float:
 class SolveScreen(Screen[Solution | None]):
     """Runs the full solve; ``solver`` is ``fixwizard.solver.solve.solve`` (another for tests)."""
 
-    DEFAULT_CSS = """
-    SolveScreen { layout: vertical; padding: 0 1; }
-    SolveScreen #title { text-style: bold; margin-bottom: 1; }
-    SolveScreen #about { color: $text-muted; margin-bottom: 1; }
-    SolveScreen ProgressBar { margin-bottom: 1; }
-    SolveScreen #figures { height: auto; }
-    SolveScreen #problem { height: auto; margin-top: 1; text-style: bold; border: heavy $error; }
-    SolveScreen #problem.-empty { display: none; }
-    """
-    BINDINGS = [Binding("escape", "cancel", "Cancel"), Binding("d", "details", "Details")]
+    BINDINGS = [keys.binding(keys.BACK, "Cancel"), keys.binding(keys.DETAILS)]
+    HELP_TITLE = "solving"
+    HELP_ABOUT = ("The full solve searches every fixture pose that explains the taps; the bar shows how far it is. "
+                  "Wait for the result, or press Esc to cancel and go back to sampling (the taps are kept).")
     clock: Callable[[], float] = staticmethod(time.monotonic)
 
     def __init__(self, context: WizardContext, solver: Solver = solve) -> None:
@@ -68,7 +62,7 @@ class SolveScreen(Screen[Solution | None]):
         yield ProgressBar(total=1.0, show_eta=False, id="budget")
         yield Static("", id="figures", markup=False)
         yield Static("", id="problem", classes="-empty", markup=False)
-        yield Footer()
+        yield Footer(compact=True)
 
     def on_mount(self) -> None:
         self._started = self.clock()
@@ -83,7 +77,7 @@ class SolveScreen(Screen[Solution | None]):
         self._details = not self._details
         self._show()
 
-    def action_cancel(self) -> None:
+    def action_back(self) -> None:
         self.cancel.set()
         self.dismiss(None)
 

@@ -35,32 +35,21 @@ UNITS = [("mm", "mm"), ("m", "m")]
 
 class StartScreen(Screen[bool]):
     """Choose robot, fixture, tip calibration, or an unfinished session to resume. ``refusal`` is why a
-    requested resume (``--resume``) failed: shown in a message and kept at the top of the screen."""
+    requested resume (``--resume``) failed: shown in a message and kept at the top of the screen. ``left`` is
+    the session the operator just left sampling from: it is selected to resume."""
 
-    DEFAULT_CSS = """
-    StartScreen VerticalScroll { padding: 0 1; }
-    StartScreen .title { text-style: bold; margin-bottom: 1; }
-    StartScreen .row { height: auto; margin-top: 1; }
-    StartScreen .label { width: 12; text-style: bold; }
-    StartScreen .detail { margin-left: 12; color: $text-muted; }
-    StartScreen .problem { margin-left: 12; text-style: bold; color: $text-error; }
-    StartScreen .refusal { text-style: bold; color: $text-error; margin-bottom: 1; }
-    StartScreen #fixture { width: 38; }
-    StartScreen #units-label { width: 8; padding-left: 2; }
-    StartScreen #units { width: 10; }
-    StartScreen #fixture-path { margin-left: 12; width: 60; }
-    StartScreen #calibration, StartScreen #session { width: 60; }
-    StartScreen #buttons { margin-left: 12; }
-    StartScreen #check { margin-left: 2; }
-    StartScreen #robot-host { margin-left: 12; width: 60; }
-    StartScreen #use-simulated { margin-left: 12; }
-    StartScreen .-hidden { display: none; }
-    """
+    HELP_TITLE = "start"
+    HELP_ABOUT = ("Choose the robot (the simulated demo cell, or type a UR arm's IP address), the fixture's mesh "
+                  "and its units (check the size shown), and the tip calibration: a stored one of this robot, or a "
+                  "new one (about 5 minutes). An unfinished session can be resumed with its own fixture and "
+                  "calibration. Then Continue; \"Check a calibrated fixture\" tests whether a fixture has moved.")
 
-    def __init__(self, context: WizardContext, refusal: ResumeRefused | None = None) -> None:
+
+    def __init__(self, context: WizardContext, refusal: ResumeRefused | None = None, left: Path | None = None) -> None:
         super().__init__()
         self.context = context
         self.refusal = refusal
+        self.left = left
         self._fixtures = fixture_choices(context.fixtures_dir)
         self._calibrations = {str(choice.path): choice for choice in calibration_choices(context.calibrations_dir)}
         self._sessions = session_choices(context.sessions_dir)
@@ -102,7 +91,8 @@ class StartScreen(Screen[bool]):
                     yield Static("Session", classes="label")
                     yield Select([("Start a new session", NEW),
                                   *((f"Resume {path.stem}", str(path)) for path in self._sessions)],
-                                 id="session", value=NEW, allow_blank=False, compact=True)
+                                 id="session", value=self._preselected_session(), allow_blank=False,
+                                 compact=True)
                 yield Static("", id="session-info", classes="detail")
             with Horizontal(id="buttons", classes="row"):
                 yield Button("Continue", id="continue", variant="primary", compact=True)
@@ -111,9 +101,15 @@ class StartScreen(Screen[bool]):
     def on_mount(self) -> None:
         self.query_one("#fixture", Select).focus()
         self._show_calibration()
+        if self._sessions:
+            self._show_session()
         self._load_fixture()
         if self.refusal is not None:
             self.app.show_error(self.refusal)
+
+    def _preselected_session(self) -> str:
+        """The session just left (to resume it), else a new one."""
+        return next((str(path) for path in self._sessions if self.left is not None and path == self.left), NEW)
 
     def _preselected_calibration(self) -> str:
         """The newest calibration made on this robot (choices are newest first), else a new calibration."""
@@ -145,10 +141,13 @@ class StartScreen(Screen[bool]):
         elif event.select.id == "calibration":
             self._show_calibration()
         elif event.select.id == "session":
-            changed = self._sessions.get(Path(str(event.value)))
-            self.query_one("#session-info", Static).update(
-                "" if changed is None else f"Last change {changed:%Y-%m-%d %H:%M}; Continue reopens it with its own "
-                "fixture and tip calibration.")
+            self._show_session()
+
+    def _show_session(self) -> None:
+        changed = self._sessions.get(Path(str(self.query_one("#session", Select).value)))
+        self.query_one("#session-info", Static).update(
+            "" if changed is None else f"Last change {changed:%Y-%m-%d %H:%M}; Continue reopens it with its own "
+            "fixture and tip calibration.")
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
         text = event.value.strip()

@@ -4,33 +4,30 @@ bars and cancel. Recorded taps survive a cancel, a STOP or a robot error; starti
 import threading
 
 from textual.app import ComposeResult
-from textual.binding import Binding
 from textual.containers import Horizontal
 from textual.widgets import ProgressBar, Static
 
+from fixwizard.tui import keys
 from fixwizard.tui.tip_calibration_step import CalibrationStepScreen
 from fixwizard.workflow.robot_calibration import Cancelled, Step
 
 AUTO_TEXT = (
     "The robot now moves by itself: it lifts the ball {height_mm:.0f} mm above the table, taps a {rows} x {cols} "
     "grid in the corner between A, B and C, then taps {tilted} times near B with the tool tilted. Keep clear of "
-    "the cell; the STOP key (F12) halts it at once. Press G to start.")
+    "the cell; the STOP key (F12) halts it at once. Press g to start.")
 AUTO_STEPS: tuple[Step, ...] = ("table", "tilted")
 STEP_LABELS = {"table": "Table taps", "tilted": "Tilted taps"}
 
 
 class AutoTapsScreen(CalibrationStepScreen):
-    """Run the table and tilted taps in a worker; cancel stops between two taps."""
+    """Run the table and tilted taps in a worker; Esc cancels between two taps (and goes back when none run)."""
 
     STEP = 3
     TITLE_TEXT = "automatic taps"
-    DEFAULT_CSS = """
-    AutoTapsScreen .progress-row { height: 1; margin-top: 1; }
-    AutoTapsScreen .progress-label { width: 14; }
-    """
-    BINDINGS = [Binding("g", "start", "Go"),
-                Binding("c", "cancel", "Cancel"),
-                Binding("n", "next", "Next")]
+    BINDINGS = [keys.binding(keys.GO), keys.binding(keys.NEXT)]
+    HELP_ABOUT = ("The robot taps the table by itself: a grid in the corner of A, B and C, then tilted taps near "
+                  "B. Keep clear of the cell; STOP (F12) halts it at once, Esc cancels after the current tap and "
+                  "going on continues where it stopped. Once all taps are done, go on to the result.")
 
     _cancel: threading.Event | None = None
 
@@ -55,17 +52,17 @@ class AutoTapsScreen(CalibrationStepScreen):
     def on_mount(self) -> None:
         for step in AUTO_STEPS:
             self._progress(step, len(self.workflow.poses(step)))
-        self._show("All taps are done: press N for the result." if self._finished() else "")
+        self._show("All taps are done: press n for the result." if self._finished() else "")
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
-        if action == "cancel":
-            return True if self._cancel is not None else None
+        if action in (keys.BACK.action, keys.NEXT.action) and self._cancel is not None:
+            return True  # Esc cancels the running taps, n says they are running
         allowed = super().check_action(action, parameters)
-        if allowed and ((action == "next") != self._finished()):
+        if allowed and action == keys.GO.action and self._finished():
             return None
         return allowed
 
-    def action_start(self) -> None:
+    def action_go(self) -> None:
         robot, workflow, app = self.context.robot, self.workflow, self.app
         cancel = threading.Event()
         self._cancel = cancel
@@ -83,16 +80,25 @@ class AutoTapsScreen(CalibrationStepScreen):
                 return cancelled
             return None
 
-        self._show("Tapping... press C to cancel after the current tap.")
+        self._show("Tapping... press Esc to cancel after the current tap.")
         self.run_robot(run, self._ended, lambda error: self._ended(error))
 
-    def action_cancel(self) -> None:
+    def action_back(self) -> None:
+        """Cancel the running taps (after the current one); else back to the table points, the taps kept."""
         if self._cancel is not None:
             self._cancel.set()
             self._show("Cancelling after the current tap...")
+        else:
+            super().action_back()
 
     def action_next(self) -> None:
-        self.dismiss("next")
+        if self._finished():
+            self.dismiss("next")
+        elif self._cancel is not None:
+            self.notify("Not yet: the automatic taps are running; the result comes once they are done.")
+        else:
+            self.notify(f"Not yet: press {keys.name(keys.GO)} to start the automatic taps; the result comes once "
+                        "they are done.", severity="warning")
 
     def _ended(self, outcome: Exception | None) -> None:
         if self._cancel is not None:
@@ -102,9 +108,9 @@ class AutoTapsScreen(CalibrationStepScreen):
         if outcome is None:
             self.dismiss("next")
         elif isinstance(outcome, Cancelled):
-            self._show(f"{outcome}. Press G to continue.")
+            self._show(f"{outcome}. Press g to continue.")
         else:
-            self._show(f"Stopped: {outcome}\nPress G to continue once the cell is ready.")
+            self._show(f"Stopped: {outcome}\nPress g to continue once the cell is ready.")
 
     def _progress(self, step: Step, done: int) -> None:
         if self.is_attached:

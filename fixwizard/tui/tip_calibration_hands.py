@@ -3,11 +3,11 @@ and the three table points A, B, C. On a simulated cell a SIMULATED key lets the
 moving; on a real robot the text says what to do with the arm."""
 
 from textual.app import ComposeResult
-from textual.binding import Binding
 from textual.widgets import Static
 
 from fixwizard.calibration.errors import CalibrationError
 from fixwizard.calibration.pivot import MIN_POSES
+from fixwizard.tui import keys
 from fixwizard.tui.background import ShownError
 from fixwizard.tui.tip_calibration_step import CalibrationStepScreen
 from fixwizard.workflow.robot_calibration import TABLE_POINTS
@@ -33,16 +33,18 @@ class PivotScreen(CalibrationStepScreen):
 
     STEP = 1
     TITLE_TEXT = "pivot (coarse tip)"
-    BINDINGS = [Binding("space", "capture", "Capture"),
-                Binding("s", "simulated_hands", "SIM hands"),
-                Binding("f", "freedrive", "Freedrive"),
-                Binding("n", "next", "Next")]
+    BINDINGS = [keys.binding(keys.CAPTURE), keys.binding(keys.HANDS), keys.binding(keys.FREEDRIVE),
+                keys.binding(keys.NEXT)]
+    HELP_ABOUT = ("Find the ball tip roughly: with the ball held on one fixed point of the table, capture 5-8 poses "
+                  "of the tool tilted in different directions. Once the pivot fit is good, go on to the table "
+                  "points. Going back to the start screen drops the captured poses (it asks first).")
 
     def body(self) -> ComposeResult:
         yield Static(PIVOT_TEXT)
         if self.context.hands is not None:
-            yield Static("SIMULATED: no hands can move a simulated arm. Press S and the simulated hands put the "
-                         "tool in the next pivot pose, then the pose is captured.", classes="simulated")
+            yield Static(f"SIMULATED: no hands can move a simulated arm. Press {keys.name(keys.HANDS)} and the "
+                         "simulated hands put the tool in the next pivot pose, then the pose is captured.",
+                         classes="simulated")
         yield Static("", id="pivot-state", classes="state", markup=False)
 
     _fit_ok = False
@@ -51,11 +53,12 @@ class PivotScreen(CalibrationStepScreen):
         self._show_fit()
         self.action_freedrive()
 
-    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
-        allowed = super().check_action(action, parameters)
-        if allowed and action == "next" and not self._fit_ok:
-            return None
-        return allowed
+    def action_back(self) -> None:
+        count = len(self.workflow.poses("pivot"))
+        if count:
+            self.confirm_discard(f"the {count} captured pose{'s' if count != 1 else ''}", super().action_back)
+        else:
+            super().action_back()
 
     def action_freedrive(self) -> None:
         self.run_robot(lambda: self.context.robot.freedrive(True), lambda _: None)
@@ -74,7 +77,11 @@ class PivotScreen(CalibrationStepScreen):
         self.run_robot(move_and_capture, lambda _: self._show_fit())
 
     def action_next(self) -> None:
-        self.dismiss("next")
+        if self._fit_ok:
+            self.dismiss("next")
+        else:
+            self.notify(f"Not yet: capture poses until the pivot fit is good ({keys.name(keys.CAPTURE)}).",
+                        severity="warning")
 
     def _show_fit(self) -> None:
         count = len(self.workflow.poses("pivot"))
@@ -99,10 +106,11 @@ class TablePointsScreen(CalibrationStepScreen):
 
     STEP = 2
     TITLE_TEXT = "table points A, B, C"
-    BINDINGS = [Binding("t", "tap", "Tap"),
-                Binding("s", "simulated_hands", "SIM hands"),
-                Binding("f", "freedrive", "Freedrive"),
-                Binding("n", "next", "Next")]
+    BINDINGS = [keys.binding(keys.TAP), keys.binding(keys.HANDS), keys.binding(keys.FREEDRIVE),
+                keys.binding(keys.NEXT)]
+    HELP_ABOUT = ("Tap three points of a flat, clear table corner: A, then the corner B, then C. For each, guide "
+                  "the ball 5-10 mm above the point in freedrive with the tool pointing down and press the tap key; "
+                  "the robot taps straight down. Going back keeps the points tapped.")
 
     def body(self) -> ComposeResult:
         rows, cols = self.workflow.table_grid
@@ -110,8 +118,8 @@ class TablePointsScreen(CalibrationStepScreen):
         yield Static(TABLE_POINTS_TEXT.format(reach_mm=reach_mm))
         yield Static(TABLE_POINTS_PICTURE, markup=False)
         if self.context.hands is not None:
-            yield Static("SIMULATED: press S and the simulated hands bring the ball above the next point, then "
-                         "the robot taps it.", classes="simulated")
+            yield Static(f"SIMULATED: press {keys.name(keys.HANDS)} and the simulated hands bring the ball above "
+                         "the next point, then the robot taps it.", classes="simulated")
         yield Static("", id="points-state", classes="state", markup=False)
 
     def on_mount(self) -> None:
@@ -124,8 +132,7 @@ class TablePointsScreen(CalibrationStepScreen):
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
         allowed = super().check_action(action, parameters)
-        done = self._tapped() == len(TABLE_POINTS)
-        if allowed and ((action == "next" and not done) or (action in ("tap", "simulated_hands") and done)):
+        if allowed and action in (keys.TAP.action, keys.HANDS.action) and self._tapped() == len(TABLE_POINTS):
             return None
         return allowed
 
@@ -145,7 +152,11 @@ class TablePointsScreen(CalibrationStepScreen):
         self.run_robot(place_and_tap, lambda _: self._show_points(), self._tap_failed)
 
     def action_next(self) -> None:
-        self.dismiss("next")
+        if self._tapped() == len(TABLE_POINTS):
+            self.dismiss("next")
+        else:
+            self.notify(f"Not yet: tap {TABLE_POINTS[self._tapped()]} first ({keys.name(keys.TAP)}).",
+                        severity="warning")
 
     def _tap(self) -> None:
         """Freedrive off, tap, and freedrive on again while points are left (worker thread)."""

@@ -46,14 +46,9 @@ class CalibrationResultScreen(CalibrationStepScreen):
 
     STEP = 4
     TITLE_TEXT = "result"
-    DEFAULT_CSS = """
-    CalibrationResultScreen .field { height: 1; margin-top: 1; }
-    CalibrationResultScreen .field-label { width: 16; }
-    CalibrationResultScreen #name { width: 36; }
-    CalibrationResultScreen #ball-diameter { width: 8; }
-    CalibrationResultScreen .buttons { height: 1; margin-top: 1; }
-    CalibrationResultScreen Button { margin-right: 2; }
-    """
+    HELP_ABOUT = ("Read the residuals and the proposed sample bound, check the ball diameter (as measured or from "
+                  "the data sheet) and the file name, then accept to save the calibration, or redo it from the "
+                  "pivot. Esc goes back to the automatic taps, which are kept.")
 
     calibration: TipCalibration | None = None
 

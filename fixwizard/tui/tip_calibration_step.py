@@ -5,40 +5,35 @@ from collections.abc import Callable
 from typing import Literal, TypeVar
 
 from textual.app import ComposeResult
-from textual.binding import Binding
 from textual.containers import VerticalScroll
 from textual.screen import Screen
 from textual.widgets import Static
 
+from fixwizard.tui import keys
 from fixwizard.tui.background import ShownError, run_in_thread
+from fixwizard.tui.confirm import Confirm
 from fixwizard.tui.context import WizardContext
 from fixwizard.workflow.robot_calibration import RobotTipCalibration
 
 StepOutcome = Literal["next", "back", "redo"]
 T = TypeVar("T")
 STEP_COUNT = 4
-# Keys that only exist on a simulated cell (the simulated operator's hands).
-SIMULATED_ACTIONS = {"simulated_hands"}
 
 
 class CalibrationStepScreen(Screen[StepOutcome]):
     """A step of the tip calibration; subclasses set ``STEP``, ``TITLE_TEXT`` and compose ``body``."""
 
-    DEFAULT_CSS = """
-    CalibrationStepScreen VerticalScroll { padding: 0 1; }
-    CalibrationStepScreen .title { text-style: bold; margin-bottom: 1; }
-    CalibrationStepScreen .simulated { text-style: bold; margin-top: 1; }
-    CalibrationStepScreen .state { margin-top: 1; }
-    """
-    BINDINGS = [Binding("escape", "back", "Back")]
+    BINDINGS = [keys.binding(keys.BACK)]
     STEP = 0
     TITLE_TEXT = ""
+    HELP_ABOUT = ""
 
     def __init__(self, context: WizardContext, workflow: RobotTipCalibration) -> None:
         super().__init__()
         self.context = context
         self.workflow = workflow
         self.busy = False
+        self.HELP_TITLE = f"tip calibration, step {self.STEP} of {STEP_COUNT}: {self.TITLE_TEXT}"
 
     def compose(self) -> ComposeResult:
         with VerticalScroll():
@@ -49,7 +44,7 @@ class CalibrationStepScreen(Screen[StepOutcome]):
         yield from ()
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
-        if action in SIMULATED_ACTIONS and self.context.hands is None:
+        if action in keys.SIMULATED_ACTIONS and self.context.hands is None:
             return False
         return None if self.busy else True
 
@@ -75,3 +70,12 @@ class CalibrationStepScreen(Screen[StepOutcome]):
 
     def action_back(self) -> None:
         self.dismiss("back")
+
+    def confirm_discard(self, what: str, then: Callable[[], None]) -> None:
+        """Ask before a step back that drops ``what`` (e.g. "the 4 captured poses"); ``then`` once confirmed."""
+        def answered(yes: bool | None) -> None:
+            if yes:
+                then()
+
+        self.app.push_screen(Confirm("Discard what was recorded?", f"Going back drops {what}; you would record "
+                                     "them again.", "Discard and go back", "Stay"), answered)

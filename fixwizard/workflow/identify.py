@@ -3,8 +3,8 @@
 A mesh for which no pose explains the taps is *ruled out* (the search keeps every pose that could explain
 them, so an empty set is a proof at any cell budget). A mesh whose set is pinned down (``unique`` or
 ``ambiguous``) *fits*, ranked by how well its most probable pose explains the taps (the residuals, in mm). In
-between, the cell budget grows tenfold (``BUDGETS``) until one of the two, the largest budget or the time limit:
-then the mesh is *not decided*, never "fits".
+between, the cell budget grows tenfold (``BUDGETS``) until one of the two, the largest budget or the time limit
+(a search still running then is stopped): then the mesh is *not decided*, never "fits".
 
 ``fixwizard identify POINTS MESH [MESH ...]`` prints one line per mesh, best fit first, and what the verdicts
 mean together; the sampling screen's "Which fixture?" runs the same against every mesh the wizard offers.
@@ -22,18 +22,18 @@ from typing import Literal
 import numpy as np
 
 from fixwizard.errors import FixwizardError
-from fixwizard.fixture import load_fixture
+from fixwizard.fixture import Fixture, load_fixture
 from fixwizard.interrupt import run_interruptibly
 from fixwizard.points import load_points
-from fixwizard.solver.solve import solve, validate_inputs
+from fixwizard.solver.search import SearchCancelled
+from fixwizard.solver.solve import Solution, solve, validate_inputs
 from fixwizard.units import parse_length_m
 from fixwizard.workflow.live import tap_surface_distances_m
 
 DEFAULT_MAX_CELLS = 1e7
 DEFAULT_TIME_LIMIT_S = 120.0
 BUDGETS = (1e5, 1e6, 1e7, 1e8)  # tried in turn up to the largest budget
-# The next budget costs about this many times the last one's time; it is not started if that would pass the limit.
-GROWTH = 6.0
+DEADLINE_POLL_S = 0.05  # how often a running search is checked against the deadline and the caller's cancel
 IDENTIFY_SAMPLES = 2000
 Verdict = Literal["fits", "ruled out", "not decided", "unreadable"]
 
@@ -95,28 +95,69 @@ def _verdict(base_p_taps: np.ndarray, mesh: Path, mesh_units: str, ball_diameter
     except FixwizardError as error:
         return MeshVerdict(mesh, "unreadable", str(error))
     budgets = [budget for budget in BUDGETS if budget < max_cells] + [max_cells]
-    spent_s = 0.0
+    solution: Solution | None = None
     for budget in budgets:
         started = time.monotonic()
-        solution = solve(fixture, base_p_taps, ball_diameter_m, sample_bound_m, max_cells=budget, cancel=cancel,
-                         max_samples=IDENTIFY_SAMPLES, diagnose_inconsistent=False)
-        spent_s = time.monotonic() - started
+        try:
+            solution = _solve_by(deadline, cancel, fixture, base_p_taps, ball_diameter_m, sample_bound_m, budget)
+        except _OutOfTime:
+            break
         if progress is not None:
-            progress(IdentifyStep(mesh, budget, solution.status, spent_s))
+            progress(IdentifyStep(mesh, budget, solution.status, time.monotonic() - started))
         if solution.status == "inconsistent":
             return MeshVerdict(mesh, "ruled out", "no pose of this mesh explains the taps", max_cells=budget)
-        distances_mm = 1e3 * tap_surface_distances_m(fixture, base_p_taps, ball_diameter_m, solution.base_T_cad)
-        rms_mm, worst_mm = float(np.sqrt(np.mean(distances_mm**2))), float(np.max(np.abs(distances_mm)))
+        rms_mm, worst_mm = _residuals_mm(fixture, base_p_taps, ball_diameter_m, solution)
         if solution.status in ("unique", "ambiguous"):
             poses = "one pose explains" if solution.status == "unique" else f"{len(solution.modes)} poses explain"
             return MeshVerdict(mesh, "fits", f"{poses} the taps; at the most probable the taps lie "
                                f"{rms_mm:.2f} mm off the surface (RMS, worst {worst_mm:.2f} mm)", rms_mm, worst_mm,
                                budget)
-        if time.monotonic() + GROWTH * spent_s > deadline:
-            break
+    if solution is None:
+        return MeshVerdict(mesh, "not decided", f"its first search ({budgets[0]:.0e} cells) did not end within the "
+                           "time limit")
+    rms_mm, worst_mm = _residuals_mm(fixture, base_p_taps, ball_diameter_m, solution)
     return MeshVerdict(mesh, "not decided", f"neither ruled out nor pinned down within {solution.stats.max_cells:.0e} "
                        f"cells (RMS {rms_mm:.2f} mm off the surface at the most probable pose so far)", rms_mm,
                        worst_mm, solution.stats.max_cells)
+
+
+class _OutOfTime(Exception):
+    """The deadline passed while a search ran."""
+
+
+def _solve_by(deadline: float, cancel: threading.Event | None, fixture: Fixture, base_p_taps: np.ndarray,
+              ball_diameter_m: float, sample_bound_m: float, max_cells: float) -> Solution:
+    """The solve at ``max_cells``, stopped at ``deadline`` (monotonic s: raises ``_OutOfTime``) or when ``cancel``
+    is set (raises ``SearchCancelled``)."""
+    if time.monotonic() >= deadline:
+        raise _OutOfTime
+    stop, done = threading.Event(), threading.Event()
+
+    def watch() -> None:
+        while not done.wait(DEADLINE_POLL_S):
+            if time.monotonic() >= deadline or (cancel is not None and cancel.is_set()):
+                stop.set()
+                return
+
+    watcher = threading.Thread(target=watch, daemon=True)
+    watcher.start()
+    try:
+        return solve(fixture, base_p_taps, ball_diameter_m, sample_bound_m, max_cells=max_cells, cancel=stop,
+                     max_samples=IDENTIFY_SAMPLES, diagnose_inconsistent=False)
+    except SearchCancelled:
+        if cancel is not None and cancel.is_set():
+            raise
+        raise _OutOfTime from None
+    finally:
+        done.set()
+        watcher.join()
+
+
+def _residuals_mm(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float,
+                  solution: Solution) -> tuple[float, float]:
+    """RMS and largest distance (mm) of the taps from the surface at the solution's most probable pose."""
+    distances_mm = 1e3 * tap_surface_distances_m(fixture, base_p_taps, ball_diameter_m, solution.base_T_cad)
+    return float(np.sqrt(np.mean(distances_mm**2))), float(np.max(np.abs(distances_mm)))
 
 
 def summary_lines(verdicts: list[MeshVerdict]) -> list[str]:

@@ -1,0 +1,110 @@
+"""The wizard's one key map: every key defined once, with one meaning on every screen. Screens build their
+``BINDINGS`` from it (``binding``), messages that name a key take its name from here (``name``), and the help
+screen (``?``) lists a screen's keys with their longer explanations.
+
+Dialogs are modal and answer a question; their two answer keys (``YES``, ``NO``) are a map of their own and
+written on their buttons. Keys marked ``motion`` make the robot move; they are refused while the wizard is
+STOPPED (after the STOP key or a protective stop) until the operator re-arms."""
+
+from dataclasses import dataclass
+
+from textual.binding import Binding
+
+
+@dataclass(frozen=True)
+class Key:
+    """One key: Textual key names (``keys``, comma-separated), the action every screen names its method after
+    (``action_<action>``), the footer's short label, the help screen's explanation, and whether it moves the
+    robot."""
+
+    keys: str
+    action: str
+    label: str
+    explanation: str
+    motion: bool = False
+    display: str = ""
+
+    @property
+    def method(self) -> str:
+        """The action's name without its parameters (the screen's method is ``action_<method>``)."""
+        return self.action.split("(", 1)[0]
+
+    @property
+    def shown(self) -> str:
+        """The key as the operator reads it (e.g. ``t``, ``Esc``, ``F12``)."""
+        return self.display or self.keys.split(",")[0]
+
+
+# --- every screen ---
+STOP = Key("f12,ctrl+x", "stop_robot", "STOP", "halt the robot now and stop any automatic step (also Ctrl+X); the "
+           "wizard then stays STOPPED until you re-arm it", display="F12")
+REARM = Key("ctrl+r", "rearm", "Re-arm", "after a STOP: once the cell is checked and clear, allow robot motion "
+            "again (asks first)", display="Ctrl+R")
+QUIT = Key("ctrl+q", "quit", "Quit", "leave the wizard (asks first while the robot moves); an open session stays "
+           "resumable", display="Ctrl+Q")
+HELP = Key("question_mark", "help", "Help", "this help", display="?")
+BACK = Key("escape", "back", "Back", "one step back, or cancel what is running (asks before anything recorded is "
+           "dropped)", display="Esc")
+
+# --- the steps ---
+TAP = Key("t", "tap", "Tap", "the robot taps straight down along the tool axis and records the contact",
+          motion=True)
+CAPTURE = Key("space", "capture", "Capture", "record the current pose of the arm (the ball stays on its point)",
+              display="Space")
+UNDO = Key("u", "undo", "Undo", "undo the last tap (the journal keeps it, marked undone)")
+SOLVE = Key("s", "solve", "Solve", "find every fixture pose that explains the taps")
+CHECK = Key("c", "check", "Check", "check the taps against the fixture's report: has it moved?")
+GO = Key("g", "go", "Go", "the robot moves by itself (asks first where it goes): above the suggested next tap, or "
+         "the automatic calibration taps", motion=True)
+NEXT = Key("n", "next", "Next", "go on to the next step")
+FREEDRIVE = Key("f", "freedrive", "Freedrive", "turn freedrive on, to guide the arm by hand")
+IDENTIFY = Key("i", "identify", "Which?", "check the taps against every fixture offered: which one is this?")
+HANDS = Key("m", "simulated_hands", "SIM hands", "SIMULATED cell only: the simulated operator's hands move the arm "
+            "to the next point (and the step goes on)", motion=True)
+UNLOCK = Key("k", "simulated_unlock", "SIM unlock", "SIMULATED cell only: unlock a protective stop, as on the teach "
+             "pendant")
+DETAILS = Key("o", "details", "Details", "show or hide the solver's own figures behind what is shown (levels, "
+              "cells, budget, candidate poses)")
+WRITE = Key("w", "write", "Write", "write the report to the path shown")
+EDIT_PATH = Key("e", "edit_path", "Edit path", "edit where the report is written (Enter writes it there)")
+VIEW = Key("v", "next_view", "View", "show the next view: summary, rotation set, taps on the fixture")
+DROP = Key("d", "drop_suspect", "Drop tap", "drop the tap that does not fit (the journal keeps it), then sample "
+           "and solve again")
+RESAMPLE = Key("r", "resample", "Resample", "back to sampling to add taps, then solve again")
+DONE = Key("q", "done", "Done", "finish this fixture (asks once if the report is not written)")
+SCROLL_DOWN = Key("down", "scroll_summary(1)", "Scroll down", "scroll the summary down", display="Down")
+SCROLL_UP = Key("up", "scroll_summary(-1)", "Scroll up", "scroll the summary up", display="Up")
+PAGE_DOWN = Key("pagedown", "scroll_summary(10)", "Page down", "scroll the summary a page down", display="PgDn")
+PAGE_UP = Key("pageup", "scroll_summary(-10)", "Page up", "scroll the summary a page up", display="PgUp")
+
+# --- dialogs ---
+YES = Key("y", "yes", "Yes", "answer yes (the button says what it does)")
+NO = Key("n,escape", "no", "No", "answer no, change nothing", display="n")
+
+GLOBAL_KEYS = (HELP, QUIT, STOP, REARM)
+SCREEN_KEYS = (BACK, TAP, CAPTURE, UNDO, SOLVE, CHECK, GO, NEXT, FREEDRIVE, IDENTIFY, HANDS, UNLOCK, DETAILS, WRITE,
+               EDIT_PATH, VIEW, DROP, RESAMPLE, DONE, SCROLL_DOWN, SCROLL_UP, PAGE_DOWN, PAGE_UP)
+DIALOG_KEYS = (YES, NO)
+MOTION_ACTIONS = frozenset(key.method for key in (*GLOBAL_KEYS, *SCREEN_KEYS) if key.motion)
+SIMULATED_ACTIONS = frozenset({HANDS.method, UNLOCK.method})
+
+
+def binding(key: Key, label: str | None = None, show: bool = True, priority: bool = False) -> Binding:
+    """The Textual binding of ``key``; ``label`` only rewords the footer for this screen (the meaning stays)."""
+    return Binding(key.keys, key.action, label or key.label, show=show, priority=priority,
+                   key_display=key.display if "," in key.keys else None)
+
+
+def name(key: Key) -> str:
+    """How a message names the key, e.g. ``m`` or ``Esc``."""
+    return key.shown
+
+
+def short_name(key: Key) -> str:
+    """The key in the fewest columns, as terminals write control keys (``^R`` for Ctrl+R)."""
+    return key.shown.replace("Ctrl+", "^")
+
+
+def key_of(action: str) -> Key | None:
+    """The key-map entry of a screen or app ``action`` (None for a widget's own key)."""
+    return next((key for key in (*GLOBAL_KEYS, *SCREEN_KEYS, *DIALOG_KEYS) if key.action == action), None)

@@ -1,0 +1,351 @@
+"""The wizard's keys and states as an operator meets them at 80x24 on the simulated cell: one key map for every
+screen (no key means two things, the simulated hands on one key everywhere), help on ``?`` everywhere, the
+STOPPED state that refuses motion until a confirmed re-arm, confirmations before anything recorded is dropped
+or the wizard quits during motion, the footer's Esc and Quit in view, the newest tap in view, focus visible
+without colour."""
+
+import asyncio
+import dataclasses
+import importlib
+import inspect
+import pkgutil
+import sys
+
+import pytest
+from pilot_wait import until
+from test_tui_app import REPO, SIZE, at_start, calibrate_by_hand, press_button, rearm, wizard
+from textual.pilot import Pilot
+from textual.screen import Screen
+from textual.widgets import DataTable, Footer, Select, Static
+from textual.widgets._footer import FooterKey
+from tui_cell import ScreenHost, record_spread_taps, wizard_context
+
+import fixwizard.tui
+from fixwizard.calibration.store import load_calibration, save_calibration
+from fixwizard.tui import keys
+from fixwizard.tui.app import FixwizardApp
+from fixwizard.tui.confirm import Confirm
+from fixwizard.tui.help import HelpScreen
+from fixwizard.tui.sampling import SamplingScreen
+from fixwizard.tui.start import NEW, StartScreen
+from fixwizard.tui.status import StatusBar
+from fixwizard.tui.tip_calibration_auto import AutoTapsScreen
+from fixwizard.tui.tip_calibration_hands import PivotScreen, TablePointsScreen
+from fixwizard.tui.tip_calibration_result import CalibrationResultScreen
+
+
+def wizard_screens() -> list[type[Screen]]:
+    """Every screen and dialog class the wizard defines."""
+    for module in pkgutil.iter_modules(fixwizard.tui.__path__):
+        importlib.import_module(f"fixwizard.tui.{module.name}")
+    found = set()
+    for module_name, module in list(sys.modules.items()):
+        if module_name.startswith("fixwizard.tui."):
+            found |= {cls for _, cls in inspect.getmembers(module, inspect.isclass)
+                      if issubclass(cls, Screen) and cls.__module__.startswith("fixwizard.tui.")}
+    return sorted(found, key=lambda cls: cls.__name__)
+
+
+def key_names(key: keys.Key) -> list[str]:
+    return key.keys.split(",")
+
+
+def test_every_binding_of_every_screen_comes_from_the_key_map_and_has_its_action():
+    screens = wizard_screens()
+    assert {"StartScreen", "PivotScreen", "SamplingScreen", "ResultsScreen", "CheckScreen", "HelpScreen",
+            "Confirm"} <= {cls.__name__ for cls in screens}
+    for cls in [*screens, FixwizardApp]:
+        for binding in cls.__dict__.get("BINDINGS", []):
+            key = keys.key_of(binding.action)
+            assert key is not None, f"{cls.__name__}: {binding.action} is not in the key map"
+            assert binding.key == key.keys, f"{cls.__name__}: {binding.action} on {binding.key}, not {key.keys}"
+            assert hasattr(cls, f"action_{key.method}"), f"{cls.__name__} has no action_{key.method}"
+
+
+def test_no_key_means_two_things():
+    for scope in ((*keys.GLOBAL_KEYS, *keys.SCREEN_KEYS), (*keys.GLOBAL_KEYS, *keys.DIALOG_KEYS)):
+        names = [name for key in scope for name in key_names(key)]
+        assert len(names) == len(set(names)), sorted(name for name in names if names.count(name) > 1)
+        actions = [key.action for key in scope]
+        assert len(actions) == len(set(actions))
+
+
+def test_the_simulated_hands_are_on_one_key_on_every_screen_that_has_them():
+    with_hands = [cls for cls in wizard_screens() if any(b.action == keys.HANDS.action for b in cls.BINDINGS)]
+    assert {cls.__name__ for cls in with_hands} == {"PivotScreen", "TablePointsScreen", "SamplingScreen",
+                                                    "CheckScreen"}
+    for cls in wizard_screens():
+        for binding in cls.__dict__.get("BINDINGS", []):
+            assert (binding.key == keys.HANDS.keys) == (binding.action == keys.HANDS.action)
+
+
+def help_of(app) -> str:
+    assert isinstance(app.screen, HelpScreen)
+    return str(app.screen.query_one("#help-text", Static).render())
+
+
+async def open_help(pilot: Pilot) -> str:
+    await pilot.press("question_mark")
+    await until(pilot, lambda: isinstance(pilot.app.screen, HelpScreen))
+    text = help_of(pilot.app)
+    await pilot.press("escape")
+    await until(pilot, lambda: not isinstance(pilot.app.screen, HelpScreen))
+    return text
+
+
+def test_question_mark_opens_the_help_of_each_step_with_its_keys_and_the_global_ones(tmp_path):
+    async def run():
+        app = FixwizardApp(wizard(tmp_path))
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            text = await open_help(pilot)
+            assert text.startswith("Choose the robot") and "Keys everywhere:" in text and "F12" in text
+            assert isinstance(app.screen, StartScreen)
+            await press_button(pilot, "#continue")
+            await until(pilot, lambda: isinstance(app.screen, PivotScreen) and not app.screen.busy)
+            text = await open_help(pilot)
+            assert text.startswith("Find the ball tip roughly") and "Keys on this screen:" in text
+            assert "  m       SIM hands: SIMULATED cell only" in text and "  Space   Capture" in text
+            assert "  Esc     Back" in text and "  Ctrl+R  Re-arm" in text
+            for _ in range(app.context.hands.pivot_count):
+                await pilot.press("m")
+                await until(pilot, lambda: not app.screen.busy)
+            await pilot.press("n")
+            await until(pilot, lambda: isinstance(app.screen, TablePointsScreen) and not app.screen.busy)
+            assert (await open_help(pilot)).startswith("Tap three points of a flat, clear table corner")
+            for _ in range(3):
+                await pilot.press("m")
+                await until(pilot, lambda: not app.screen.busy)
+            await pilot.press("n")
+            await until(pilot, lambda: isinstance(app.screen, AutoTapsScreen))
+            text = await open_help(pilot)
+            assert text.startswith("The robot taps the table by itself") and "  g       Go" in text
+            await pilot.press("g")  # the simulated taps may be done before the next frame
+            await until(pilot, lambda: isinstance(app.screen, Confirm | CalibrationResultScreen) or app.screen.busy)
+            await pilot.press("question_mark")  # also over a dialog or the result
+            await until(pilot, lambda: isinstance(app.screen, HelpScreen))
+    asyncio.run(run())
+
+
+def test_help_on_the_sampling_screen_lists_its_keys(tmp_path):
+    async def run():
+        context = wizard_context(tmp_path)
+        app = FixwizardApp(context)
+        async with app.run_test(size=SIZE) as pilot:
+            await until(pilot, lambda: isinstance(app.screen, SamplingScreen) and not app.screen.busy)
+            text = await open_help(pilot)
+            assert text.startswith("Freedrive is on") and "  t       Tap" in text and "  s       Solve" in text
+            assert "  m       SIM hands" in text and "  i       Which?" in text  # also the keys the footer hides
+            assert "SIM unlock" not in text  # only after a protective stop
+    asyncio.run(run())
+
+
+def status_of(app) -> str:
+    return str(app.screen.query_one(StatusBar).render())
+
+
+def test_stop_shows_stopped_refuses_motion_until_a_confirmed_rearm(tmp_path):
+    async def run():
+        app = FixwizardApp(wizard(tmp_path))
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await at_start(pilot)
+            await press_button(pilot, "#continue")
+            await until(pilot, lambda: isinstance(app.screen, PivotScreen) and not app.screen.busy)
+            await pilot.press("m")
+            await until(pilot, lambda: len(app.screen.workflow.poses("pivot")) == 1 and not app.screen.busy)
+            await pilot.press("f12")
+            await until(pilot, lambda: status_of(app).startswith(" SIMULATED   STOPPED  ^R re-arms | demo cell"))
+            assert "F12 STOP" not in status_of(app)
+            await pilot.press("m")  # a motion key: refused, with why
+            await pilot.pause()
+            assert len(app.screen.workflow.poses("pivot")) == 1
+            assert any("STOPPED: the robot does not move until you re-arm" in str(note.message)
+                       for note in app._notifications)
+            await pilot.press("ctrl+r")
+            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await pilot.press("n")  # not yet
+            await until(pilot, lambda: isinstance(app.screen, PivotScreen))
+            assert app.stopped
+            await rearm(pilot)
+            assert "STOPPED" not in status_of(app) and "F12 STOP" in status_of(app)
+            await pilot.press("m")
+            await until(pilot, lambda: len(app.screen.workflow.poses("pivot")) == 2)
+    asyncio.run(run())
+
+
+def test_a_protective_stop_makes_the_wizard_stopped_and_rearm_waits_for_the_unlock(tmp_path):
+    async def run():
+        context = wizard_context(tmp_path)
+        app = FixwizardApp(context)
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await until(pilot, lambda: isinstance(app.screen, SamplingScreen) and not app.screen.busy)
+            sampling = app.screen
+            context.robot.inject_fault("protective_stop_during_tap")
+            await pilot.press("m")
+            await until(pilot, lambda: not sampling.busy)
+            await pilot.press("t")
+            await until(pilot, lambda: app.stopped and " STOPPED" in status_of(app))
+            await until(pilot, lambda: app.robot_status.protective_stop)
+            if app.screen is not sampling:  # the error dialog
+                await pilot.press("escape")
+            await assert_in_view(pilot, "escape", "ctrl+q")  # also with the unlock and re-arm keys shown
+            await pilot.press("ctrl+r")
+            await pilot.pause()
+            assert not isinstance(app.screen, Confirm) and app.stopped  # still locked: unlock first
+            await pilot.press("k")
+            await until(pilot, lambda: not app.robot_status.protective_stop)
+            assert app.stopped
+            await rearm(pilot)
+    asyncio.run(run())
+
+
+def test_quitting_while_the_robot_moves_asks_first(tmp_path):
+    async def run():
+        app = FixwizardApp(wizard(tmp_path, pace_s=0.2))
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            await calibrate_by_hand(pilot)
+            await pilot.press("g")
+            await until(pilot, lambda: app.motion_running())
+            await pilot.press("ctrl+q")
+            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            assert "Stop and quit (y)" in str(app.screen.query_one("#yes").label)
+            await pilot.press("n")
+            await until(pilot, lambda: isinstance(app.screen, AutoTapsScreen))
+            assert app.is_running
+            await pilot.press("escape")  # cancels the automatic taps
+            await until(pilot, lambda: not app.motion_running())
+            await pilot.press("ctrl+q")  # nothing moves: quits at once
+            await until(pilot, lambda: not app.is_running)
+    asyncio.run(run())
+
+
+def test_esc_on_the_pivot_asks_before_dropping_the_captured_poses(tmp_path):
+    async def run():
+        app = FixwizardApp(wizard(tmp_path))
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            await press_button(pilot, "#continue")
+            await until(pilot, lambda: isinstance(app.screen, PivotScreen) and not app.screen.busy)
+            pivot = app.screen
+            await pilot.press("m")
+            await until(pilot, lambda: len(pivot.workflow.poses("pivot")) == 1 and not pivot.busy)
+            await pilot.press("escape")
+            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            assert "drops the 1 captured pose;" in str(app.screen.query_one("#dialog-message").render())
+            await pilot.press("n")
+            await until(pilot, lambda: app.screen is pivot)
+            await pilot.press("escape")
+            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await pilot.press("y")
+            await until(pilot, lambda: isinstance(app.screen, StartScreen))
+    asyncio.run(run())
+
+
+def test_on_the_automatic_taps_esc_goes_back_and_next_answers_when_not_yet(tmp_path):
+    async def run():
+        app = FixwizardApp(wizard(tmp_path))
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await at_start(pilot)
+            await calibrate_by_hand(pilot)
+            await pilot.press("n")
+            await pilot.pause()
+            assert isinstance(app.screen, AutoTapsScreen)
+            assert any("Not yet: press g to start the automatic taps" in str(note.message)
+                       for note in app._notifications)
+            await pilot.press("escape")
+            await until(pilot, lambda: isinstance(app.screen, TablePointsScreen))
+    asyncio.run(run())
+
+
+def test_leaving_sampling_asks_and_lands_on_the_start_screen_with_that_session_to_resume(tmp_path):
+    async def run():
+        context = wizard(tmp_path)
+        example = load_calibration(REPO / "calibrations" / "example_matlab_logo.yaml")
+        save_calibration(dataclasses.replace(example, robot=context.robot_name), context.calibrations_dir / "tip.yaml")
+        app = FixwizardApp(context)
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await at_start(pilot)
+            assert app.screen.query_one("#calibration", Select).value != NEW
+            await press_button(pilot, "#continue")
+            await until(pilot, lambda: isinstance(app.screen, SamplingScreen) and not app.screen.busy)
+            session_path = context.session.path
+            await pilot.press("escape")
+            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await pilot.press("y")
+            await until(pilot, lambda: isinstance(app.screen, StartScreen) and bool(app.screen.query("#session")))
+            assert app.screen.query_one("#session", Select).value == str(session_path)
+            await press_button(pilot, "#continue")
+            await until(pilot, lambda: isinstance(app.screen, SamplingScreen))
+            assert any(note.title == "Session resumed" and session_path.name in str(note.message)
+                       for note in app._notifications)
+    asyncio.run(run())
+
+
+def footer_keys(app) -> dict[str, FooterKey]:
+    return {footer_key.key: footer_key for footer_key in app.screen.query_one(Footer).query(FooterKey)}
+
+
+async def assert_in_view(pilot: Pilot, *key_names: str) -> None:
+    app = pilot.app
+    await until(pilot, lambda: bool(app.screen.query(Footer)) and bool(footer_keys(app)))
+    await pilot.pause()
+    shown = footer_keys(app)
+    for name in key_names:
+        assert name in shown, f"{name} not in the footer of {type(app.screen).__name__}"
+        region = shown[name].region
+        assert region.width > 0 and region.right <= SIZE[0], f"{name} cut off on {type(app.screen).__name__}"
+
+
+def test_the_footer_keeps_esc_and_quit_in_view_at_80x24(tmp_path):
+    async def run():
+        context = wizard_context(tmp_path)
+        app = FixwizardApp(context)
+        async with app.run_test(size=SIZE) as pilot:
+            await until(pilot, lambda: isinstance(app.screen, SamplingScreen) and not app.screen.busy)
+            await pilot.pause()
+            await assert_in_view(pilot, "escape", "ctrl+q", "question_mark")
+        app = FixwizardApp(wizard(tmp_path / "calibration"))
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            await assert_in_view(pilot, "ctrl+q", "question_mark")
+            await press_button(pilot, "#continue")
+            await until(pilot, lambda: isinstance(app.screen, PivotScreen) and not app.screen.busy)
+            await pilot.pause()
+            await assert_in_view(pilot, "escape", "ctrl+q", "question_mark")
+    asyncio.run(run())
+
+
+@pytest.mark.asyncio
+async def test_the_newest_tap_stays_in_view_after_25_taps(tmp_path):
+    context = wizard_context(tmp_path)
+    record_spread_taps(context, 24)
+    app = ScreenHost(lambda: SamplingScreen(context))
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        for key in "mt":
+            await until(pilot, lambda: not screen.busy)
+            await pilot.press(key)
+        await until(pilot, lambda: not screen.busy and len(context.session.taps) == 25)
+        await pilot.pause()
+        table = screen.query_one(DataTable)
+        await until(pilot, lambda: table.max_scroll_y > 0 and table.scroll_y == table.max_scroll_y)
+        assert table.cursor_row == 24 and table.size.height >= 4
+    context.session.release()
+
+
+def test_focus_shows_without_colour(tmp_path, monkeypatch):
+    monkeypatch.setenv("NO_COLOR", "1")
+
+    async def run():
+        app = FixwizardApp(wizard(tmp_path))
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            assert "nocolor" in app.pseudo_classes
+            focused = app.screen.query_one("#fixture", Select)
+            other = app.screen.query_one("#units", Select)
+            assert focused.has_focus
+            # a bar glyph left of the focused field, none left of the others; bold reverse on the choice
+            assert focused.styles.border_left[0] == "outer" and other.styles.border_left[0] == "blank"
+            assert app.screen.query_one("#continue").styles.border_left[0] == "blank"
+    asyncio.run(run())
