@@ -5,7 +5,7 @@ inconsistent one."""
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from fixwizard.geometry.se3 import format_ur_pose
+from fixwizard.geometry.se3 import format_ur_pose, rotation_angle_rad
 from fixwizard.solver.estimates import Bounds
 from fixwizard.solver.solve import Mode, Solution
 from fixwizard.workflow.advice import TapAdvice
@@ -53,7 +53,7 @@ def summary_lines(solution: Solution) -> list[str]:
 
 def mode_line(number: int, mode: Mode) -> str:
     x, y, z = mode.base_T_cad[:3, 3] * 1e3
-    angle = np.degrees(Rotation.from_matrix(mode.base_T_cad[:3, :3]).magnitude())
+    angle = np.degrees(rotation_angle_rad(mode.base_T_cad[:3, :3]))
     return (f"  {number}. {mode.probability:6.1%}  x {round(x)} y {round(y)} z {round(z)} mm, turned {round(angle)} "
             f"deg; within {mode.bounds.position_m * 1e3:.1f} mm, {np.degrees(mode.bounds.rotation_rad):.1f} deg")
 

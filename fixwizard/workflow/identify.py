@@ -103,7 +103,7 @@ def _verdict(base_p_taps: np.ndarray, mesh: Path, mesh_units: str, ball_diameter
         spent_s = time.monotonic() - started
         if progress is not None:
             progress(IdentifyStep(mesh, budget, solution.status, spent_s))
-        if solution.status == "inconsistent":
+        if solution.status == "inconsistent" or solution.base_T_cad is None:
             return MeshVerdict(mesh, "ruled out", "no pose of this mesh explains the taps", max_cells=budget)
         distances_mm = 1e3 * tap_surface_distances_m(fixture, base_p_taps, ball_diameter_m, solution.base_T_cad)
         rms_mm, worst_mm = float(np.sqrt(np.mean(distances_mm**2))), float(np.max(np.abs(distances_mm)))
