@@ -13,7 +13,8 @@ unique with the full solve's bounds and at least ``--min-taps`` taps are in, the
 Before each tap it waits for the live check to settle, as an operator waiting for the suggestion would.
 
 It prints the operator's keys, the total time, the longest unresponsive interval (from sending a key to the
-first change of the screen, colours included, polled every ``POLL_S``) and the longest wait without visible progress (the screen
+first change of the screen, colours included, polled every ``POLL_S``) and the longest wait without visible
+progress (the screen
 unchanged while the script waits for the wizard). Targets (issue 19): the whole run under 4 minutes, no key
 unanswered over 100 ms, no wait over 1 s without progress. Nothing asserts them; a step that never comes
 stops the run with the screen it shows.
@@ -242,7 +243,8 @@ def main() -> int:
     unresponsive, stall = worst(run.responses), worst(run.stalls)
     print(f"operator keys: {len(run.keys)} ({taps} taps): {key_text}")
     print(f"total time: {total_s:.1f} s (target under {TARGETS['total_s']:.0f} s)")
-    print(f"longest unresponsive interval: {unresponsive[0].seconds * 1e3:.0f} ms (target {TARGETS['unresponsive_s'] * 1e3:.0f}"
+    print(f"longest unresponsive interval: {unresponsive[0].seconds * 1e3:.0f} ms "
+          f"(target {TARGETS['unresponsive_s'] * 1e3:.0f}"
           " ms); worst:")
     print("\n".join(f"  {item.seconds * 1e3:6.0f} ms  {item.what} on '{item.where}'" for item in unresponsive))
     print(f"longest wait without visible progress: {stall[0].seconds:.1f} s (target {TARGETS['no_progress_s']:.0f} s); "

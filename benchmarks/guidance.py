@@ -31,10 +31,10 @@ something; the summary counts those and the live sets that missed the true pose 
 """
 
 import argparse
-from dataclasses import dataclass, field
 import statistics
 import sys
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np

@@ -76,7 +76,7 @@ def reach_of(run_points: Path, figures: dict) -> tuple[float, float, float]:
     from scipy.spatial.transform import Rotation
 
     from fixwizard.fixture import load_fixture
-    from fixwizard.geometry.se3 import invert, make_transform
+    from fixwizard.geometry.se3 import make_transform
     from fixwizard.points import load_points
     from fixwizard.solver.estimates import BoundCentre
     from fixwizard.solver.reach import reach
@@ -87,7 +87,7 @@ def reach_of(run_points: Path, figures: dict) -> tuple[float, float, float]:
     centre = figures["centre"]
     bound_centre = BoundCentre(Rotation.from_rotvec(centre["rotvec_rad"]), np.array(centre["position_m"]))
     pose = figures["pose"]
-    start = make_transform(Rotation.from_rotvec(pose["rotvec_rad"]), pose["position_m"]) @ invert(fixture.fix_T_cad)
+    start = fixture.base_T_fix(make_transform(Rotation.from_rotvec(pose["rotvec_rad"]), pose["position_m"]))
     found = reach(problem, [start], bound_centre, -fixture.cad_p_center, fixture.oracle.hull_vertices_m,
                   figures["bounds"][2] * 1e-3)
     if found is None:
@@ -122,7 +122,7 @@ def main() -> None:
             wall = statistics.median(seconds for seconds, _ in timings[name])
             walls[name].append(wall)
             peak = max(megabytes for _, megabytes in timings[name])
-            ratios = [bound / reached for bound, reached in zip(figures["bounds"], reach)]
+            ratios = [bound / reached for bound, reached in zip(figures["bounds"], reach, strict=True)]
             position, rotation, displacement = figures["bounds"]
             print(f"{run:10} {name:8} {figures['status']:8} {wall:6.1f} {peak:7.0f} {position:6.2f} {rotation:7.2f} "
                   f"{displacement:7.2f} | {reach[0]:5.2f} {reach[1]:5.2f} {reach[2]:5.2f} | "

@@ -14,6 +14,7 @@ import argparse
 import importlib
 import re
 import sys
+from typing import NoReturn
 
 from fixwizard.errors import FixwizardError, MeshUnitsError, file_problem
 from fixwizard.exit_codes import EXIT_BAD_INPUT, EXIT_CANCELLED, EXIT_CODES, EXIT_OK
@@ -78,7 +79,7 @@ class _Parser(argparse.ArgumentParser):
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = re.compile(r"^-(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?\s*(?:mm|m)?$")
 
-    def error(self, message: str) -> None:
+    def error(self, message: str) -> NoReturn:
         self.print_usage(sys.stderr)
         self.exit(EXIT_BAD_INPUT, f"fixwizard: {message}\n")
 

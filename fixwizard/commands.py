@@ -8,13 +8,13 @@ from pathlib import Path
 from fixwizard import report
 from fixwizard.atomic import check_output
 from fixwizard.errors import InputError
+from fixwizard.exit_codes import EXIT_CODES, EXIT_OK
 from fixwizard.interrupt import run_interruptibly
 from fixwizard.points import write_points
 from fixwizard.solver.search import SearchProgress
 from fixwizard.units import parse_length_m
 from fixwizard.workflow.import_poses import import_pose_dir, load_tip
 from fixwizard.workflow.solve_run import SolveRequest, run_solve, summary_lines
-from fixwizard.exit_codes import EXIT_CODES, EXIT_OK
 
 
 def _print_progress(step: SearchProgress) -> None:

@@ -15,9 +15,9 @@ import numpy as np
 import trimesh
 
 from fixwizard.errors import MeshError, MeshUnitsError
-from fixwizard.geometry.mesh_distance import MeshDistance
 from fixwizard.geometry.meb import minimum_enclosing_ball
-from fixwizard.geometry.se3 import make_transform
+from fixwizard.geometry.mesh_distance import MeshDistance
+from fixwizard.geometry.se3 import invert, make_transform, points_in_frames
 from fixwizard.mesh_hygiene import clean_mesh, refuse_non_finite
 
 METRES_PER_UNIT = {"m": 1.0, "mm": 1e-3}
@@ -54,6 +54,15 @@ class Fixture:
     def fix_T_cad(self) -> np.ndarray:
         """Transform from the CAD frame to the internal frame (a pure shift)."""
         return make_transform(np.eye(3), -self.cad_p_center)
+
+    def base_T_fix(self, base_T_cad: np.ndarray) -> np.ndarray:
+        """The pose of the internal frame when the CAD frame is at ``base_T_cad``."""
+        return base_T_cad @ invert(self.fix_T_cad)
+
+    def signed_distance_at_m(self, base_T_cad: np.ndarray, base_p_points: np.ndarray) -> np.ndarray:
+        """Distance (N,) in m of base-frame points (N, 3) from the surface with the CAD frame at ``base_T_cad``:
+        negative inside a closed mesh, unsigned on an open one (``DistanceOracle.signed_distance_m``)."""
+        return self.oracle.signed_distance_at_m(self.base_T_fix(base_T_cad), base_p_points)
 
     @property
     def fix_vertices_m(self) -> np.ndarray:
@@ -206,6 +215,12 @@ class DistanceOracle:
         cost."""
         low, high, _ = self._signed_interval_m(points_m, signed, None, cap_m)
         return np.where(np.isfinite(high), 0.5 * (low + high), low)
+
+    def signed_distance_at_m(self, base_T_fix: np.ndarray, base_p_points: np.ndarray) -> np.ndarray:
+        """``signed_distance_m`` (N,) of base-frame points (N, 3) with the mesh's (internal) frame at
+        ``base_T_fix``: the one home of "distance of points at a pose" (``Fixture.signed_distance_at_m`` for a
+        CAD-frame pose)."""
+        return self.signed_distance_m(points_in_frames(base_T_fix[:3, :3], base_T_fix[:3, 3], base_p_points)[0])
 
     def ray_hit_distance_m(self, origins_m: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """Distance (m) along each ray (origins (N, 3) m, unit directions (N, 3)) to the first surface it hits;

@@ -28,8 +28,8 @@ from scipy.spatial.transform import Rotation
 from fixwizard.atomic import write_text_atomic
 from fixwizard.errors import InputError, quoted
 from fixwizard.fixture import Fixture
-from fixwizard.geometry.se3 import make_transform
-from fixwizard.geometry.so3_grid import chord, rotation_angles
+from fixwizard.geometry.se3 import make_transform, rotation_angle_rad
+from fixwizard.geometry.so3_grid import chord
 from fixwizard.solver.estimates import Bounds
 from fixwizard.solver.solve import Solution
 from fixwizard.solver.verdict import STATUSES
@@ -98,7 +98,7 @@ class _Gap:
 def _gap(first: np.ndarray, second: np.ndarray, fixture: Fixture) -> _Gap:
     """The distance of two ``base_T_cad``: any fixture point lies within ``r`` of the mesh's enclosing-ball centre,
     so it moves by at most the centre's displacement plus ``r`` times the chord of the rotation between them."""
-    angle = float(rotation_angles(first[:3, :3], second[:3, :3][None])[0])
+    angle = float(rotation_angle_rad(first[:3, :3].T @ second[:3, :3]))
     centres = [pose[:3, :3] @ fixture.cad_p_center + pose[:3, 3] for pose in (first, second)]
     point_m = float(np.linalg.norm(centres[0] - centres[1])) + fixture.radius_m * float(chord(angle))
     return _Gap(float(np.linalg.norm(first[:3, 3] - second[:3, 3])), angle, point_m)
@@ -203,7 +203,8 @@ def report_dict(solution: Solution, fixture: Fixture, base_p_taps: np.ndarray, b
                    "position_level": solution.stats.position_level, "elapsed_s": round(solution.stats.elapsed_s, 3),
                    "max_cells": float(solution.stats.max_cells)},
         "inputs": {"ball_diameter_m": float(ball_diameter_m), "sample_bound_m": float(sample_bound_m),
-                   "sigma_m": round(float(sigma_m), 10), "points_m": [_rounded(point, POSITION_DECIMALS) for point in base_p_taps]},
+                   "sigma_m": round(float(sigma_m), 10),
+                   "points_m": [_rounded(point, POSITION_DECIMALS) for point in base_p_taps]},
     }
 
 

@@ -44,7 +44,7 @@ def pivot_poses(rotvecs_rad: np.ndarray, noise_m: float = 0.0, seed: int = 0) ->
     base_R_tcp = (Rotation.from_rotvec(rotvecs_rad) * Rotation.from_rotvec([np.pi, 0, 0])).as_matrix()
     noise = np.random.default_rng(seed).uniform(-noise_m, noise_m, (len(base_R_tcp), 3))
     return np.array([make_transform(rotation, base_p_pivot - rotation @ TCP_P_TIP_M + offset)
-                     for rotation, offset in zip(base_R_tcp, noise)])
+                     for rotation, offset in zip(base_R_tcp, noise, strict=True)])
 
 
 def abc_taps() -> np.ndarray:

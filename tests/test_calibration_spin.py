@@ -18,7 +18,7 @@ HOVER = tilted_hover_poses(BASE_T_TABLE, TCP_P_TIP_M, 0.005, 0.01)
 def spun(spins_deg: np.ndarray) -> np.ndarray:
     """The 40 hover poses of the tilted plan, the i-th turned by ``spins_deg[i]`` about its own tool axis."""
     return np.array([pose @ make_transform(Rotation.from_euler("z", spin, degrees=True), np.zeros(3))
-                     for pose, spin in zip(HOVER, spins_deg)])
+                     for pose, spin in zip(HOVER, spins_deg, strict=True)])
 
 
 def test_tilting_keeps_the_heading_and_spinning_turns_it_by_the_spin():

@@ -43,6 +43,7 @@ def solve_args(folder, points="taps.yaml", *extra):
             "--ball-diameter", "3mm", "--max-cells", "1e6", "-q", "-o", str(folder / "report.yaml"), *extra]
 
 
+@pytest.mark.slow
 def test_solve_prints_a_summary_and_writes_a_loadable_report(bracket, capsys):
     folder, taps, base_T_cad = bracket
     assert main(solve_args(folder)) == 0
@@ -54,6 +55,7 @@ def test_solve_prints_a_summary_and_writes_a_loadable_report(bracket, capsys):
     assert np.array(loaded.data["inputs"]["points_m"]) == pytest.approx(taps, abs=1e-7)  # 0.1 um
 
 
+@pytest.mark.slow
 def test_a_csv_points_file_works_like_yaml(bracket, capsys):
     folder, taps, _ = bracket
     np.savetxt(folder / "taps.csv", taps, delimiter=",", header="x,y,z", comments="")
@@ -90,6 +92,7 @@ def test_nan_in_the_points_file_is_refused_with_the_tap_number(bracket, capsys):
     assert "tap 2" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_a_tap_5cm_off_the_fixture_is_inconsistent_and_named(bracket, capsys):
     folder, taps, _ = bracket
     off = taps.copy()
@@ -132,6 +135,7 @@ def test_import_poses_reads_a_tip_calibration(tmp_path, real_data):
     assert len(yaml.safe_load(output.read_text())["points_m"]) == 20
 
 
+@pytest.mark.slow
 def test_the_bundled_demo_solves(tmp_path, capsys):
     args = ["solve", str(DEMO_MESH), str(DEMO_TAPS),
             "--mesh-units", "mm", "--sample-bound", "1mm", "--ball-diameter", "3mm", "--max-cells", "2e5", "-q",
@@ -143,6 +147,7 @@ def test_the_bundled_demo_solves(tmp_path, capsys):
     assert np.linalg.norm(loaded.center_base_T_cad[:3, 3] - values[:3]) <= loaded.position_bound_m
 
 
+@pytest.mark.slow
 def test_solve_takes_ball_diameter_and_sample_bound_from_a_tip_calibration(tmp_path, real_data, capsys):
     calibration = REPO / "calibrations" / "example_matlab_logo.yaml"
     points = tmp_path / "expert.yaml"
@@ -217,6 +222,7 @@ def test_help_and_argument_errors_answer_without_loading_the_heavy_libraries():
     assert result.returncode == 1 and "'-1mm' must be a positive length" in result.stderr
 
 
+@pytest.mark.slow
 def test_ctrl_c_during_a_solve_exits_130_within_a_second_without_a_traceback(bracket, tmp_path):
     import signal
     import subprocess

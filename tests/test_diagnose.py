@@ -2,13 +2,13 @@
 is named with its distance at the pose the others fit, a wrong ball is not blamed on a tap, a sample bound too
 small is bracketed, and taps of another size than the mesh point at the mesh or its units."""
 
-import numpy as np
-import pytest
-from conftest import real_taps
-
-from fixwizard.fixture import load_fixture
 from dataclasses import replace
 
+import numpy as np
+import pytest
+
+from conftest import real_taps
+from fixwizard.fixture import load_fixture
 from fixwizard.solver.search import search
 from fixwizard.solver.solve import solve
 
@@ -24,6 +24,7 @@ def _codes(solution) -> list[str]:
     return [cause.code for cause in solution.diagnosis.causes]
 
 
+@pytest.mark.slow
 def test_a_tap_raised_50_mm_is_named_first_with_its_distance_at_the_pose_the_others_fit(expert):
     fixture, taps = expert
     raised = taps.copy()
@@ -35,6 +36,7 @@ def test_a_tap_raised_50_mm_is_named_first_with_its_distance_at_the_pose_the_oth
     assert "Tap 5 lies" in solution.warnings[1].message
 
 
+@pytest.mark.slow
 def test_a_wrong_ball_diameter_is_not_blamed_on_a_tap(expert):
     fixture, taps = expert
     solution = solve(fixture, taps, 0.006, BOUND_M)
@@ -43,6 +45,7 @@ def test_a_wrong_ball_diameter_is_not_blamed_on_a_tap(expert):
     assert solution.diagnosis.ball_diameter_m < 0.0055
 
 
+@pytest.mark.slow
 def test_a_sample_bound_too_small_is_bracketed(expert):
     fixture, taps = expert
     solution = solve(fixture, taps, BALL_M, 0.0002)

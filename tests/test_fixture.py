@@ -3,9 +3,11 @@
 import numpy as np
 import pytest
 import trimesh
+from scipy.spatial.transform import Rotation
 
 from fixwizard.errors import MeshError, MeshUnitsError
 from fixwizard.fixture import load_fixture
+from fixwizard.geometry.se3 import make_transform, transform_points
 from fixwizard.synthetic import closest_on_triangles, exact_distances_m, touching_ball_centres
 from shapes import SHAPES, as_fixture
 
@@ -91,6 +93,22 @@ def test_signed_distance_is_negative_inside_a_closed_mesh():
     fixture = as_fixture("cube")
     points = np.array([[0.0, 0, 0], [0.0, 0, 0.05]])
     assert fixture.oracle.signed_distance_m(points) == pytest.approx([-0.03, 0.02], abs=1e-6)
+
+
+def test_the_distance_of_base_frame_points_at_a_pose_is_their_distance_in_the_cad_frame():
+    """``Fixture.signed_distance_at_m``: points given in the base frame with the CAD frame at ``base_T_cad``."""
+    fixture = as_fixture("l_prism")
+    base_T_cad = make_transform(Rotation.from_rotvec([0.3, -1.2, 2.0]), np.array([0.4, -0.1, 0.05]))
+    rng = np.random.default_rng(9)
+    cad_p_points = fixture.mesh.bounds[0] - 0.01 + rng.random((2000, 3)) * (fixture.mesh.extents + 0.02)
+    base_p_points = transform_points(base_T_cad, cad_p_points)
+    expected = fixture.oracle.signed_distance_m(cad_p_points - fixture.cad_p_center)
+    assert np.any(expected < 0.0) and np.any(expected > 0.0)
+    assert np.allclose(fixture.signed_distance_at_m(base_T_cad, base_p_points), expected, rtol=0.0, atol=1e-12)
+    base_T_fix = fixture.base_T_fix(base_T_cad)
+    assert np.allclose(transform_points(base_T_fix, cad_p_points - fixture.cad_p_center), base_p_points, atol=1e-15)
+    assert np.allclose(fixture.oracle.signed_distance_at_m(base_T_fix, base_p_points), expected, rtol=0.0,
+                       atol=1e-12)
 
 
 def test_sign_is_right_where_ray_parity_fails():

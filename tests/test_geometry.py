@@ -8,7 +8,8 @@ from scipy.spatial.transform import Rotation
 
 from fixwizard.geometry.meb import minimum_enclosing_ball
 from fixwizard.geometry.octree import PositionGrid
-from fixwizard.geometry.so3_grid import RotationGrid, rotation_angles
+from fixwizard.geometry.se3 import rotation_angle_rad
+from fixwizard.geometry.so3_grid import RotationGrid
 from fixwizard.geometry.socp_box import ball_intersection_box
 
 
@@ -105,13 +106,42 @@ def test_rotation_cell_centre_matrices_are_proper_rotations_and_match_the_centre
     assert np.allclose(grid.centers(5, cells).as_matrix(), matrices, atol=1e-14)
 
 
-@pytest.mark.parametrize("scale", [1.0, 1e-7])
-def test_rotation_angles_match_the_relative_rotation_magnitude_at_large_and_tiny_angles(scale):
+def _rotations_by(angles_rad: np.ndarray, seed: int) -> Rotation:
+    """Rotations by the given angles about random axes."""
+    axes = np.random.default_rng(seed).normal(size=(len(angles_rad), 3))
+    return Rotation.from_rotvec(axes / np.linalg.norm(axes, axis=1, keepdims=True) * angles_rad[:, None])
+
+
+def test_the_rotation_angle_matches_scipy_for_random_rotations():
+    rotations = Rotation.random(20000, random_state=3)
+    assert np.allclose(rotation_angle_rad(rotations.as_matrix()), rotations.magnitude(), rtol=0.0, atol=1e-14)
+
+
+@pytest.mark.parametrize("angle_rad", [1e-12, 1e-9, 1e-6, 1e-3])
+def test_the_rotation_angle_keeps_its_digits_near_zero(angle_rad):
+    """Where ``arccos((trace - 1) / 2)`` returns 0 (the cosine rounds to 1), the angle keeps 7 digits."""
+    rotations = _rotations_by(np.full(1000, angle_rad), 4)
+    assert np.allclose(rotation_angle_rad(rotations.as_matrix()), angle_rad, rtol=1e-7, atol=0.0)
+
+
+@pytest.mark.parametrize("below_pi_rad", [0.0, 1e-12, 1e-9, 1e-6, 1e-3])
+def test_the_rotation_angle_keeps_its_digits_near_a_half_turn(below_pi_rad):
+    """Near pi ``arccos`` of the trace errs by about ``sqrt(u)`` (1e-8 rad); the angle stays within 1e-13."""
+    rotations = _rotations_by(np.full(1000, np.pi - below_pi_rad), 5)
+    assert np.allclose(rotation_angle_rad(rotations.as_matrix()), np.pi - below_pi_rad, rtol=0.0, atol=1e-13)
+    assert np.allclose(rotation_angle_rad(rotations.as_matrix()), rotations.magnitude(), rtol=0.0, atol=1e-13)
+
+
+def test_the_angle_between_two_rotations_is_the_angle_of_the_relative_rotation_and_broadcasts():
     reference = Rotation.random(random_state=8)
-    offsets = Rotation.from_rotvec(np.random.default_rng(8).normal(size=(5000, 3)) * scale)
-    others = reference * offsets
-    angles = rotation_angles(reference.as_matrix(), others.as_matrix())
-    assert np.allclose(angles, offsets.magnitude(), rtol=1e-7, atol=1e-15)
+    offsets = _rotations_by(np.geomspace(1e-9, np.pi, 5000), 8)
+    others = (reference * offsets).as_matrix()
+    angles = rotation_angle_rad(reference.as_matrix().T @ others)
+    assert angles.shape == (5000,)
+    assert np.allclose(angles, offsets.magnitude(), rtol=1e-7, atol=1e-14)
+    assert rotation_angle_rad(others.reshape(50, 100, 3, 3)).shape == (50, 100)
+    assert float(rotation_angle_rad(np.eye(3))) == 0.0
+    assert float(rotation_angle_rad(np.diag([1.0, -1.0, -1.0]))) == pytest.approx(np.pi, abs=1e-15)
 
 
 def test_position_cell_bound_holds_for_points_in_the_cell():

@@ -17,13 +17,24 @@ from scipy.spatial.transform import Rotation
 from fixwizard.geometry.se3 import invert, make_transform, transform_points
 from fixwizard.solver.cells import root_cells
 from fixwizard.solver.estimates import bound_centre, cell_bound_figures
-from fixwizard.solver.search import (SearchProblem, add_taps, filter_cells, rotation_splits_first, search,
-                                     start_position_grid)
+from fixwizard.solver.search import (
+    SearchProblem,
+    add_taps,
+    filter_cells,
+    rotation_splits_first,
+    search,
+    start_position_grid,
+)
 from fixwizard.solver.solve import solve
 from fixwizard.synthetic import bounded_noise, touching_ball_centres, touching_ball_contacts
 from shapes import SHAPES, as_fixture
 
 TRIALS_PER_SHAPE = 30
+
+
+def trial_seeds(count: int) -> list:
+    """Seeds ``0 .. count - 1``; all but the first are ``slow`` (the fast tier runs one trial per shape)."""
+    return [pytest.param(seed, marks=() if seed == 0 else pytest.mark.slow) for seed in range(count)]
 FIXTURES = {name: as_fixture(name) for name in SHAPES}
 
 
@@ -49,6 +60,7 @@ def largest_vertex_displacement_m(fixture, first: np.ndarray, second: np.ndarray
                                        - transform_points(second, fixture.mesh.vertices), axis=1)))
 
 
+@pytest.mark.slow  # full solves, 10-30 s each
 @pytest.mark.parametrize("seed", range(TRIALS_PER_SHAPE))
 @pytest.mark.parametrize("name", sorted(SHAPES))
 def test_true_pose_is_inside_the_guaranteed_set_and_bounds(name, seed):
@@ -73,7 +85,7 @@ def true_cell_mask(cells, base_T_fix: np.ndarray) -> np.ndarray:
     return (cells.rotation_cells == rotation) & np.all(cells.position_cells == position, axis=1)
 
 
-@pytest.mark.parametrize("seed", range(TRIALS_PER_SHAPE))
+@pytest.mark.parametrize("seed", trial_seeds(TRIALS_PER_SHAPE))
 @pytest.mark.parametrize("name", sorted(SHAPES))
 def test_true_cell_survives_every_level_down_to_fine_cells(name, seed):
     fixture, base_T_cad, taps, ball_diameter, sample_bound, _ = random_case(name, seed)
@@ -114,6 +126,7 @@ def symmetric_case(name: str, seed: int):
     return fixture, base_T_cad, transform_points(base_T_cad, centres) + bounded_noise(len(centres), 0.0005, rng)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, symmetries, max_cells", [("brick", 4, 8e6), ("triangular_prism", 6, 8e6)])
 def test_discrete_symmetry_gives_one_mode_per_symmetric_pose(name, symmetries, max_cells):
     fixture, base_T_cad, taps = symmetric_case(name, seed=3)
@@ -127,6 +140,7 @@ def test_discrete_symmetry_gives_one_mode_per_symmetric_pose(name, symmetries, m
     assert solution.contains(base_T_cad)
 
 
+@pytest.mark.slow
 def test_an_asymmetric_fixture_tapped_all_over_is_unique():
     fixture = FIXTURES["l_prism"]
     rng = np.random.default_rng(5)
@@ -145,11 +159,11 @@ def ancestors_in(cells, coarse) -> np.ndarray:
     rotations = cells.rotation_grid.ancestors(cells.rotation_level, cells.rotation_cells, coarse.rotation_level)
     positions = cells.position_cells >> position_steps
     assert rotation_steps >= 0 and position_steps >= 0
-    known = {(int(r), *map(int, p)) for r, p in zip(coarse.rotation_cells, coarse.position_cells)}
-    return np.array([(int(r), *map(int, p)) in known for r, p in zip(rotations, positions)])
+    known = {(int(r), *map(int, p)) for r, p in zip(coarse.rotation_cells, coarse.position_cells, strict=True)}
+    return np.array([(int(r), *map(int, p)) in known for r, p in zip(rotations, positions, strict=True)])
 
 
-@pytest.mark.parametrize("seed", range(12))
+@pytest.mark.parametrize("seed", trial_seeds(12))
 @pytest.mark.parametrize("name", sorted(SHAPES))
 def test_adding_taps_only_removes_poses_and_keeps_the_true_one(name, seed):
     fixture, base_T_cad, taps, ball_diameter, sample_bound, max_cells = random_case(name, seed)

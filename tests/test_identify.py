@@ -4,12 +4,12 @@ fitting meshes give a warning, and a mesh that cannot be read is reported withou
 import shutil
 
 import pytest
-from shapes import l_prism
 
 from fixwizard.cli import main
 from fixwizard.demo import DEMO_MESH, DEMO_TAPS
 from fixwizard.points import load_points
 from fixwizard.workflow.identify import identify, summary_lines
+from shapes import l_prism
 
 BUDGET = 1e7
 FLAGS = ["--mesh-units", "mm", "--sample-bound", "1mm", "--ball-diameter", "3mm", "-q"]
@@ -25,6 +25,7 @@ def other_mesh(tmp_path):
     return path
 
 
+@pytest.mark.slow
 def test_the_right_mesh_fits_and_another_is_ruled_out(other_mesh):
     verdicts = identify(load_points(DEMO_TAPS), [(other_mesh, "mm"), (DEMO_MESH, "mm")], 0.003, 0.001, BUDGET)
     assert [(verdict.mesh, verdict.verdict) for verdict in verdicts] == [(other_mesh, "ruled out"),
@@ -32,6 +33,7 @@ def test_the_right_mesh_fits_and_another_is_ruled_out(other_mesh):
     assert verdicts[1].rms_mm < 1.0
 
 
+@pytest.mark.slow
 def test_the_command_warns_when_two_meshes_fit(tmp_path, capsys):
     twin = tmp_path / "twin.stl"
     shutil.copy(DEMO_MESH, twin)
@@ -49,10 +51,12 @@ def test_no_fitting_mesh_exits_2_and_an_unreadable_one_is_reported(tmp_path, oth
     assert "no mesh fits: check the units" in out
 
 
+@pytest.mark.slow
 def test_a_box_the_size_of_the_logo_is_not_called_a_fit_for_the_logo_taps(tmp_path, real_data):
     """At the old default budget a plain 180 x 180 x 59 mm box "fitted" the MATLAB logo taps as well as the logo."""
-    from conftest import real_taps
     import trimesh
+
+    from conftest import real_taps
 
     box = tmp_path / "box.stl"
     trimesh.creation.box((0.18, 0.18, 0.0587)).export(box)

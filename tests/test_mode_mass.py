@@ -4,12 +4,12 @@ symmetry is found from a rough guess; masses become shares."""
 
 import numpy as np
 import pytest
-from shapes import as_fixture
 from scipy.spatial.transform import Rotation
 
 from fixwizard.geometry.se3 import make_transform
 from fixwizard.solver.mode_mass import fixture_symmetry, laplace_peak, mode_peak, shares_of
 from fixwizard.synthetic import touching_ball_centres
+from shapes import as_fixture
 
 BALL_RADIUS_M = 0.0015
 SIGMA_M = 0.001 / 3

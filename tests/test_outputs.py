@@ -11,14 +11,14 @@ from pathlib import Path
 
 import pytest
 import yaml
-from conftest import fill_disk
-from tui_cell import wizard_context
 
+from conftest import fill_disk
 from fixwizard.atomic import check_output, write_text_atomic
 from fixwizard.cli import EXIT_CODES, main
 from fixwizard.demo import DEMO_MESH, DEMO_TAPS
 from fixwizard.errors import InputError
 from fixwizard.workflow.wizard_report import write_session_report
+from tui_cell import wizard_context
 
 REPO = Path(__file__).resolve().parents[1]
 CALIBRATION = REPO / "calibrations" / "example_matlab_logo.yaml"
@@ -81,6 +81,7 @@ def test_a_folder_as_output_is_refused_with_a_file_name_to_use(demo, capsys):
     refused(capsys, solve(demo, "-o", str(demo / "reports")), "is a folder", str(demo / "reports" / "report.yaml"))
 
 
+@pytest.mark.slow
 def test_a_symlink_output_is_written_through_to_its_target_atomically(demo, capsys):
     target = demo / "archive" / "report.yaml"
     target.parent.mkdir()

@@ -3,14 +3,16 @@ guaranteed set and bounds: a cross-check of the guarantee from the other side.""
 
 import numpy as np
 import pytest
-from conftest import real_taps
 from scipy.spatial.transform import Rotation
 
+from conftest import real_taps
 from fixwizard.fixture import load_fixture
 from fixwizard.geometry.se3 import invert, transform_points
 from fixwizard.solver.estimates import BoundCentre
 from fixwizard.solver.reach import certified, pose_figures, reach
 from fixwizard.solver.solve import solve
+
+pytestmark = pytest.mark.slow  # real-data solves pushed outward, 15-40 s each
 
 
 @pytest.mark.parametrize("run", ["student_3", "expert"])

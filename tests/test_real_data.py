@@ -11,6 +11,8 @@ from fixwizard.geometry.se3 import transform_points
 from fixwizard.solver.estimates import rotation_center
 from fixwizard.solver.solve import solve
 
+pytestmark = pytest.mark.slow  # solves of the paper's real runs at full budget (minutes in all)
+
 TOLERANCE = 1.25  # within 25 % of the published bounds, or tighter
 
 

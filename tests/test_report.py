@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 import yaml
 from scipy.spatial.transform import Rotation
-from shapes import l_prism
 
 from fixwizard import report
 from fixwizard.errors import InputError
@@ -18,6 +17,7 @@ from fixwizard.geometry.se3 import make_transform, transform_points
 from fixwizard.solver.estimates import Bounds
 from fixwizard.solver.solve import solve
 from fixwizard.synthetic import bounded_noise, touching_ball_centres
+from shapes import l_prism
 
 V1_REPORT = Path(__file__).resolve().parent / "data" / "report_v1.yaml"
 

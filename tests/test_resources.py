@@ -7,7 +7,8 @@ import pytest
 from fixwizard.demo import DEMO_TAPS, demo_fixture
 from fixwizard.errors import InputError
 from fixwizard.points import load_points
-from fixwizard.solver import resources, solve as solve_module
+from fixwizard.solver import resources
+from fixwizard.solver import solve as solve_module
 from fixwizard.solver.solve import MAX_TAPS, solve
 
 

@@ -6,7 +6,6 @@ import threading
 
 import numpy as np
 import pytest
-from shapes import as_fixture
 
 from fixwizard.calibration.errors import CalibrationError
 from fixwizard.calibration.taps import ball_centres_m
@@ -16,6 +15,7 @@ from fixwizard.robot.sim_hands import SimulatedHands
 from fixwizard.solver.solve import solve
 from fixwizard.workflow.robot_calibration import TABLE_POINTS, Cancelled, RobotTipCalibration
 from fixwizard.workflow.session import SamplingSession
+from shapes import as_fixture
 
 TRUE_TIP_M = np.array([0.0012, -0.0007, 0.049])
 FK_BOUND_M = 0.0003
@@ -92,6 +92,7 @@ def test_calibration_recovers_the_hidden_tip_and_proposes_a_bound_covering_the_r
     assert workflow.pivot_fit().stats.max_m < 2 * FK_BOUND_M
 
 
+@pytest.mark.slow
 def test_the_calibrated_tip_locates_the_fixture(calibrated, fixture, tmp_path):
     cell, _, _, calibration, _ = calibrated
     hands = SimulatedHands(cell, seed=5)

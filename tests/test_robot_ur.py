@@ -17,8 +17,6 @@ import time
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
-from ur_loopback import LoopbackProcess
-from ur_loopback.arm import SURFACE_STIFFNESS_N_M
 
 from fixwizard.geometry.se3 import make_transform
 from fixwizard.robot import (
@@ -39,6 +37,8 @@ from fixwizard.robot.ur_script import (
     tap_program,
 )
 from fixwizard.robot.ur_state import ControllerState
+from ur_loopback import LoopbackProcess
+from ur_loopback.arm import SURFACE_STIFFNESS_N_M
 
 # any loopback address works; set UR_LOOPBACK_HOST=127.0.0.2 to test beside something holding 127.0.0.1's ports
 HOST = os.environ.get("UR_LOOPBACK_HOST", "127.0.0.1")
@@ -217,6 +217,7 @@ def test_connect_to_nothing_names_the_port():
     assert time.monotonic() - started < 5.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("port, named", [("rtde", "the RTDE data stream \\(port 30004\\)"),
                                          ("dashboard", "the dashboard server \\(port 29999\\)")])
 def test_connect_to_a_silent_port_fails_within_its_deadline_and_names_it(start_controller, port, named):
@@ -231,6 +232,7 @@ def test_connect_to_a_silent_port_fails_within_its_deadline_and_names_it(start_c
     assert robot.link_pid is None and not robot.status().connected
 
 
+@pytest.mark.slow
 def test_connect_to_a_silent_script_port_says_the_program_did_not_start(start_controller):
     controller = start_controller()
     controller.silence("script")
@@ -466,6 +468,7 @@ def test_a_link_dropped_mid_tap_stops_the_arm_before_the_error_and_reconnect_wor
     np.testing.assert_allclose(result.base_T_tcp_contact, controller.contact_poses()[-1], atol=2e-6)
 
 
+@pytest.mark.slow
 def test_a_frozen_link_shows_disconnected_within_a_second_and_stops_the_arm(robot, controller):
     assert robot.status().mode == "ready"
     controller.freeze_link()
@@ -493,6 +496,7 @@ def test_a_crashed_link_process_leaves_the_wizard_running(robot, controller, kil
     assert robot.status().mode == "ready"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("stall_s", [0.2, 0.4, 1.0, 3.0])
 def test_the_tap_travel_holds_on_the_controller_when_the_pc_stalls(start_controller, connect, stall_s):
     """A 20 mm tap at 50 mm/s into nothing; the link process is frozen (SIGSTOP) for ``stall_s`` partway."""

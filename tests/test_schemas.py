@@ -11,8 +11,6 @@ import jsonschema
 import numpy as np
 import pytest
 import yaml
-from test_calibration_helpers import synthetic_steps
-from tui_cell import truth_calibration
 
 from fixwizard import report
 from fixwizard.calibration.calibrate import calibrate_tip
@@ -25,6 +23,8 @@ from fixwizard.tui.context import WizardContext
 from fixwizard.tui.sessions import start_session
 from fixwizard.workflow.session import SamplingSession
 from fixwizard.workflow.wizard_report import session_report
+from test_calibration_helpers import synthetic_steps
+from tui_cell import truth_calibration
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE_CALIBRATION = REPO / "calibrations" / "example_matlab_logo.yaml"
@@ -84,7 +84,8 @@ def test_reports_written_by_solve_match_the_schema(demo_reports, name):
 
 def test_the_wizard_report_matches_the_schema(tmp_path):
     fixture, calibration = demo_fixture(), truth_calibration(demo_cell(0))
-    with SamplingSession.create(tmp_path / "s.jsonl", {"name": "demo_bracket"}, {"tcp_p_tip_m": [0, 0, 0.1]}) as session:
+    with SamplingSession.create(tmp_path / "s.jsonl", {"name": "demo_bracket"},
+                                {"tcp_p_tip_m": [0, 0, 0.1]}) as session:
         for point in yaml.safe_load(DEMO_TAPS.read_text())["points_m"]:
             session.record_tap(np.eye(4), base_p_ball_m=point)
         solution = solve(fixture, session.base_p_taps, 0.003, 0.001, max_cells=2e5, max_samples=500)

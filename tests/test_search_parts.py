@@ -70,7 +70,7 @@ def test_a_cached_lattice_is_the_computed_one_and_a_damaged_cache_file_is_rebuil
     built = DistanceGrid(fixture.oracle)
     [cached] = tmp_path.glob("lattice-*.npz")
     loaded = DistanceGrid(fixture.oracle)
-    for mine, theirs in zip(built.kernel_arguments, loaded.kernel_arguments):
+    for mine, theirs in zip(built.kernel_arguments, loaded.kernel_arguments, strict=True):
         assert np.array_equal(mine, theirs)
     cached.write_bytes(b"not a lattice")
     rebuilt = DistanceGrid(fixture.oracle)

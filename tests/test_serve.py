@@ -16,13 +16,13 @@ from pathlib import Path
 
 import pytest
 import yaml
-from test_report import V1_REPORT
 
 from fixwizard import report
 from fixwizard.cli import main
 from fixwizard.errors import InputError
 from fixwizard.serve import FixtureService, make_server, parse_duration_s
 from fixwizard.workflow.cell_reports import scan
+from test_report import V1_REPORT
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "report.yaml"
 REPO = Path(__file__).resolve().parents[1]
@@ -213,6 +213,7 @@ def test_the_newest_report_of_each_name_wins_by_its_creation_time(tmp_path):
     assert scan(tmp_path).newest["bracket"].path.name == "a.yaml"
 
 
+@pytest.mark.slow
 def test_the_serve_command_serves_until_interrupted(cell):
     process = subprocess.Popen([sys.executable, "-m", "fixwizard.cli", "serve", "--reports", str(cell), "--host",
                                 "127.0.0.1", "--port", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,

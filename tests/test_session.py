@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import fill_disk
 
+from conftest import fill_disk
 from fixwizard.geometry.se3 import make_transform
 from fixwizard.points import load_points
 from fixwizard.workflow.session import SamplingSession, SessionError, find_unfinished
@@ -217,8 +217,8 @@ def test_a_full_disk_mid_record_loses_nothing_and_the_next_tap_does_not_follow_t
         session.record_tap(pose(index))
     saved = session.path.read_bytes()
     FailingWrites(monkeypatch, session._handle)
-    with pytest.raises(SessionError, match="the disk is full; free some space on it. This tap was not saved; everything saved "
-                                           "before is kept"):
+    with pytest.raises(SessionError, match="the disk is full; free some space on it. This tap was not saved; "
+                                           "everything saved before is kept"):
         session.record_tap(pose(10))
     assert session.path.read_bytes() == saved  # the partial record was cut off again
     assert len(session.taps) == 10

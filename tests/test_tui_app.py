@@ -7,10 +7,10 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+import pytest
 from textual.pilot import Pilot
 from textual.widgets import Button, Input, Select, Static
 
-from pilot_wait import until
 from fixwizard.calibration.store import load_calibration, save_calibration
 from fixwizard.demo import DEMO_MESH, demo_fixture
 from fixwizard.tui import keys
@@ -25,6 +25,7 @@ from fixwizard.tui.status import StatusBar
 from fixwizard.tui.tip_calibration_auto import AutoTapsScreen
 from fixwizard.tui.tip_calibration_hands import PivotScreen, TablePointsScreen
 from fixwizard.tui.tip_calibration_result import CalibrationResultScreen
+from pilot_wait import until
 
 SEED = 3
 SIZE = (80, 24)
@@ -140,6 +141,7 @@ def test_a_typed_path_that_is_no_mesh_is_refused_with_the_reason(tmp_path, monke
     asyncio.run(run())
 
 
+@pytest.mark.slow
 def test_a_new_tip_calibration_through_the_screens_is_saved_and_finds_the_hidden_tip(tmp_path):
     async def run():
         context = wizard(tmp_path)
@@ -170,6 +172,7 @@ def recorded(workflow) -> dict[str, int]:
     return {step: len(workflow.poses(step)) for step in ("table", "tilted")}
 
 
+@pytest.mark.slow
 def test_cancel_during_the_automatic_taps_keeps_the_taps_and_going_on_continues(tmp_path):
     async def run():
         context = wizard(tmp_path, pace_s=0.02)
@@ -194,6 +197,7 @@ def test_cancel_during_the_automatic_taps_keeps_the_taps_and_going_on_continues(
     asyncio.run(run())
 
 
+@pytest.mark.slow
 def test_a_protective_stop_during_a_tap_is_explained_and_unlocking_recovers(tmp_path):
     async def run():
         context = wizard(tmp_path)
@@ -243,6 +247,7 @@ class StopCounter:
         return getattr(self.cell, name)
 
 
+@pytest.mark.slow
 def test_the_stop_key_halts_the_robot_from_any_screen_and_keeps_the_taps(tmp_path):
     async def run():
         context = wizard(tmp_path, pace_s=0.03)
@@ -267,6 +272,7 @@ def test_the_stop_key_halts_the_robot_from_any_screen_and_keeps_the_taps(tmp_pat
     asyncio.run(run())
 
 
+@pytest.mark.slow
 def test_quitting_during_the_automatic_taps_stops_them_after_the_current_tap(tmp_path):
     async def run():
         app = FixwizardApp(wizard(tmp_path, pace_s=0.2))

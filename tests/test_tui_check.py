@@ -9,9 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from pilot_wait import until
 from textual.widgets import DataTable, Select, Static
-from tui_cell import SAMPLE_BOUND_M, ScreenHost, spread_taps, truth_calibration
 
 from fixwizard import report
 from fixwizard.demo import demo_cell, demo_fixture
@@ -23,6 +21,8 @@ from fixwizard.tui.check import CheckScreen
 from fixwizard.tui.context import WizardContext
 from fixwizard.tui.launch import simulated_context
 from fixwizard.tui.start import StartScreen
+from pilot_wait import until
+from tui_cell import SAMPLE_BOUND_M, ScreenHost, spread_taps, truth_calibration
 
 SIZE = (80, 24)
 SEED = 3
@@ -49,7 +49,8 @@ def context_for(tmp_path, calibrated, push_m: float = 0.0) -> WizardContext:
     report.write(tmp_path / "reports" / "demo_bracket-1.yaml", data)
     base_T_cad = cell.truth.base_T_cad.copy()
     base_T_cad[0, 3] += push_m
-    checked = SimulatedCell.with_fixture(cell.fixture, seed=5, base_T_cad=base_T_cad, tcp_p_tip_m=cell.truth.tcp_p_tip_m)
+    checked = SimulatedCell.with_fixture(cell.fixture, seed=5, base_T_cad=base_T_cad,
+                                         tcp_p_tip_m=cell.truth.tcp_p_tip_m)
     checked.connect()
     return WizardContext(robot=checked, robot_name="simulated cell", simulated=True,
                          hands=SimulatedHands(checked, seed=2), reports_dir=tmp_path / "reports",
@@ -89,6 +90,7 @@ async def check(pilot, screen: CheckScreen) -> str:
     return text_of(screen, "#check-verdict")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("push_m, verdict", [(0.0, "consistent with the report"),
                                              (0.004, "MOVED: no pose the report allows explains the 4 taps")])
 def test_four_suggested_taps_tell_whether_the_fixture_moved(tmp_path, calibrated, push_m, verdict):

@@ -4,10 +4,9 @@ simulator's hidden pose of the fixture."""
 
 import asyncio
 
+import pytest
 from textual.pilot import Pilot
 from textual.widgets import Button, Static
-from pilot_wait import until
-from tui_cell import bounds_contain
 
 from fixwizard import report
 from fixwizard.tui.app import FixwizardApp
@@ -18,6 +17,10 @@ from fixwizard.tui.start import StartScreen
 from fixwizard.tui.tip_calibration_auto import AutoTapsScreen
 from fixwizard.tui.tip_calibration_hands import PivotScreen, TablePointsScreen
 from fixwizard.tui.tip_calibration_result import CalibrationResultScreen
+from pilot_wait import until
+from tui_cell import bounds_contain
+
+pytestmark = pytest.mark.slow  # the whole wizard from launch to a report, about a minute
 
 SEED = 5
 SIZE = (80, 24)

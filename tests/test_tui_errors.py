@@ -3,12 +3,12 @@ stop on a UR arm (its dashboard) as its message promises, on the simulated cell 
 
 import asyncio
 
-from pilot_wait import until
 from textual.app import App
 
 from fixwizard.robot.base import ConnectionLost, ProtectiveStop
 from fixwizard.robot.ur_errors import LinkLost, URProtectiveStop
 from fixwizard.tui.errors import ErrorModal, error_message
+from pilot_wait import until
 
 
 def buttons_of(error: Exception, simulated: bool, can_unlock: bool) -> dict[str, str]:

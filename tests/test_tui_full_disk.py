@@ -6,12 +6,12 @@ import re
 
 import pytest
 from textual.widgets import DataTable, Static
-from pilot_wait import until
-from tui_cell import ScreenHost, record_spread_taps, wizard_context
 
 from conftest import fill_disk
 from fixwizard.tui.sampling import SamplingScreen
 from fixwizard.workflow.session import SamplingSession
+from pilot_wait import until
+from tui_cell import ScreenHost, record_spread_taps, wizard_context
 
 pytestmark = pytest.mark.asyncio
 SIZE = (80, 24)
@@ -21,6 +21,7 @@ def text_of(screen, selector: str) -> str:
     return str(screen.query_one(selector, Static).content)
 
 
+@pytest.mark.slow
 async def test_a_full_disk_mid_session_strands_no_tap(small_disk):
     context = wizard_context(small_disk)
     record_spread_taps(context, 9)  # the journal's last page is nearly full: the disk fills after a tap or two

@@ -12,13 +12,10 @@ import pkgutil
 import sys
 
 import pytest
-from pilot_wait import until
-from test_tui_app import REPO, SIZE, at_start, calibrate_by_hand, press_button, rearm, wizard
 from textual.pilot import Pilot
 from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Select, Static
 from textual.widgets._footer import FooterKey
-from tui_cell import ScreenHost, record_spread_taps, wizard_context
 
 import fixwizard.tui
 from fixwizard.calibration.store import load_calibration, save_calibration
@@ -32,6 +29,9 @@ from fixwizard.tui.status import StatusBar
 from fixwizard.tui.tip_calibration_auto import AutoTapsScreen
 from fixwizard.tui.tip_calibration_hands import PivotScreen, TablePointsScreen
 from fixwizard.tui.tip_calibration_result import CalibrationResultScreen
+from pilot_wait import until
+from test_tui_app import REPO, SIZE, at_start, calibrate_by_hand, press_button, rearm, wizard
+from tui_cell import ScreenHost, record_spread_taps, wizard_context
 
 
 def wizard_screens() -> list[type[Screen]]:

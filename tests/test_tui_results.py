@@ -8,15 +8,22 @@ import json
 import numpy as np
 import pytest
 from textual.widgets import Input, Static
-from pilot_wait import until
-from tui_cell import (ScreenHost, bounds_contain, cell_of, point_above_fixture_m, record_spread_taps, symmetric_cell,
-                      wizard_context)
 
 from fixwizard import report
 from fixwizard.geometry.se3 import format_ur_pose
 from fixwizard.solver.solve import Solution, solve
 from fixwizard.tui.results import ResultsScreen
 from fixwizard.tui.solve_screen import SolveScreen
+from pilot_wait import until
+from tui_cell import (
+    ScreenHost,
+    bounds_contain,
+    cell_of,
+    point_above_fixture_m,
+    record_spread_taps,
+    symmetric_cell,
+    wizard_context,
+)
 
 pytestmark = pytest.mark.asyncio
 SIZE = (80, 24)
@@ -42,6 +49,7 @@ def tapped(tmp_path):
     context.session.release()
 
 
+@pytest.mark.slow
 async def test_solve_shows_progress_then_results_write_a_report_holding_the_true_pose(tapped):
     app = ScreenHost(lambda: SolveScreen(tapped))
     async with app.run_test(size=SIZE) as pilot:
@@ -105,6 +113,7 @@ async def test_a_solve_input_problem_is_explained_and_esc_goes_back(tapped):
         assert app.results == [None] and tapped.solution is None
 
 
+@pytest.mark.slow
 async def test_the_report_path_can_be_edited_and_a_bad_one_is_explained(tapped, tmp_path):
     tapped.max_cells = 1e5  # a coarse result is enough to write
     solved(tapped)
@@ -131,6 +140,7 @@ async def test_the_report_path_can_be_edited_and_a_bad_one_is_explained(tapped, 
         assert app.results == ["done"]
 
 
+@pytest.mark.slow
 async def test_an_inconsistent_result_names_the_suspect_and_dropping_it_solves(tapped):
     tapped.session.record_tap(np.eye(4), base_p_ball_m=point_above_fixture_m(tapped, 0.05))
     solved(tapped)
@@ -152,6 +162,7 @@ async def test_an_inconsistent_result_names_the_suspect_and_dropping_it_solves(t
         assert again.status == "unique" and again.contains(cell_of(tapped).truth.base_T_cad)
 
 
+@pytest.mark.slow
 async def test_a_wrong_ball_diameter_is_said_plainly_instead_of_blaming_a_tap(tapped):
     tapped.calibration = dataclasses.replace(tapped.calibration, ball_diameter_m=0.006)  # the ball is 3 mm
     solved(tapped)
@@ -170,6 +181,7 @@ async def test_a_wrong_ball_diameter_is_said_plainly_instead_of_blaming_a_tap(ta
         assert f"Ball diameter fitted with the pose: {fitted_mm:.2f} mm." in details and "cells survive" in details
 
 
+@pytest.mark.slow
 async def test_an_ambiguous_result_lists_the_modes_and_says_where_to_tap_next(tmp_path):
     context = wizard_context(tmp_path, cell=symmetric_cell())
     record_spread_taps(context, 12)

@@ -10,7 +10,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from pilot_wait import until
 from textual.widgets import Static
 
 from fixwizard.calibration.store import load_calibration
@@ -21,6 +20,7 @@ from fixwizard.tui.launch import simulated_context
 from fixwizard.tui.sessions import start_session
 from fixwizard.tui.start import NEW, StartScreen
 from fixwizard.workflow.session import SamplingSession
+from pilot_wait import until
 
 SIZE = (80, 24)
 REPO = Path(__file__).resolve().parents[1]

@@ -10,14 +10,14 @@ import json
 import numpy as np
 import pytest
 from textual.widgets import DataTable, Static
-from pilot_wait import until
-from tui_cell import ScreenHost, cell_of, record_spread_taps, wizard_context
 
 from fixwizard.demo import disc_fixture
 from fixwizard.tui.confirm import Confirm, ConfirmMove
 from fixwizard.tui.dialog import Dialog
 from fixwizard.tui.sampling import SamplingScreen
 from fixwizard.workflow import hover
+from pilot_wait import until
+from tui_cell import ScreenHost, cell_of, record_spread_taps, wizard_context
 
 pytestmark = pytest.mark.asyncio
 SIZE = (80, 24)
@@ -50,6 +50,7 @@ def journal_kinds(context) -> list[str]:
     return [json.loads(line)["kind"] for line in context.session.path.read_text().splitlines()[1:]]
 
 
+@pytest.mark.slow
 async def test_twelve_taps_fill_the_table_and_the_journal_and_the_live_check_finds_the_pose(context):
     app = ScreenHost(lambda: SamplingScreen(context))
     cell = cell_of(context)
@@ -82,6 +83,7 @@ async def test_twelve_taps_fill_the_table_and_the_journal_and_the_live_check_fin
         assert cell.status().mode == "idle"  # freedrive off while solving
 
 
+@pytest.mark.slow
 async def test_undo_removes_the_last_tap_and_journals_it(context):
     app = ScreenHost(lambda: SamplingScreen(context))
     async with app.run_test(size=SIZE) as pilot:
@@ -96,6 +98,7 @@ async def test_undo_removes_the_last_tap_and_journals_it(context):
         assert "Tap 4 undone" in text_of(screen, "#note")
 
 
+@pytest.mark.slow
 async def test_protective_stop_during_a_tap_is_explained_and_loses_nothing(context):
     app = ScreenHost(lambda: SamplingScreen(context))
     cell = cell_of(context)
@@ -169,6 +172,7 @@ async def test_leaving_turns_freedrive_off_and_keeps_the_session_open(context):
         assert not context.session.closed and len(context.session.taps) == 1
 
 
+@pytest.mark.slow
 async def test_once_the_pose_is_pinned_down_the_screen_suggests_a_tap_and_moves_above_it_after_confirmation(context):
     app = ScreenHost(lambda: SamplingScreen(context))
     cell = cell_of(context)
@@ -188,7 +192,7 @@ async def test_once_the_pose_is_pinned_down_the_screen_suggests_a_tap_and_moves_
             context.hands.near_fixture(screen.advice.base_p_point_m)
             await tap(pilot, screen, "t")
             count = len(context.session.taps)
-            await until(pilot, lambda: screen.live is not None and screen.live.tap_count == count
+            await until(pilot, lambda count=count: screen.live is not None and screen.live.tap_count == count
                         and screen.live.refined and not live_check_running(app))
         assert "Press g to go above it" in text_of(screen, "#guide")
         before = cell.base_T_tcp()
@@ -211,6 +215,7 @@ async def test_once_the_pose_is_pinned_down_the_screen_suggests_a_tap_and_moves_
         assert np.linalg.norm(contact - target) < 0.006  # the ball touched the fixture at the suggested point
 
 
+@pytest.mark.slow
 async def test_when_the_possible_poses_leave_no_safe_way_down_the_screen_asks_to_guide_the_ball_by_hand(
         context, monkeypatch):
     monkeypatch.setattr(hover, "plan_hover", lambda *args: None)  # as for a set still too wide
@@ -230,6 +235,7 @@ async def test_when_the_possible_poses_leave_no_safe_way_down_the_screen_asks_to
         np.testing.assert_allclose(cell.base_T_tcp()[:3, 3], before[:3, 3], atol=1e-3)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("chosen, conclusion", [
     ("bracket", "Only the chosen fixture fits these taps"),
     ("plate", "The taps do not fit the chosen fixture; they fit Demo bracket (bundled). Leave (Esc), choose it")])

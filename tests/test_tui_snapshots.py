@@ -4,8 +4,7 @@ and look at the SVGs in tests/__snapshots__/."""
 
 from pathlib import Path
 
-from pilot_wait import until
-from test_tui_app import SIZE, at_start, calibrate_by_hand, press_button, wizard
+import pytest
 from textual.pilot import Pilot
 from textual.widgets import Input
 
@@ -14,6 +13,10 @@ from fixwizard.tui.errors import ErrorModal
 from fixwizard.tui.help import HelpScreen
 from fixwizard.tui.tip_calibration_hands import PivotScreen, TablePointsScreen
 from fixwizard.tui.tip_calibration_result import CalibrationResultScreen
+from pilot_wait import until
+from test_tui_app import SIZE, at_start, calibrate_by_hand, press_button, wizard
+
+pytestmark = pytest.mark.slow  # screens driven to a state and rendered, 5-10 s each
 
 
 async def settled(pilot: Pilot) -> None:

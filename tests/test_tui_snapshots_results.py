@@ -7,14 +7,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from pilot_wait import until
-from tui_cell import ScreenHost, point_above_fixture_m, record_spread_taps, symmetric_cell, wizard_context
 
 from fixwizard.solver.search import SearchCancelled, SearchProgress
 from fixwizard.solver.solve import solve
 from fixwizard.tui.results import ResultsScreen
 from fixwizard.tui.sampling import SamplingScreen
 from fixwizard.tui.solve_screen import SolveScreen
+from pilot_wait import until
+from tui_cell import ScreenHost, point_above_fixture_m, record_spread_taps, symmetric_cell, wizard_context
+
+pytestmark = pytest.mark.slow  # solves behind the screens (20 s to set up), 15-30 s each
 
 SIZE = (80, 24)
 NOW = dt.datetime(2026, 11, 24, 10, 15, 0)

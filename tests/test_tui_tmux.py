@@ -11,8 +11,9 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.skipif(shutil.which("tmux") is None,
-                                reason="tmux is not installed; `./dev test` installs it with apt-get")
+pytestmark = [pytest.mark.skipif(shutil.which("tmux") is None,
+                                 reason="tmux is not installed; `./dev test` installs it with apt-get"),
+              pytest.mark.slow]  # the real wizard started in a terminal, about 12 s a run
 
 FIXWIZARD = Path(sys.executable).parent / "fixwizard"
 

@@ -41,6 +41,7 @@ def plate():
     return fixture, taps
 
 
+@pytest.mark.slow
 def test_well_spread_taps_at_a_fair_budget_are_unique_with_intervals(plate):
     fixture, taps = plate
     solution = solve(fixture, taps, BALL_M, BOUND_M, max_cells=2e6)
@@ -91,6 +92,7 @@ def test_two_identical_bodies_tapped_on_one_are_never_unique():
     assert solution.status in ("ambiguous", "undetermined")
 
 
+@pytest.mark.slow
 def test_the_cli_exit_code_says_the_status(plate, tmp_path):
     fixture, taps = plate
     mesh = tmp_path / "plate.stl"

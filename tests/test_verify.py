@@ -9,12 +9,9 @@ import shutil
 import numpy as np
 import pytest
 import yaml
-from conftest import real_taps
 from scipy.spatial.transform import Rotation
-from shapes import as_fixture
-from test_report import V1_REPORT
-from tui_cell import spread_taps
 
+from conftest import real_taps
 from fixwizard import report
 from fixwizard.calibration.taps import ball_centres_m
 from fixwizard.cli import main
@@ -29,6 +26,11 @@ from fixwizard.solver.solve import solve
 from fixwizard.solver.verify_search import AllowedRegion, search_region, start_cells
 from fixwizard.synthetic import bounded_noise, touching_ball_centres
 from fixwizard.workflow.verify import fixture_of, suggest_check_points, verify
+from shapes import as_fixture
+from test_report import V1_REPORT
+from tui_cell import spread_taps
+
+pytestmark = pytest.mark.slow  # the expert run solved and verified (27 s to set up), 5-35 s a test
 
 BALL_M, BOUND_M = 0.003, 0.001
 

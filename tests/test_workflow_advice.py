@@ -5,15 +5,23 @@ import numpy as np
 import pytest
 import trimesh
 from scipy.spatial.transform import Rotation
-from shapes import as_fixture
 
 from fixwizard.demo import DEMO_TAPS, demo_fixture, disc_fixture
 from fixwizard.geometry.se3 import make_transform, transform_points
 from fixwizard.points import load_points
 from fixwizard.solver.solve import solve
-from fixwizard.workflow.advice import (PREFER_SHARE, PREFER_TRIES, REACHABLE_MIN_NORMAL_Z, TABLE_CLEARANCE_M,
-                                       corners_cad_m, distinguishing_tap, next_tap, reachable_points)
+from fixwizard.workflow.advice import (
+    PREFER_SHARE,
+    PREFER_TRIES,
+    REACHABLE_MIN_NORMAL_Z,
+    TABLE_CLEARANCE_M,
+    corners_cad_m,
+    distinguishing_tap,
+    next_tap,
+    reachable_points,
+)
 from fixwizard.workflow.live import tap_surface_distances_m
+from shapes import as_fixture
 
 
 def test_poses_apart_along_x_are_told_apart_on_a_side_face_facing_x():
@@ -91,8 +99,9 @@ def test_corners_are_the_vertices_where_three_face_directions_meet():
     assert len(corners_cad_m(disc_fixture())) == 12  # the round plate: the flat's and the notch's ends only
 
 
+@pytest.mark.slow
 def test_an_ambiguous_set_is_told_apart_and_a_set_without_an_estimate_gets_no_advice():
-    from tui_cell import symmetric_cell, spread_taps
+    from tui_cell import spread_taps, symmetric_cell
 
     cell = symmetric_cell()
     cell.connect()

@@ -5,14 +5,23 @@ at all when the set is too wide for that."""
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
-from shapes import as_fixture
 
 from fixwizard.geometry.se3 import make_transform, transform_points
 from fixwizard.robot.sim import SimulatedCell
 from fixwizard.solver.estimates import Bounds
 from fixwizard.workflow.advice import TapAdvice
-from fixwizard.workflow.hover import (CLEARANCE_M, HOVER_M, HOVER_STEP_M, MARGIN_M, MAX_HOVER_M, PATH_STEP_M,
-                                      guaranteed_gap_m, hover_path, plan_hover)
+from fixwizard.workflow.hover import (
+    CLEARANCE_M,
+    HOVER_M,
+    HOVER_STEP_M,
+    MARGIN_M,
+    MAX_HOVER_M,
+    PATH_STEP_M,
+    guaranteed_gap_m,
+    hover_path,
+    plan_hover,
+)
+from shapes import as_fixture
 
 BALL_RADIUS_M = 0.0015
 TCP_P_TIP_M = np.array([0.0, 0.0, 0.1])

@@ -6,13 +6,13 @@ import threading
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
-from shapes import as_fixture
-from tui_cell import SAMPLE_BOUND_M, spread_taps
 
 from fixwizard.demo import demo_cell
 from fixwizard.geometry.se3 import make_transform
 from fixwizard.solver.search import SearchCancelled
 from fixwizard.workflow.live import quick_check, refine_check, tap_surface_distances_m
+from shapes import as_fixture
+from tui_cell import SAMPLE_BOUND_M, spread_taps
 
 BALL_DIAMETER_M = 0.003
 
@@ -41,6 +41,7 @@ def test_taps_of_the_simulated_cell_touch_the_surface_under_the_true_pose(tapped
     assert np.all(np.abs(distances) <= cell.truth.fk_error_bound_m + 1e-6)
 
 
+@pytest.mark.slow
 def test_quick_check_needs_three_taps_and_pins_the_pose_down_with_enough_taps(tapped):
     cell, base_p_taps = tapped
     assert quick_check(cell.fixture, base_p_taps[:2], BALL_DIAMETER_M, SAMPLE_BOUND_M) is None
@@ -54,6 +55,7 @@ def test_quick_check_needs_three_taps_and_pins_the_pose_down_with_enough_taps(ta
     assert np.all(np.abs(distances) < 0.005)
 
 
+@pytest.mark.slow
 def test_refining_a_check_tightens_its_bounds_on_the_same_set_and_keeps_the_true_pose(tapped):
     cell, base_p_taps = tapped
     quick = quick_check(cell.fixture, base_p_taps, BALL_DIAMETER_M, SAMPLE_BOUND_M)
@@ -68,6 +70,7 @@ def test_refining_a_check_tightens_its_bounds_on_the_same_set_and_keeps_the_true
     assert Rotation.from_matrix(centre[:3, :3].T @ truth[:3, :3]).magnitude() <= refined.solution.bounds.rotation_rad
 
 
+@pytest.mark.slow
 def test_quick_check_says_inconsistent_for_a_tap_in_the_air(tapped):
     cell, base_p_taps = tapped
     in_the_air = base_p_taps[np.argmax(base_p_taps[:, 2])] + [0.0, 0.0, 0.05]

@@ -32,7 +32,7 @@ def truth_calibration(cell: SimulatedCell) -> TipCalibration:
     """A tip calibration holding the cell's hidden tip and ball, as if calibrated perfectly."""
     no_residuals = ResidualStats(0.0, 0.0)
     return TipCalibration(
-        name="truth", created=dt.datetime.now(dt.timezone.utc).isoformat(), robot="simulated",
+        name="truth", created=dt.datetime.now(dt.UTC).isoformat(), robot="simulated",
         tcp_p_tip_m=cell.truth.tcp_p_tip_m, ball_diameter_m=cell.truth.ball_diameter_m,
         sample_bound_m=SAMPLE_BOUND_M, sample_bound_reason="the simulated cell's error bound with a margin",
         base_T_table=np.eye(4), pivot_tcp_p_tip_m=cell.truth.tcp_p_tip_m, pivot_residuals=no_residuals,

@@ -4,7 +4,7 @@ The robot-driven steps and the command line both end here, with the poses of eve
 """
 
 from dataclasses import replace
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 import numpy as np
 
@@ -48,7 +48,7 @@ def calibrate_tip(pivot: PoseSeries, table: PoseSeries, tilted: PoseSeries, ball
     if table_coarse is not None:
         steps["table_coarse"] = table_coarse
     return TipCalibration(
-        name=name, created=datetime.now(timezone.utc).isoformat(timespec="seconds"), robot=robot,
+        name=name, created=datetime.now(UTC).isoformat(timespec="seconds"), robot=robot,
         tcp_p_tip_m=fine.tcp_p_tip_m, ball_diameter_m=float(ball_diameter_m), sample_bound_m=bound.bound_m,
         sample_bound_reason=bound.reason, base_T_table=base_T_table, pivot_tcp_p_tip_m=pivot_fit.tcp_p_tip_m,
         pivot_residuals=pivot_fit.stats, table_residuals=plane.stats, tip_residuals=fine.stats,

@@ -63,4 +63,4 @@ def _hover_poses(base_T_table: np.ndarray, tcp_p_tip_m: np.ndarray, cells: np.nd
     table_p_tip = table_p_target - (approach_height_m / -table_z_tool[:, 2])[:, None] * table_z_tool
     table_p_tcp = table_p_tip - table_R_tool @ tcp_p_tip_m
     return np.array([base_T_table @ make_transform(rotation, position)
-                     for rotation, position in zip(table_R_tool, table_p_tcp)])
+                     for rotation, position in zip(table_R_tool, table_p_tcp, strict=True)])

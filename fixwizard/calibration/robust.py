@@ -54,7 +54,7 @@ def robust_inliers(count: int, minimal: int, fit: Callable[[np.ndarray], Model],
         if np.array_equal(refitted, inliers):
             break
         inliers = refitted
-    excluded = tuple(ExcludedTap(int(index), files[index] if files else None, float(residuals[index]),
+    excluded = tuple(ExcludedTap(int(index), files[int(index)] if files else None, float(residuals[index]),
                                  float(threshold_m)) for index in np.flatnonzero(~inliers))
     if len(excluded) > MAX_REJECTED_FRACTION * count:
         raise CalibrationError(

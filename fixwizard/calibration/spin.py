@@ -120,7 +120,7 @@ def _describe_group(indices: np.ndarray, files: Sequence[str]) -> str:
     ends = np.append(starts[1:], len(indices)) - 1
     name = (lambda index: files[index]) if files else (lambda index: f"tap {index}")
     runs = [name(indices[start]) + ("" if start == end else f" to {name(indices[end])}")
-            for start, end in zip(starts[:_LISTED_RUNS], ends)]
+            for start, end in zip(starts[:_LISTED_RUNS], ends, strict=False)]
     more = f" and {len(starts) - _LISTED_RUNS} more runs" if len(starts) > _LISTED_RUNS else ""
     return f"the {len(indices)} taps " + ", ".join(runs) + more
 

@@ -13,11 +13,11 @@ import numpy as np
 import yaml
 
 from fixwizard.atomic import write_text_atomic
-from fixwizard.yamlfile import load_document
 from fixwizard.calibration.errors import CalibrationFileError
 from fixwizard.calibration.residuals import ExcludedTap, ResidualStats
 from fixwizard.calibration.taps import PoseSeries, readonly_array
 from fixwizard.geometry.se3 import from_ur_pose, to_ur_pose
+from fixwizard.yamlfile import load_document
 
 SCHEMA = "fixwizard.tip/1"
 STEPS = ("pivot", "table_coarse", "table", "tilted")
@@ -128,7 +128,7 @@ def _calibration(data: dict) -> TipCalibration:
     return TipCalibration(
         name=_text(_get(data, "name", ""), "name"),
         created=_text(_get(data, "created", ""), "created"),
-        robot=_text(_get(data, "robot", ""), "robot", nullable=True),
+        robot=_optional_text(_get(data, "robot", ""), "robot"),
         tcp_p_tip_m=_numbers(_get(data, "tcp_p_tip_m", ""), (3,), "tcp_p_tip_m"),
         ball_diameter_m=_positive(_get(data, "ball_diameter_m", ""), "ball_diameter_m"),
         sample_bound_m=_positive(_get(data, "sample_bound_m", ""), "sample_bound_m"),
@@ -157,7 +157,8 @@ def _numbers(value: Any, shape: tuple[int | None, ...], where: str) -> np.ndarra
         array = np.array(value, dtype=float)
     except (TypeError, ValueError):
         raise _Damaged(f"'{where}' must hold numbers") from None
-    if array.ndim != len(shape) or any(want is not None and have != want for have, want in zip(array.shape, shape)):
+    if array.ndim != len(shape) or any(want is not None and have != want
+                                        for have, want in zip(array.shape, shape, strict=True)):
         wanted = " x ".join("N" if want is None else str(want) for want in shape) or "one number"
         raise _Damaged(f"'{where}' must be {wanted}, not of shape {array.shape}")
     if not np.all(np.isfinite(array)):
@@ -176,10 +177,14 @@ def _positive(value: Any, where: str) -> float:
     return number
 
 
-def _text(value: Any, where: str, nullable: bool = False) -> str | None:
-    if (value is None and nullable) or isinstance(value, str):
+def _text(value: Any, where: str) -> str:
+    if isinstance(value, str):
         return value
     raise _Damaged(f"'{where}' must be text")
+
+
+def _optional_text(value: Any, where: str) -> str | None:
+    return None if value is None else _text(value, where)
 
 
 def _stats(section: Any, where: str) -> ResidualStats:
@@ -203,6 +208,6 @@ def _excluded(section: Any, count: int, where: str) -> ExcludedTap:
     index = _get(section, "index", where)
     if not isinstance(index, int) or not 0 <= index < count:
         raise _Damaged(f"'{where}index' must be a tap index from 0 to {count - 1}")
-    return ExcludedTap(index, _text(_get(section, "file", where), where + "file", nullable=True),
+    return ExcludedTap(index, _optional_text(_get(section, "file", where), where + "file"),
                        _number(_get(section, "residual_mm", where), where + "residual_mm") / 1e3,
                        _positive(_get(section, "threshold_mm", where), where + "threshold_mm") / 1e3)

@@ -8,13 +8,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from fixwizard.calibration.errors import CalibrationError
 from fixwizard.calibration.residuals import ExcludedTap, ResidualStats
 from fixwizard.calibration.robust import robust_inliers
 from fixwizard.calibration.taps import ball_centres_m
-from fixwizard.geometry.se3 import make_transform
+from fixwizard.geometry.se3 import make_transform, rotation_angle_rad
 
 MIN_TABLE_TAPS = 6
 MAX_TURN_DEG = 2.0
@@ -47,8 +46,7 @@ def fit_table_plane(base_T_tcp: np.ndarray, tcp_p_tip_m: np.ndarray, files: Sequ
     if count < MIN_TABLE_TAPS:
         raise CalibrationError(f"the table plane needs at least {MIN_TABLE_TAPS} taps spread over the table; "
                                f"got {count}")
-    turned_deg = np.degrees((Rotation.from_matrix(base_T_tcp[0, :3, :3]).inv()
-                             * Rotation.from_matrix(base_T_tcp[:, :3, :3])).magnitude())
+    turned_deg = np.degrees(rotation_angle_rad(base_T_tcp[0, :3, :3].T @ base_T_tcp[:, :3, :3]))
     if turned_deg.max() > MAX_TURN_DEG:
         worst = int(np.argmax(turned_deg))
         raise CalibrationError(

@@ -38,11 +38,14 @@ the triangles visited, and the triangle of the smallest ``high`` is returned wit
 """
 
 import math
+from typing import Any
 
 import numba
 import numpy as np
 
 UNIT_ROUNDOFF = 2.0**-53
+Vector3 = tuple[float, float, float]  # a point or an offset (m) as three floats, as the compiled kernels pass them
+Arrays = tuple[Any, ...]  # several arrays passed to a compiled kernel as one argument
 ROUNDING_ULPS = 64.0
 NORMAL_ULPS = 16.0
 LEAF_TRIANGLES = 4
@@ -71,7 +74,7 @@ def _segment_distance_m(o0: float, o1: float, o2: float, e0: float, e1: float, e
 
 
 @numba.njit(nogil=True, cache=True)
-def closest_weights(p0: float, p1: float, p2: float, ab: tuple, ac: tuple) -> tuple[float, float]:
+def closest_weights(p0: float, p1: float, p2: float, ab: Vector3, ac: Vector3) -> tuple[float, float]:
     """Barycentric weights ``(v, w)`` of the point ``a + v ab + w ac`` of a triangle closest to ``a + p`` by
     Voronoi regions (Ericson 5.1.5). Clamped, so the point lies on the triangle whatever the rounding."""
     ab0, ab1, ab2 = ab
@@ -171,7 +174,7 @@ def _plane_low_m(x0: float, x1: float, x2: float, row: np.ndarray) -> float:
 
 
 @numba.njit(nogil=True, cache=True, inline="always")
-def _closest_point_offset(x0: float, x1: float, x2: float, row: np.ndarray) -> tuple:
+def _closest_point_offset(x0: float, x1: float, x2: float, row: np.ndarray) -> tuple[Vector3, float, float, float]:
     """``x - a`` for point ``x``, the weights ``(v, w)`` of the triangle's point closest to ``x`` (Voronoi
     regions, clamped), and that point's distance (m), without rounding allowance."""
     p = (x0 - row[_A], x1 - row[_A + 1], x2 - row[_A + 2])
@@ -183,7 +186,7 @@ def _closest_point_offset(x0: float, x1: float, x2: float, row: np.ndarray) -> t
 
 
 @numba.njit(nogil=True, cache=True, inline="always")
-def _rounding_m(p: tuple, row: np.ndarray) -> float:
+def _rounding_m(p: Vector3, row: np.ndarray) -> float:
     return ROUNDING_ULPS * UNIT_ROUNDOFF * (math.sqrt(_dot(p[0], p[1], p[2], p[0], p[1], p[2])) + row[_LONGEST])
 
 
@@ -272,7 +275,7 @@ def _best_split(lows: np.ndarray, highs: np.ndarray, members: np.ndarray) -> int
 
 
 @numba.njit(nogil=True, cache=True)
-def _build_hierarchy(lows: np.ndarray, highs: np.ndarray) -> tuple:
+def _build_hierarchy(lows: np.ndarray, highs: np.ndarray) -> Arrays:
     """Bounding-volume hierarchy over boxes ``(F, 3)`` (m): each node split along the widest axis of its centres
     where the surface-area heuristic says, at most ``LEAF_TRIANGLES`` per leaf. Returns the nodes' boxes (low,
     high), each inner node's two children (-1 for a leaf), each node's range in ``order``, and ``order`` (the
@@ -322,7 +325,7 @@ def _box_low_m(x: np.ndarray, low: np.ndarray, high: np.ndarray) -> float:
 
 
 @numba.njit(nogil=True, cache=True)
-def _query_point(x: np.ndarray, rows: np.ndarray, hierarchy: tuple, hint: int,
+def _query_point(x: np.ndarray, rows: np.ndarray, hierarchy: Arrays, hint: int,
                  cap: float) -> tuple[float, float, int, float, float]:
     """The mesh's distance interval at ``x`` (m), the triangle of the smallest ``high`` and its weights. ``hint``:
     a triangle likely to be near (-1: none); its interval starts the search, so that far nodes are pruned at once
@@ -366,8 +369,8 @@ def _query_point(x: np.ndarray, rows: np.ndarray, hierarchy: tuple, hint: int,
 
 
 @numba.njit(nogil=True, cache=True)
-def _query_range(start: int, stop: int, points: np.ndarray, rows: np.ndarray, hierarchy: tuple, hints: np.ndarray,
-                 cap: float, out: tuple) -> None:
+def _query_range(start: int, stop: int, points: np.ndarray, rows: np.ndarray, hierarchy: Arrays, hints: np.ndarray,
+                 cap: float, out: Arrays) -> None:
     low_out, high_out, face_out, weights_out = out
     for point in range(start, stop):
         low, high, face, v, w = _query_point(points[point], rows, hierarchy, hints[point], cap)
@@ -376,8 +379,8 @@ def _query_range(start: int, stop: int, points: np.ndarray, rows: np.ndarray, hi
 
 
 @numba.njit(nogil=True, cache=True, parallel=True)
-def _query(points: np.ndarray, rows: np.ndarray, hierarchy: tuple, hints: np.ndarray, cap: float,
-           out: tuple) -> None:
+def _query(points: np.ndarray, rows: np.ndarray, hierarchy: Arrays, hints: np.ndarray, cap: float,
+           out: Arrays) -> None:
     count = len(points)
     blocks = (count + BLOCK_POINTS - 1) // BLOCK_POINTS
     for block in numba.prange(blocks):
@@ -427,7 +430,7 @@ def _ray_triangle_t(origin: np.ndarray, direction: np.ndarray, row: np.ndarray) 
 
 @numba.njit(nogil=True, cache=True)
 def _ray_range(start: int, stop: int, origins: np.ndarray, directions: np.ndarray, rows: np.ndarray,
-               hierarchy: tuple, first_out: np.ndarray, crossings_out: np.ndarray) -> None:
+               hierarchy: Arrays, first_out: np.ndarray, crossings_out: np.ndarray) -> None:
     """Per ray of ``start .. stop``: the parameter of its first hit (inf: none) and how many triangles it crosses."""
     node_low, node_high, children, ranges, order = hierarchy
     for ray in range(start, stop):
@@ -457,7 +460,7 @@ def _ray_range(start: int, stop: int, origins: np.ndarray, directions: np.ndarra
 
 
 @numba.njit(nogil=True, cache=True, parallel=True)
-def _rays(origins: np.ndarray, directions: np.ndarray, rows: np.ndarray, hierarchy: tuple, first_out: np.ndarray,
+def _rays(origins: np.ndarray, directions: np.ndarray, rows: np.ndarray, hierarchy: Arrays, first_out: np.ndarray,
           crossings_out: np.ndarray) -> None:
     count = len(origins)
     blocks = (count + BLOCK_POINTS - 1) // BLOCK_POINTS

@@ -8,12 +8,13 @@ import re
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
 from fixwizard.errors import InputError
 
 
-def make_transform(rotation: np.ndarray | Rotation, translation_m: np.ndarray) -> np.ndarray:
+def make_transform(rotation: np.ndarray | Rotation, translation_m: npt.ArrayLike) -> np.ndarray:
     """4x4 transform from a rotation (matrix or scipy Rotation) and a translation (m)."""
     matrix = rotation.as_matrix() if isinstance(rotation, Rotation) else np.asarray(rotation, float)
     a_T_b = np.eye(4)
@@ -59,9 +60,18 @@ def format_ur_pose(a_T_b: np.ndarray) -> str:
     return "p[" + ", ".join(f"{value:.6f}" for value in to_ur_pose(a_T_b)) + "]"
 
 
-def rotation_angle_rad(a_R_b: np.ndarray) -> float:
-    """Rotation angle (rad, in [0, pi]) of a 3x3 rotation matrix."""
-    return float(Rotation.from_matrix(a_R_b).magnitude())
+def rotation_angle_rad(a_R_b: np.ndarray) -> np.ndarray:
+    """Angle (rad, in [0, pi]) of each rotation matrix (..., 3, 3); shape (...). The one home of this figure: for
+    the angle between two rotations pass ``a_R_b.T @ a_R_c`` (it broadcasts over stacks).
+
+    ``atan2`` of the sine (half the norm of the skew part) and the cosine (half the trace less one): accurate to
+    rounding at every angle, where ``arccos`` of the trace loses half the digits near 0 and near pi."""
+    a_R_b = np.asarray(a_R_b, float)
+    skew = np.stack([a_R_b[..., 2, 1] - a_R_b[..., 1, 2], a_R_b[..., 0, 2] - a_R_b[..., 2, 0],
+                     a_R_b[..., 1, 0] - a_R_b[..., 0, 1]], axis=-1)
+    trace = a_R_b[..., 0, 0] + a_R_b[..., 1, 1] + a_R_b[..., 2, 2]
+    angle: np.ndarray = np.arctan2(0.5 * np.linalg.norm(skew, axis=-1), 0.5 * (trace - 1.0))
+    return angle
 
 
 def read_pose_file(path: str | Path) -> np.ndarray:
@@ -78,7 +88,7 @@ def read_pose_file(path: str | Path) -> np.ndarray:
     return from_ur_pose(values)
 
 
-def _natural_key(path: Path) -> tuple:
+def _natural_key(path: Path) -> tuple[int | str, ...]:
     """Sort key that orders ``pt_2`` before ``pt_10``."""
     return tuple(int(part) if part.isdigit() else part for part in re.split(r"(\d+)", path.name))
 

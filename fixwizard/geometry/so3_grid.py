@@ -23,6 +23,8 @@ than 0.5 of the chord covers the edge's curvature between samples). Tests check 
 against random rotations at several levels.
 """
 
+from typing import overload
+
 import healpy
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -37,6 +39,10 @@ LIPSCHITZ_G = 2.0
 _EZ = np.array([0.0, 0.0, 1.0])
 
 
+@overload
+def chord(angle_rad: float) -> float: ...
+@overload
+def chord(angle_rad: np.ndarray) -> np.ndarray: ...
 def chord(angle_rad: np.ndarray | float) -> np.ndarray | float:
     """Largest displacement of a unit-lever point rotated by ``angle``: ``2 sin(angle / 2)``, angle capped at pi
     (the cancellation-free form of ``sqrt(2 - 2 cos(angle))``)."""
@@ -68,16 +74,6 @@ def _tilted(sections: np.ndarray, psi_rad: np.ndarray) -> np.ndarray:
     tilted[:, :, 0] = sections[:, :, 0] * cos + sections[:, :, 1] * sin
     tilted[:, :, 1] = sections[:, :, 1] * cos - sections[:, :, 0] * sin
     return tilted
-
-
-def rotation_angles(base_R_a: np.ndarray, base_R_b: np.ndarray) -> np.ndarray:
-    """Angles (rad) of the rotations taking a rotation (3, 3) to each of (N, 3, 3): ``atan2`` of the sine (half
-    the norm of the skew part of ``R_a^T R_b``) and the cosine (from its trace), accurate at every angle."""
-    relative = np.einsum("ji,njk->nik", base_R_a, base_R_b)
-    skew = np.stack([relative[:, 2, 1] - relative[:, 1, 2], relative[:, 0, 2] - relative[:, 2, 0],
-                     relative[:, 1, 0] - relative[:, 0, 1]], axis=1)
-    trace = relative[:, 0, 0] + relative[:, 1, 1] + relative[:, 2, 2]
-    return np.arctan2(0.5 * np.linalg.norm(skew, axis=1), 0.5 * (trace - 1.0))
 
 
 def _angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:

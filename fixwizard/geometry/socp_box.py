@@ -6,6 +6,8 @@ converge or fails (it raises ``ValueError`` on a singular system when two balls 
 the intersection of the balls' own boxes instead: looser, still a superset.
 """
 
+from typing import Any
+
 import numpy as np
 from cvxopt import matrix, solvers
 
@@ -39,7 +41,7 @@ def ball_intersection_box(centers_m: np.ndarray, radius_m: float) -> tuple[np.nd
     return origin + (low - SOLVER_MARGIN) * radius_m, origin + (high + SOLVER_MARGIN) * radius_m
 
 
-def _quiet_socp(objective: matrix, cone_matrices: list, cone_offsets: list) -> dict:
+def _quiet_socp(objective: matrix, cone_matrices: list[matrix], cone_offsets: list[matrix]) -> dict[str, Any]:
     """cvxopt's SOCP without its progress printout (cvxopt reads that switch from a module global)."""
     previous = solvers.options.get("show_progress", True)
     solvers.options["show_progress"] = False

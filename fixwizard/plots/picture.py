@@ -44,8 +44,9 @@ class Picture:
         start = 0
         for index in range(1, len(styles) + 1):
             if index == len(styles) or styles[index] != styles[start]:
-                if styles[start] is not None:
-                    runs.append((start, index, styles[start]))
+                style = styles[start]
+                if style is not None:
+                    runs.append((start, index, style))
                 start = index
         return runs
 
@@ -73,7 +74,8 @@ def pad(picture: Picture, width: int, height: int) -> Picture:
 def hstack(pictures: Sequence[Picture], gap: int = 1) -> Picture:
     """Pictures side by side, ``gap`` blank columns apart, top-aligned and padded to the tallest."""
     height = max(picture.height for picture in pictures)
-    rows, styles = [""] * height, [()] * height
+    rows = [""] * height
+    styles: list[tuple[Style, ...]] = [()] * height
     for number, picture in enumerate(pictures):
         spacer = gap if number else 0
         for row in range(height):

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from fixwizard.geometry.se3 import rotation_angle_rad
 from fixwizard.plots.canvas import DOTS_PER_CELL_X, DOTS_PER_CELL_Y, BrailleCanvas, spots_beside
 from fixwizard.plots.mollweide import HALF_HEIGHT, HALF_WIDTH, direction_xy
 from fixwizard.plots.picture import Picture, hstack, pad, text_line, vstack
@@ -63,8 +64,8 @@ def rotation_set_from_solution(solution: Solution) -> RotationSet:
         raise ValueError("an inconsistent solution has no orientations to draw")
     base_R_cad = solution.cells.distinct_rotations()[0] * Rotation.from_matrix(solution.fix_T_cad[:3, :3])
     mode_base_R_cad = Rotation.from_matrix(np.stack([mode.base_T_cad[:3, :3] for mode in solution.modes]))
-    angles = np.stack([(mode_base_R_cad[mode].inv() * base_R_cad).magnitude()
-                       for mode in range(len(solution.modes))])
+    base_R_cad_matrices = base_R_cad.as_matrix()
+    angles = np.stack([rotation_angle_rad(mode.base_T_cad[:3, :3].T @ base_R_cad_matrices) for mode in solution.modes])
     return RotationSet(base_R_cad, np.argmin(angles, axis=0), mode_base_R_cad)
 
 
@@ -171,7 +172,7 @@ def zoom_panel(rotations: RotationSet, axis: str, half_range_deg: float, width: 
                            (0, centre_y, 2, centre_y), (right, centre_y, right - 2, centre_y)):
         canvas.line(x0, y0, x1, y1, "expected")
     centre = rotations.mode_axis(column, 0)
-    canvas.set_dots([centre_x], [centre_y], "expected")
+    canvas.set_dots(np.array([centre_x]), np.array([centre_y]), "expected")
     for mode in range(rotations.mode_count):
         offsets = zoom_coordinates_deg(rotations.axes(column, mode), centre) * dots_per_degree
         inside = (np.abs(offsets[:, 0]) < centre_x - 1) & (np.abs(offsets[:, 1]) < centre_y - 1)

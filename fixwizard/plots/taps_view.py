@@ -76,7 +76,8 @@ def _draw_fixture(canvas: BrailleCanvas, frame: TopViewFrame, mesh: trimesh.Trim
     sharp = mesh.face_adjacency_angles > SHARP_EDGE_RAD
     seen = upward[mesh.face_adjacency[:, 0]] | upward[mesh.face_adjacency[:, 1]]
     for start, end in mesh.face_adjacency_edges[sharp & seen]:
-        canvas.line(*vertices_dots[start], *vertices_dots[end], "outline")
+        (x0, y0), (x1, y1) = vertices_dots[start], vertices_dots[end]
+        canvas.line(x0, y0, x1, y1, "outline")
 
 
 def tap_label(index: int, suspect_index: int | None) -> str:

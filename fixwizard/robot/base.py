@@ -19,7 +19,10 @@ MAX_LINEAR_SPEED_M_S = 0.25
 
 
 class RobotError(FixwizardError):
-    """The robot cannot do what was asked; the message says what to do next."""
+    """The robot cannot do what was asked; the message says what to do next. An error during a tap may carry
+    the recorded ``tap_result`` (the attribute is absent otherwise)."""
+
+    tap_result: "TapResult"
 
 
 class ProtectiveStop(RobotError):

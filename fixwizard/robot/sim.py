@@ -14,7 +14,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from fixwizard.fixture import Fixture
-from fixwizard.geometry.se3 import invert, make_transform, transform_points
+from fixwizard.geometry.se3 import invert, make_transform, rotation_angle_rad, transform_points
 from fixwizard.robot.base import (
     MAX_LINEAR_SPEED_M_S,
     ConnectionLost,
@@ -277,8 +277,8 @@ class SimulatedCell:
         start, end = self._base_T_tcp, base_T_tcp_end
         tip = self.truth.tcp_p_tip_m
         rotations = Rotation.from_matrix(np.stack([start[:3, :3], end[:3, :3]]))
-        turn = rotations[0].inv() * rotations[1]
-        length_m = np.linalg.norm(end[:3, 3] - start[:3, 3]) + turn.magnitude() * np.linalg.norm(tip)
+        turn_rad = rotation_angle_rad(start[:3, :3].T @ end[:3, :3])
+        length_m = np.linalg.norm(end[:3, 3] - start[:3, 3]) + turn_rad * np.linalg.norm(tip)
         fractions = np.linspace(0.0, 1.0, max(2, int(np.ceil(length_m / MOVE_STEP_M)) + 1))
         path = np.repeat(np.eye(4)[None], len(fractions), axis=0)
         path[:, :3, :3] = Slerp([0.0, 1.0], rotations)(fractions).as_matrix()
@@ -289,8 +289,8 @@ class SimulatedCell:
         """Index of the first flange pose of ``path`` after its start where the ball dips more than
         ``COLLISION_DEPTH_M`` into the fixture or the table, or None."""
         base_p_balls = path[1:, :3, 3] + path[1:, :3, :3] @ self.truth.tcp_p_tip_m
-        fix_p_balls = transform_points(self._fix_T_base, base_p_balls)
-        clearance = np.minimum(self.fixture.oracle.signed_distance_m(fix_p_balls), base_p_balls[:, 2])
+        clearance = np.minimum(self.fixture.signed_distance_at_m(self.truth.base_T_cad, base_p_balls),
+                               base_p_balls[:, 2])
         deep = np.flatnonzero(clearance - self._ball_radius_m < -COLLISION_DEPTH_M)
         return int(deep[0]) + 1 if len(deep) else None
 

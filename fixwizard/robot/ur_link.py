@@ -145,8 +145,8 @@ class Link:
         if not self._open(DASHBOARD, self._dashboard.isInRemoteControl):
             raise NotInRemoteControl()
         self._step(f"the RTDE data stream (port {RTDE_PORT})")
-        self._receive = self._open(f"the RTDE data stream (port {RTDE_PORT})", lambda: rtde_receive.RTDEReceiveInterface(
-            self.host, -1.0, RECEIVE_FIELDS))
+        self._receive = self._open(f"the RTDE data stream (port {RTDE_PORT})",
+                                   lambda: rtde_receive.RTDEReceiveInterface(self.host, -1.0, RECEIVE_FIELDS))
         self._step(f"the RTDE inputs (port {RTDE_PORT})")
         self._io = self._open(f"the RTDE inputs (port {RTDE_PORT})", lambda: rtde_io.RTDEIOInterface(self.host))
         self._step(f"the script port (port {SCRIPT_PORT})")
@@ -416,7 +416,7 @@ class Link:
     def _sample(receive: Any, now: float) -> dict[str, float]:
         pose = receive.getActualTCPPose()
         return {"received_at": now, "timestamp": receive.getTimestamp(),
-                **dict(zip(("x", "y", "z", "rx", "ry", "rz"), pose)),
+                **dict(zip(("x", "y", "z", "rx", "ry", "rz"), pose, strict=True)),
                 "speed_m_s": float(np.linalg.norm(receive.getActualTCPSpeed()[:3])),
                 "force_n": float(np.linalg.norm(receive.getActualTCPForce()[:3])),
                 "robot_mode": receive.getRobotMode(), "safety_mode": receive.getSafetyMode(),

@@ -110,13 +110,13 @@ class SharedState:
         the last watchdog kick, and whether the link saw its connection drop."""
         for _ in range(READ_ATTEMPTS):
             before = self._sequence.value
-            values = list(self._values)
+            values = self._values[:]
             if before % 2 == 0 and self._sequence.value == before:
                 break
             time.sleep(0)
         else:
             return None, 0.0, False
-        field = dict(zip(_FIELDS, values))
+        field = dict(zip(_FIELDS, values, strict=True))
         state = None if field["received_at"] == 0.0 else ControllerState(
             field["received_at"], field["timestamp"],
             from_ur_pose(np.array([field[name] for name in ("x", "y", "z", "rx", "ry", "rz")])),

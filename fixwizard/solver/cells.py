@@ -104,7 +104,8 @@ class CellSet:
         offsets = np.cumsum([0] + [len(part.rotation_ids) for part in parts[:-1]])
         return CellSet(first.rotation_grid, first.position_grid, first.rotation_level, first.position_level,
                        np.concatenate([part.rotation_ids for part in parts]),
-                       np.concatenate([part.rotation_index + offset for part, offset in zip(parts, offsets)]),
+                       np.concatenate([part.rotation_index + offset
+                                       for part, offset in zip(parts, offsets, strict=True)]),
                        np.concatenate([part.position_cells for part in parts]))
 
     def split_rotations(self) -> "CellSet":

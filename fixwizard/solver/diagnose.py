@@ -76,8 +76,7 @@ def _fits(problem: SearchProblem, max_cells: float, cancel: threading.Event | No
 
 def _residuals_m(problem: SearchProblem, base_T_fix: np.ndarray) -> np.ndarray:
     """Each tap's signed distance less the ball radius (m) at a pose."""
-    fix_p_taps = points_in_frames(base_T_fix[:3, :3], base_T_fix[:3, 3], problem.base_p_taps)[0]
-    return problem.oracle.signed_distance_m(fix_p_taps) - problem.ball_radius_m
+    return problem.oracle.signed_distance_at_m(base_T_fix, problem.base_p_taps) - problem.ball_radius_m
 
 
 def _refit(problem: SearchProblem, start: np.ndarray, extent_m: float) -> np.ndarray:

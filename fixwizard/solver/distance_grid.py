@@ -24,7 +24,7 @@ import numpy as np
 
 from fixwizard.atomic import write_bytes_atomic
 from fixwizard.fixture import DistanceOracle
-from fixwizard.solver.interval_kernel import lattice_intervals_m
+from fixwizard.solver.interval_kernel import Arrays, lattice_intervals_m
 
 MAX_VERTICES = 400_000
 MIN_SPACING_M = 0.0015
@@ -99,7 +99,7 @@ class DistanceGrid:
             pass
 
     @property
-    def kernel_arguments(self) -> tuple:
+    def kernel_arguments(self) -> Arrays:
         """The lattice as ``interval_kernel`` takes it: low corner (m), spacing (m), shape, flat values (m), their
         error (m), the mesh's bounding box (m), and the face closest to each vertex."""
         return (self._low, self._spacing, self._shape, self._values, self._value_error_m, self._mesh_low,

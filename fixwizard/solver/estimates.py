@@ -9,13 +9,13 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-from scipy.special import gammaln, logsumexp
 from scipy.spatial.transform import Rotation
+from scipy.special import gammaln, logsumexp
 
 from fixwizard.fixture import DistanceOracle
 from fixwizard.geometry.meb import minimum_enclosing_ball
-from fixwizard.geometry.se3 import make_transform, points_in_frames
-from fixwizard.geometry.so3_grid import chord, rotation_angles
+from fixwizard.geometry.se3 import make_transform, points_in_frames, rotation_angle_rad
+from fixwizard.geometry.so3_grid import chord
 from fixwizard.solver.cells import CellSet
 from fixwizard.solver.distance_grid import distance_grid_for
 
@@ -147,7 +147,7 @@ def cell_bound_figures(cells: CellSet, centre: BoundCentre, fix_p_origin: np.nda
     origin_lever = float(np.linalg.norm(fix_p_origin))
     position = (np.linalg.norm(cad_origins - centre.cad_origin_m, axis=1) + position_bound
                 + origin_lever * chord(gammas[rotation_index]))
-    angles = np.minimum(rotation_angles(centre.rotation.as_matrix(), base_R_fix) + gammas, np.pi)
+    angles = np.minimum(rotation_angle_rad(centre.rotation.as_matrix().T @ base_R_fix) + gammas, np.pi)
     center_fix = centre.cad_origin_m - centre.rotation.apply(fix_p_origin)
     fixture_radius_m = float(np.max(np.linalg.norm(fix_p_hull, axis=1)))
     ball = (np.linalg.norm(positions - center_fix, axis=1) + fixture_radius_m * chord(angles[rotation_index]))
@@ -338,6 +338,6 @@ def intervals(samples: Samples, base_T_cad: np.ndarray, fix_p_origin: np.ndarray
     """Radii about ``base_T_cad`` (CAD origin distance, rotation angle) holding each level of the mass."""
     cad_origins = samples.rotations.apply(fix_p_origin) + samples.positions_m
     distances = np.linalg.norm(cad_origins - base_T_cad[:3, 3], axis=1)
-    angles = (Rotation.from_matrix(base_T_cad[:3, :3]).inv() * samples.rotations).magnitude()
+    angles = rotation_angle_rad(base_T_cad[:3, :3].T @ samples.rotations.as_matrix())
     return [Interval(level, _weighted_quantile(distances, samples.weights, level),
                      _weighted_quantile(angles, samples.weights, level)) for level in levels]

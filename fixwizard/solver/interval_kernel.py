@@ -13,6 +13,7 @@ interval ends are rounded outward.
 """
 
 import math
+from typing import Any
 
 import numba
 import numpy as np
@@ -22,8 +23,9 @@ from fixwizard.geometry.mesh_distance import triangle_row_high_m
 # OpenMP where the system has it, else Numba's own work queue, which never fails: TBB, whose version
 # check warns on the terminal the wizard draws on, is never tried. Callers run one parallel kernel at
 # a time (the work queue is not thread-safe).
-numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
+numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]  # type: ignore[attr-defined]  # set at import
 
+Arrays = tuple[Any, ...]  # several arrays passed to a compiled kernel as one argument
 NOT_REJECTED = -1
 BLOCK_CELLS = 4096  # cells per parallel work item
 
@@ -51,7 +53,7 @@ def _straddles(low: float, high: float, band_low: float, band_high: float) -> bo
 
 
 @numba.njit(nogil=True, cache=True, inline="always")
-def _box_gap_m(x0: float, x1: float, x2: float, lattice: tuple) -> float:
+def _box_gap_m(x0: float, x1: float, x2: float, lattice: Arrays) -> float:
     """Distance (m) from a point to the mesh's bounding box (zero inside it): where positive, the point lies outside
     the solid, at least that far from the surface."""
     mesh_low_m, mesh_high_m = lattice[5], lattice[6]
@@ -63,7 +65,7 @@ def _box_gap_m(x0: float, x1: float, x2: float, lattice: tuple) -> float:
 
 @numba.njit(nogil=True, cache=True, inline="always")
 def _vertex_bounds_m(x0: float, x1: float, x2: float, j0: int, j1: int, j2: int,
-                     lattice: tuple) -> tuple[float, float, int]:
+                     lattice: Arrays) -> tuple[float, float, int]:
     """Bounds (m) on the signed distance at a point from lattice vertex ``(j0, j1, j2)``: its value minus and plus
     the point's distance to it and the values' error (the signed distance is 1-Lipschitz); the vertex's face."""
     lattice_low_m, spacing_m, shape, values_m, value_error_m = lattice[:5]
@@ -81,7 +83,7 @@ def _nearest_index(coordinate: float, low_m: float, spacing_m: float, size: int)
 
 
 @numba.njit(nogil=True, cache=True)
-def _nearest_vertex_interval_m(x0: float, x1: float, x2: float, lattice: tuple) -> tuple[float, float, int]:
+def _nearest_vertex_interval_m(x0: float, x1: float, x2: float, lattice: Arrays) -> tuple[float, float, int]:
     """Interval (m) holding the signed distance at a point (m, fixture frame) from the nearest lattice vertex
     (clamped to the lattice) and the bounding box, and the face closest to that vertex."""
     lattice_low_m, spacing_m, shape = lattice[:3]
@@ -93,7 +95,7 @@ def _nearest_vertex_interval_m(x0: float, x1: float, x2: float, lattice: tuple) 
 
 
 @numba.njit(nogil=True, cache=True)
-def _voxel_interval_m(x0: float, x1: float, x2: float, lattice: tuple) -> tuple[float, float]:
+def _voxel_interval_m(x0: float, x1: float, x2: float, lattice: Arrays) -> tuple[float, float]:
     """``DistanceGrid.interval_m`` for one point (m, fixture frame): the tightest of the bounds from the eight
     corners of the lattice voxel holding it (the nearest voxel outside the lattice), and the bounding box. The
     nearest vertex is one of the corners, so this interval lies within ``_nearest_vertex_interval_m``'s."""
@@ -111,7 +113,7 @@ def _voxel_interval_m(x0: float, x1: float, x2: float, lattice: tuple) -> tuple[
 
 
 @numba.njit(nogil=True, cache=True)
-def lattice_intervals_m(points_m: np.ndarray, lattice: tuple) -> tuple[np.ndarray, np.ndarray]:
+def lattice_intervals_m(points_m: np.ndarray, lattice: Arrays) -> tuple[np.ndarray, np.ndarray]:
     """``_voxel_interval_m`` of each (N, 3) point: the intervals' low and high ends (m)."""
     low = np.empty(len(points_m))
     high = np.empty(len(points_m))
@@ -131,8 +133,8 @@ def face_distances_m(points_m: np.ndarray, faces: np.ndarray, triangle_rows: np.
 
 
 @numba.njit(nogil=True, cache=True, parallel=True)
-def _parallel_cheap_pass(cells: tuple, taps: tuple, band: tuple, parent_index: np.ndarray, parents: tuple,
-                         lattice: tuple, triangle_rows: np.ndarray, out: tuple) -> None:
+def _parallel_cheap_pass(cells: Arrays, taps: Arrays, band: Arrays, parent_index: np.ndarray, parents: Arrays,
+                         lattice: Arrays, triangle_rows: np.ndarray, out: Arrays) -> None:
     count = len(cells[1])
     blocks = (count + BLOCK_CELLS - 1) // BLOCK_CELLS
     for block in numba.prange(blocks):
@@ -140,8 +142,8 @@ def _parallel_cheap_pass(cells: tuple, taps: tuple, band: tuple, parent_index: n
                           parent_index, parents, lattice, triangle_rows, out)
 
 
-def cheap_pass(cells: tuple, taps: tuple, band: tuple, parent_index: np.ndarray, parents: tuple, lattice: tuple,
-               triangle_rows: np.ndarray, out: tuple) -> None:
+def cheap_pass(cells: Arrays, taps: Arrays, band: Arrays, parent_index: np.ndarray, parents: Arrays, lattice: Arrays,
+               triangle_rows: np.ndarray, out: Arrays) -> None:
     """``_cheap_pass_range`` over all cells, in blocks spread over the cores (a few blocks on the calling thread:
     waking the parallel workers costs milliseconds)."""
     count = len(cells[1])
@@ -152,8 +154,8 @@ def cheap_pass(cells: tuple, taps: tuple, band: tuple, parent_index: np.ndarray,
 
 
 @numba.njit(nogil=True, cache=True)
-def _cheap_pass_range(start: int, stop: int, cells: tuple, taps: tuple, band: tuple, parent_index: np.ndarray,
-                      parents: tuple, lattice: tuple, triangle_rows: np.ndarray, out: tuple) -> None:
+def _cheap_pass_range(start: int, stop: int, cells: Arrays, taps: Arrays, band: Arrays, parent_index: np.ndarray,
+                      parents: Arrays, lattice: Arrays, triangle_rows: np.ndarray, out: Arrays) -> None:
     """Cheap test of cells ``start .. stop`` of a chunk of ``n`` cells against every tap, in order.
 
     ``cells = (fix_R_base (U, 3, 3), rotation_index (n,), position_cells (n, 3), chords (U,), octree)`` with
@@ -233,8 +235,8 @@ def _cheap_pass_range(start: int, stop: int, cells: tuple, taps: tuple, band: tu
 
 
 @numba.njit(nogil=True, cache=True)
-def query_band(cells: tuple, rotated_positions: np.ndarray, rows: np.ndarray, taps: np.ndarray, base_p_taps: np.ndarray,
-               band: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def query_band(cells: Arrays, rotated_positions: np.ndarray, rows: np.ndarray, taps: np.ndarray,
+               base_p_taps: np.ndarray, band: Arrays) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Query points (m, fixture frame) of cell-tap pairs ``(rows[k], taps[k])``, and their bands' low and high
     ends (m); ``cells`` and ``band`` as for ``cheap_pass``."""
     fix_R_base, rotation_index, _, chords, _ = cells

@@ -15,10 +15,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import trimesh
 from scipy.optimize import OptimizeResult, least_squares
 from scipy.spatial.transform import Rotation
-
-import trimesh
 
 from fixwizard.fixture import DistanceOracle, Fixture
 from fixwizard.geometry.se3 import invert, make_transform, points_in_frames
@@ -181,6 +180,6 @@ def _starts(samples: Samples, count: int, rng: np.random.Generator) -> np.ndarra
 
 def shares_of(log_masses: list[float]) -> np.ndarray:
     """Probabilities (sum 1) from each mode's log mass."""
-    log_masses = np.asarray(log_masses, dtype=float)
-    shares = np.exp(log_masses - log_masses.max())
+    values = np.asarray(log_masses, dtype=float)
+    shares = np.exp(values - values.max())
     return shares / shares.sum()

@@ -13,13 +13,14 @@ set is pulled back towards its start until it certifies.
 Frames: poses are ``base_T_fix``; the figures are measured as ``estimates.cell_bound_figures`` measures them.
 """
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation
 
-from fixwizard.geometry.se3 import make_transform, points_in_frames
+from fixwizard.geometry.se3 import make_transform, points_in_frames, rotation_angle_rad
 from fixwizard.solver.estimates import BoundCentre
 from fixwizard.solver.mode_mass import laplace_peak
 from fixwizard.solver.search import SearchProblem
@@ -58,7 +59,7 @@ def pose_figures(base_T_fix: np.ndarray, centre: BoundCentre, fix_p_origin: np.n
     centre_R = centre.rotation.as_matrix()
     centre_p_fix = centre.cad_origin_m - centre_R @ fix_p_origin
     displacement = np.linalg.norm(fix_p_hull @ (base_R_fix - centre_R).T + (base_T_fix[:3, 3] - centre_p_fix), axis=1)
-    angle = Rotation.from_matrix(centre_R.T @ base_R_fix).magnitude()
+    angle = rotation_angle_rad(centre_R.T @ base_R_fix)
     return np.array([np.linalg.norm(origin - centre.cad_origin_m), angle, displacement.max()])
 
 
@@ -75,7 +76,7 @@ def _residuals_m(problem: SearchProblem, start: np.ndarray, steps: np.ndarray) -
     return distances.reshape(len(steps), -1) - problem.ball_radius_m
 
 
-def _push(problem: SearchProblem, start: np.ndarray, objective, extent_m: float,
+def _push(problem: SearchProblem, start: np.ndarray, objective: Callable[[np.ndarray], float], extent_m: float,
           bound_m: float | None = None) -> np.ndarray:
     """The pose that maximises ``objective(pose)`` subject to every tap within ``bound_m`` (default the sample
     bound), from ``start``."""
@@ -122,7 +123,7 @@ def _pulled_back(problem: SearchProblem, start: np.ndarray, end: np.ndarray) -> 
 
 
 def _objectives(centre: BoundCentre, fix_p_origin: np.ndarray, fix_p_hull: np.ndarray,
-                rng: np.random.Generator) -> list:
+                rng: np.random.Generator) -> list[Callable[..., float]]:
     """Functions of a pose to push outward: the CAD origin along directions, the rotation about axes, the
     farthest hull points along directions."""
     axes = np.vstack([np.eye(3), -np.eye(3)])
@@ -131,7 +132,7 @@ def _objectives(centre: BoundCentre, fix_p_origin: np.ndarray, fix_p_hull: np.nd
     centre_R = centre.rotation.as_matrix()
     centre_p_fix = centre.cad_origin_m - centre_R @ fix_p_origin
     far = fix_p_hull[np.argsort(-np.linalg.norm(fix_p_hull - fix_p_hull.mean(axis=0), axis=1))[:2]]
-    objectives = []
+    objectives: list[Callable[..., float]] = []
     for direction in directions:
         objectives.append(lambda pose, u=direction: float(u @ (pose[:3, :3] @ fix_p_origin + pose[:3, 3]
                                                                 - centre.cad_origin_m)))

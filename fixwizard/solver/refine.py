@@ -56,7 +56,7 @@ def refined_largest_figures(problem: SearchProblem, survivors: Survivors, centre
                 break
         budget -= wanted
         by_level: dict[tuple[int, int], list[Survivors]] = {}
-        for (cells, figures), mask in zip(pools, outer):
+        for (cells, figures), mask in zip(pools, outer, strict=True):
             if np.any(mask):
                 level = (cells.cells.rotation_level, cells.cells.position_level)
                 by_level.setdefault(level, []).append(cells.subset(mask))

@@ -120,7 +120,7 @@ class _Frames:
     """Centre frames of a CellSet's cells: ``R_c^T`` per distinct rotation, and ``chord(gamma)`` of each."""
 
     def __init__(self, cells: CellSet, fix_R_base: np.ndarray | None = None, chords: np.ndarray | None = None):
-        if fix_R_base is None:
+        if fix_R_base is None or chords is None:  # both or neither are given
             base_R_fix, gammas_rad = cells.distinct_rotation_matrices()
             fix_R_base = np.ascontiguousarray(np.swapaxes(base_R_fix, 1, 2))
             chords = chord(gammas_rad)
@@ -171,8 +171,10 @@ class Survivors:
         """One set of the survivors of several sets at the same levels (searched with the same taps); their
         parents are not one level, so none is recorded."""
         return Survivors(_Frames.concatenate([part.frames for part in parts]),
-                         *(np.concatenate([getattr(part, name) for part in parts])
-                           for name in ("rotated_positions", "low_m", "high_m", "faces")), parts[0].tap_order,
+                         np.concatenate([part.rotated_positions for part in parts]),
+                         np.concatenate([part.low_m for part in parts]),
+                         np.concatenate([part.high_m for part in parts]),
+                         np.concatenate([part.faces for part in parts]), parts[0].tap_order,
                          np.full(sum(len(part) for part in parts), -1))
 
     def subset(self, mask: np.ndarray) -> "Survivors":

@@ -14,18 +14,36 @@ from scipy.spatial.transform import Rotation
 
 from fixwizard.errors import InputError
 from fixwizard.fixture import Fixture
-from fixwizard.geometry.se3 import invert
+from fixwizard.geometry.se3 import invert, rotation_angle_rad
+from fixwizard.solver.cells import CellSet
 from fixwizard.solver.diagnose import Diagnosis, SuspectTap, diagnose
-from fixwizard.solver.estimates import (Bounds, Interval, Samples, bound_centre, bounds_from_figures,
-                                        cell_bound_figures, effective_sample_size, expected_pose, intervals, mixture,
-                                        rotation_center, sample_cells)
+from fixwizard.solver.estimates import (
+    Bounds,
+    Interval,
+    Samples,
+    bound_centre,
+    bounds_from_figures,
+    cell_bound_figures,
+    effective_sample_size,
+    expected_pose,
+    intervals,
+    mixture,
+    rotation_center,
+    sample_cells,
+)
 from fixwizard.solver.mode_mass import ModeLikelihood, mode_shares
+from fixwizard.solver.modes import rotation_modes
 from fixwizard.solver.refine import refined_largest_figures
 from fixwizard.solver.resources import available_memory_bytes, largest_cell_budget, search_peak_bytes
-from fixwizard.solver.modes import rotation_modes
-from fixwizard.solver.cells import CellSet
-from fixwizard.solver.search import (SearchProblem, SearchProgress, SearchTree, Survivors, add_taps, search,
-                                     worth_extending)
+from fixwizard.solver.search import (
+    SearchProblem,
+    SearchProgress,
+    SearchTree,
+    Survivors,
+    add_taps,
+    search,
+    worth_extending,
+)
 from fixwizard.solver.verdict import MIN_INTERVAL_SAMPLES, Status, openness, status_of, undetermined_message
 
 DEFAULT_MAX_CELLS = 1e7
@@ -152,7 +170,7 @@ def _mode_separation(modes: list[Mode]) -> tuple[float, float]:
         for second in modes[i + 1:]:
             distance = max(distance, float(np.linalg.norm(first.base_T_cad[:3, 3] - second.base_T_cad[:3, 3])))
             relative = first.base_T_cad[:3, :3].T @ second.base_T_cad[:3, :3]
-            angle = max(angle, float(Rotation.from_matrix(relative).magnitude()))
+            angle = max(angle, float(rotation_angle_rad(relative)))
     return distance, angle
 
 
@@ -205,12 +223,12 @@ def _modes(problem: SearchProblem, survivors: Survivors, likelihood: _Likelihood
     shares = mode_shares(likelihood.fixture, problem.base_p_taps, problem.ball_radius_m, likelihood.sigma_m,
                          problem.sample_bound_m, [mode for *_, mode in found], likelihood.rng)
     modes = [Mode(float(share), expected_pose(samples, np.ones(len(samples.weights), bool), fix_T_cad), bounds,
-                  len(mode_cells))
-             for share, (bounds, samples, mode_cells, _) in zip(shares, found, strict=True)]
+                  len(rows))
+             for share, (bounds, samples, rows, _) in zip(shares, found, strict=True)]
     kept = np.zeros(len(cells), bool)
-    for _, _, mode_cells, _ in found:
-        kept[mode_cells] = True
-    samples = mixture([(samples, mode_cells) for _, samples, mode_cells, _ in found], shares)
+    for _, _, rows, _ in found:
+        kept[rows] = True
+    samples = mixture([(samples, rows) for _, samples, rows, _ in found], shares)
     return sorted(modes, key=lambda mode: -mode.probability), kept, samples
 
 
@@ -245,10 +263,12 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
             f" GB, and {available_memory_bytes() / 1e9:.1f} GB are free."))
         max_cells = max(largest, MIN_MAX_CELLS)
     problem = SearchProblem(fixture.oracle, fixture.radius_m, base_p_taps, ball_diameter_m / 2.0, sample_bound_m)
-    if previous is not None and previous.extends_to(problem) and len(base_p_taps) == len(previous.problem.base_p_taps):
-        tree = previous.tree
-    elif previous is not None and previous.extends_to(problem) and worth_extending(problem, previous.tree):
-        tree = add_taps(problem, previous.tree, max_cells, progress, cancel, "quick" if quick else "thorough")
+    known = previous.tree if previous is not None and previous.extends_to(problem) else None
+    tree: SearchTree | None
+    if previous is not None and known is not None and len(base_p_taps) == len(previous.problem.base_p_taps):
+        tree = known
+    elif known is not None and worth_extending(problem, known):
+        tree = add_taps(problem, known, max_cells, progress, cancel, "quick" if quick else "thorough")
     else:
         tree = search(problem, max_cells, progress, cancel, "quick" if quick else "thorough")
     survivors = None if tree is None else tree.final
@@ -265,13 +285,13 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
                         None if diagnosis is None else diagnosis.suspect, stats, None, problem, fix_T_cad,
                         diagnosis=diagnosis)
 
-    if cells is None or len(cells) == 0:
+    if survivors is None or cells is None or len(cells) == 0:
         return inconsistent()
     fix_p_origin = -fixture.cad_p_center
     hull_cells = max_cells * HULL_SHARE if hull_cells is None else hull_cells
     likelihood = _Likelihood(fixture, sigma_m, max_samples, np.random.default_rng(seed))
     modes, in_modes, samples = _modes(problem, survivors, likelihood, fix_p_origin, fix_T_cad, hull_cells, cancel)
-    if not modes:
+    if not modes or samples is None:
         return inconsistent()
     top = modes[0]
     if len(modes) == 1:

@@ -22,7 +22,8 @@ import numpy as np
 
 from fixwizard.fixture import Fixture
 from fixwizard.geometry.octree import PositionGrid
-from fixwizard.geometry.so3_grid import RotationGrid, chord, rotation_angles
+from fixwizard.geometry.se3 import rotation_angle_rad
+from fixwizard.geometry.so3_grid import RotationGrid, chord
 from fixwizard.solver.cells import CellSet
 from fixwizard.solver.search import SearchProblem, Survivors, filter_cells, split
 
@@ -77,7 +78,7 @@ def _rotation_cells(region: AllowedRegion, grid: RotationGrid) -> tuple[int, np.
     level, ids = 0, np.arange(grid.n_cells(0), dtype=np.int64)
     while True:
         gammas = grid.gamma(level, ids)
-        angles = rotation_angles(base_R_center, grid.center_matrices(level, ids))
+        angles = rotation_angle_rad(base_R_center.T @ grid.center_matrices(level, ids))
         ids = ids[angles <= region.rotation_rad + gammas + MARGIN_M]
         if float(np.max(gammas)) <= region.rotation_rad or level >= MAX_START_LEVEL:
             return level, ids

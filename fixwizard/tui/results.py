@@ -1,5 +1,6 @@
 """The results screen: the solution in words and numbers, pictures of the rotation set and of the taps on
-the fixture, the solver's own figures (Details), the report (default path shown, editable) and what to do next. Dismisses with "resample"
+the fixture, the solver's own figures (Details), the report (default path shown, editable) and what to do next.
+Dismisses with "resample"
 (back to sampling, after dropping the suspect tap of an inconsistent result if asked) or "done"."""
 
 import datetime as dt

@@ -5,7 +5,7 @@ inconsistent one (a wrong ball diameter, or a suspect tap); the solver's own fig
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from fixwizard.geometry.se3 import format_ur_pose
+from fixwizard.geometry.se3 import format_ur_pose, rotation_angle_rad
 from fixwizard.solver.estimates import Bounds
 from fixwizard.solver.solve import Mode, Solution
 from fixwizard.workflow.advice import TapAdvice
@@ -54,7 +54,7 @@ def summary_lines(solution: Solution) -> list[str]:
 
 def mode_line(number: int, mode: Mode) -> str:
     x, y, z = mode.base_T_cad[:3, 3] * 1e3
-    angle = np.degrees(Rotation.from_matrix(mode.base_T_cad[:3, :3]).magnitude())
+    angle = np.degrees(rotation_angle_rad(mode.base_T_cad[:3, :3]))
     return (f"  {number}. {mode.probability:6.1%}  x {round(x)} y {round(y)} z {round(z)} mm, turned {round(angle)} "
             f"deg; within {mode.bounds.position_m * 1e3:.1f} mm, {np.degrees(mode.bounds.rotation_rad):.1f} deg")
 
@@ -110,11 +110,13 @@ def details_lines(solution: Solution) -> list[str]:
              f"{stats.rotation_level}, position level {stats.position_level}), {stats.elapsed_s:.1f} s.",
              f"Effective likelihood samples: {solution.effective_samples:,.0f}.",
              *(f"Mode {number}: probability {mode.probability:.1%}, within {mode.bounds.position_m * 1e3:.2f} mm, "
-               f"{np.degrees(mode.bounds.rotation_rad):.2f} deg" for number, mode in enumerate(solution.modes, start=1))]
+               f"{np.degrees(mode.bounds.rotation_rad):.2f} deg"
+               for number, mode in enumerate(solution.modes, start=1))]
     if solution.bounds is not None:
         bounds = solution.bounds
         lines.append(f"Bounds: position {bounds.position_m * 1e3:.3f} mm, rotation "
-                     f"{np.degrees(bounds.rotation_rad):.3f} deg, any point {bounds.max_point_displacement_m * 1e3:.3f} "
+                     f"{np.degrees(bounds.rotation_rad):.3f} deg, "
+                     f"any point {bounds.max_point_displacement_m * 1e3:.3f} "
                      "mm.")
     diagnosis = solution.diagnosis
     if diagnosis is not None:

@@ -22,7 +22,7 @@ import numpy as np
 import trimesh
 
 from fixwizard.fixture import Fixture
-from fixwizard.geometry.se3 import invert, transform_points
+from fixwizard.geometry.se3 import transform_points
 from fixwizard.solver.solve import Solution
 
 SURFACE_SAMPLES = 4000
@@ -178,8 +178,7 @@ def distinguishing_tap(fixture: Fixture, first_base_T_cad: np.ndarray, second_ba
     if len(cad_p_points) == 0:
         return None
     base_p_points = transform_points(first_base_T_cad, cad_p_points)
-    fix_p_second = transform_points(fixture.fix_T_cad @ invert(second_base_T_cad), base_p_points)
-    separation_m = np.abs(fixture.oracle.signed_distance_m(fix_p_second))
+    separation_m = np.abs(fixture.signed_distance_at_m(second_base_T_cad, base_p_points))
     order = np.argsort(-separation_m, kind="stable")
     ranked = [TapAdvice(base_p_points[i], cad_p_points[i], base_n_points[i], float(separation_m[i]))
               for i in _near_best(order, separation_m)]

@@ -21,7 +21,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from fixwizard.fixture import Fixture
-from fixwizard.geometry.se3 import invert, make_transform, transform_points
+from fixwizard.geometry.se3 import make_transform, transform_points
 from fixwizard.solver.estimates import Bounds
 from fixwizard.solver.solve import Solution
 from fixwizard.workflow.advice import TOOL_CLEARANCE_M, TapAdvice, next_tap
@@ -52,8 +52,8 @@ def guaranteed_gap_m(fixture: Fixture, pose_bounds: Sequence[Bounds], base_p_poi
     Unsigned on an open mesh; ``plan_hover`` only uses it along a path that starts clear above the fixture."""
     gaps = np.full(len(base_p_points), np.inf)
     for bounds in pose_bounds:
-        fix_p_points = transform_points(fixture.fix_T_cad @ invert(bounds.base_T_cad_center), base_p_points)
-        gaps = np.minimum(gaps, fixture.oracle.signed_distance_m(fix_p_points) - bounds.max_point_displacement_m)
+        gaps = np.minimum(gaps, fixture.signed_distance_at_m(bounds.base_T_cad_center, base_p_points)
+                          - bounds.max_point_displacement_m)
     return gaps
 
 

@@ -104,9 +104,9 @@ def _verdict(base_p_taps: np.ndarray, mesh: Path, mesh_units: str, ball_diameter
             break
         if progress is not None:
             progress(IdentifyStep(mesh, budget, solution.status, time.monotonic() - started))
-        if solution.status == "inconsistent":
+        if solution.status == "inconsistent" or solution.base_T_cad is None:
             return MeshVerdict(mesh, "ruled out", "no pose of this mesh explains the taps", max_cells=budget)
-        rms_mm, worst_mm = _residuals_mm(fixture, base_p_taps, ball_diameter_m, solution)
+        rms_mm, worst_mm = _residuals_mm(fixture, base_p_taps, ball_diameter_m, solution.base_T_cad)
         if solution.status in ("unique", "ambiguous"):
             poses = "one pose explains" if solution.status == "unique" else f"{len(solution.modes)} poses explain"
             return MeshVerdict(mesh, "fits", f"{poses} the taps; at the most probable the taps lie "
@@ -115,7 +115,6 @@ def _verdict(base_p_taps: np.ndarray, mesh: Path, mesh_units: str, ball_diameter
     if solution is None:
         return MeshVerdict(mesh, "not decided", f"its first search ({budgets[0]:.0e} cells) did not end within the "
                            "time limit")
-    rms_mm, worst_mm = _residuals_mm(fixture, base_p_taps, ball_diameter_m, solution)
     return MeshVerdict(mesh, "not decided", f"neither ruled out nor pinned down within {solution.stats.max_cells:.0e} "
                        f"cells (RMS {rms_mm:.2f} mm off the surface at the most probable pose so far)", rms_mm,
                        worst_mm, solution.stats.max_cells)
@@ -154,9 +153,9 @@ def _solve_by(deadline: float, cancel: threading.Event | None, fixture: Fixture,
 
 
 def _residuals_mm(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float,
-                  solution: Solution) -> tuple[float, float]:
-    """RMS and largest distance (mm) of the taps from the surface at the solution's most probable pose."""
-    distances_mm = 1e3 * tap_surface_distances_m(fixture, base_p_taps, ball_diameter_m, solution.base_T_cad)
+                  base_T_cad: np.ndarray) -> tuple[float, float]:
+    """RMS and largest distance (mm) of the taps from the surface with the fixture at ``base_T_cad``."""
+    distances_mm = 1e3 * tap_surface_distances_m(fixture, base_p_taps, ball_diameter_m, base_T_cad)
     return float(np.sqrt(np.mean(distances_mm**2))), float(np.max(np.abs(distances_mm)))
 
 

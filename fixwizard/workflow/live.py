@@ -14,7 +14,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from fixwizard.fixture import Fixture
-from fixwizard.geometry.se3 import invert, points_in_frames
 from fixwizard.solver.solve import HULL_SHARE, MIN_TAPS, Solution, solve
 from fixwizard.solver.verdict import Status
 
@@ -29,9 +28,7 @@ def tap_surface_distances_m(fixture: Fixture, base_p_taps: np.ndarray, ball_diam
     """Distance (N,) in m of each ball centre (base frame) from where it would touch the surface with the
     fixture at ``base_T_cad``: signed distance minus ball radius (positive: the ball stops short of the
     surface; negative: it would be inside; unsigned for an open mesh)."""
-    base_T_fix = base_T_cad @ invert(fixture.fix_T_cad)
-    fix_p_taps = points_in_frames(base_T_fix[:3, :3], base_T_fix[:3, 3], base_p_taps)[0]
-    return fixture.oracle.signed_distance_m(fix_p_taps) - ball_diameter_m / 2.0
+    return fixture.signed_distance_at_m(base_T_cad, base_p_taps) - ball_diameter_m / 2.0
 
 
 @dataclass(frozen=True)

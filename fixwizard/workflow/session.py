@@ -116,6 +116,13 @@ def _encode(record: dict) -> bytes:
     return (_canonical(body) + "\n").encode()
 
 
+def _decode_own(line: bytes) -> dict:
+    """The record of a line this process has just encoded (it always decodes)."""
+    record = _decode(line)
+    assert record is not None
+    return record
+
+
 def _decode(line: bytes) -> dict | None:
     """The record of a complete line, or None when it does not parse or its checksum does not match."""
     try:
@@ -236,7 +243,7 @@ class SamplingSession:
         except OSError as error:
             raise SessionError(f"cannot start the session {path}: {file_problem(error)}") from error
         _lock(handle, path)
-        session = cls(path, handle, _decode(line), [])
+        session = cls(path, handle, _decode_own(line), [])
         try:
             session._append(line, "the session")
             _fsync_dir(path.parent)
@@ -292,7 +299,7 @@ class SamplingSession:
             base_p_ball_m = ball_centres_m(base_T_tcp[None], np.asarray(self.header["tip"]["tcp_p_tip_m"], float))[0]
         record = {"kind": "tap", "id": self._next_id, "time": _now(), "base_T_tcp_ur": to_ur_pose(base_T_tcp),
                   "base_p_ball_m": np.asarray(base_p_ball_m, float).reshape(3), "force": force}
-        return self._write(record)
+        return self._write_tap(record)
 
     def undo(self) -> Tap | None:
         """Journal the undo of the last active tap and return it; None when there is no tap to undo."""
@@ -307,7 +314,7 @@ class SamplingSession:
         if tap_id not in self._taps:
             raise SessionError(f"tap id {tap_id} is not an active tap of the session {self.path}; "
                                "choose one of the taps shown")
-        return self._write({"kind": "drop", "id": tap_id, "time": _now()})
+        return self._write_tap({"kind": "drop", "id": tap_id, "time": _now()})
 
     def export_points(self, path: str | Path) -> Path:
         """Write the active taps as a POINTS YAML for ``fixwizard solve``, naming this session as source."""
@@ -333,6 +340,12 @@ class SamplingSession:
     def __exit__(self, *exc_info) -> None:
         self.release()
 
+    def _write_tap(self, record: dict) -> Tap:
+        """``_write`` of a tap or drop record, which replays to its tap."""
+        tap = self._write(record)
+        assert tap is not None
+        return tap
+
     def _write(self, record: dict) -> Tap | None:
         if self.closed:
             raise SessionError(f"the session {self.path} is finished; start a new session to record more taps")
@@ -340,7 +353,7 @@ class SamplingSession:
             raise SessionError(f"the session {self.path} was released; resume it to record more taps")
         line = _encode(record)
         self._append(line, f"this {RECORD_NAMES[record['kind']]}")
-        return self._apply(_decode(line), None)
+        return self._apply(_decode_own(line), None)
 
     def _append(self, line: bytes, what: str) -> None:
         """Write and fsync one record; on failure cut the journal back to its last saved record, so that the

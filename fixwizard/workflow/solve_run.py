@@ -54,7 +54,7 @@ def summary_lines(outcome: SolveOutcome) -> list[str]:
     solution = outcome.solution
     lines = [f"status: {solution.status} ({len(outcome.base_p_taps)} taps, {solution.stats.cells} cells survive, "
              f"{solution.stats.elapsed_s:.1f} s)"]
-    if solution.base_T_cad is not None:
+    if solution.base_T_cad is not None and solution.bounds is not None:
         pose = report.pose_dict(solution.base_T_cad)
         x, y, z = (1e3 * value for value in pose["position_m"])
         bounds = solution.bounds

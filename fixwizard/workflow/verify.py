@@ -172,8 +172,8 @@ def verdict_lines(result: VerifyResult) -> list[str]:
     bracket = result.bracket
     explained_m = None if bracket is None else bracket.explained_m
     if bracket is not None and explained_m is None:
-        lines.append(f"Not even a {bracket.ruled_out_m * 1e3:.0f} mm sample bound lets a pose the report allows explain "
-                     "them.")
+        lines.append(f"Not even a {bracket.ruled_out_m * 1e3:.0f} mm sample bound lets a pose the report allows "
+                     "explain them.")
     elif bracket is not None and explained_m is not None:
         lines.append(f"Up to a sample bound of {bracket.ruled_out_m * 1e3:.2f} mm no allowed pose explains them "
                      f"(proved); with {explained_m * 1e3:.2f} mm some pose does.")

@@ -65,7 +65,7 @@ class RtdeSession:
             names = _names(payload)
             types = [wire.field_type(name) for name in names]
             if "NOT_FOUND" not in types and not self._claim_inputs(self, names):
-                types = ["IN_USE" if name.startswith("input_") else t for name, t in zip(names, types)]
+                types = ["IN_USE" if name.startswith("input_") else t for name, t in zip(names, types, strict=True)]
             recipe_id = len(self._inputs) + 1
             if "NOT_FOUND" not in types and "IN_USE" not in types:
                 self._inputs[recipe_id] = (names, types, wire.recipe_struct(types))
@@ -81,7 +81,7 @@ class RtdeSession:
         elif package_type == wire.DATA_PACKAGE:
             names, types, layout = self._inputs[payload[0]]
             values = wire.unflatten(types, layout.unpack(payload[1:]))
-            self._write_inputs(dict(zip(names, values)))
+            self._write_inputs(dict(zip(names, values, strict=True)))
 
     def _stream(self) -> None:
         while not self._closed.is_set():
