@@ -26,6 +26,7 @@ from fixwizard.tui.solve_screen import SolveScreen
 from fixwizard.tui.start import StartScreen
 from fixwizard.tui.status import STOP_KEYS, StatusBar
 from fixwizard.tui.tip_calibration import calibrate_tip_on_screens
+from fixwizard.workflow.solver_process import SolverProcess
 
 T = TypeVar("T")
 STATUS_INTERVAL_S = 0.5
@@ -102,9 +103,11 @@ class FixwizardApp(App[None]):
         self.notify("STOP sent: the robot halts. Check the cell before going on.", severity="warning")
 
     async def action_quit(self) -> None:
-        """Quit; an automatic step stops after its current motion, and the session stays resumable."""
+        """Quit; an automatic step stops after its current motion, a solve at once (its process ends), and the
+        session stays resumable."""
         for cancel in self._motion_cancels:
             cancel.set()
+        SolverProcess.close_all()
         self.exit()
 
     def show_error(self, error: ShownError) -> None:
