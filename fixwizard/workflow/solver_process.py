@@ -18,6 +18,7 @@ oracle in place of the worker's (``_dumps`` / ``_loads``).
 
 import io
 import multiprocessing
+import os
 import pickle
 import threading
 import traceback
@@ -43,6 +44,7 @@ from fixwizard.workflow.live import LiveCheck, LiveView
 from fixwizard.workflow.live_pipeline import NextTap, live_pipeline
 
 EXIT_WAIT_S = 1.0  # a terminated worker gets this long before it is killed
+NICENESS = 10  # the worker yields the processor to the wizard's event loop (and to the robot's link)
 NO_REQUEST = -1
 
 
@@ -241,6 +243,7 @@ class _Worker:
 
 def serve(conn: Connection, current: Synchronized, fixture_state: dict[str, Any] | None) -> None:
     """The worker process's main: build the fixture and its lattice, then answer requests until the pipe closes."""
+    os.nice(NICENESS)
     fixture = None if fixture_state is None else _fixture_from_state(fixture_state)
     if fixture is not None:
         distance_grid_for(fixture.oracle)  # the search's lattice, before the first request needs it
