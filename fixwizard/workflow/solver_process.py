@@ -34,7 +34,7 @@ import numpy as np
 import trimesh
 
 from fixwizard.child_process import real_stderr
-from fixwizard.errors import FixwizardError
+from fixwizard.errors import FixwizardError, sentence
 from fixwizard.fixture import Fixture
 from fixwizard.solver.distance_grid import distance_grid_for
 from fixwizard.solver.search import SearchCancelled, SearchProgress, SearchTree
@@ -219,7 +219,7 @@ class _Worker:
         except SearchCancelled:
             return
         except FixwizardError as error:
-            send(Failed(str(error)))
+            send(Failed(sentence(error)))
             return
         except Exception as error:  # a bug: said in one line, the wizard and the taps go on
             last = traceback.extract_tb(error.__traceback__)[-1]
