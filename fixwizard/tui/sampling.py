@@ -211,10 +211,10 @@ class SamplingScreen(Screen[bool]):
         elif isinstance(event, Identified):
             self._say("")
             self.app.push_screen(Dialog("Which fixture is this?",
-                                        identify_text(choices, event.verdicts, self.context.fixture.path)))
+                                        identify_text(choices, event.verdicts, self.context.fixture.path)),
+                                 lambda _: self._end_identify())
         elif isinstance(event, Failed):
             self._problem(f"Which fixture: {event.message}")
-        if isinstance(event, (Finished, Failed)):
             self._end_identify()
 
     def _end_identify(self) -> None:

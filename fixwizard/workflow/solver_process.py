@@ -44,7 +44,7 @@ from fixwizard.workflow.live import LiveCheck, LiveView
 from fixwizard.workflow.live_pipeline import NextTap, live_pipeline
 
 EXIT_WAIT_S = 1.0  # a terminated worker gets this long before it is killed
-NICENESS = 10  # the worker yields the processor to the wizard's event loop (and to the robot's link)
+NICENESS = 5  # the worker yields the processor to the wizard's event loop (and to the robot's link)
 NO_REQUEST = -1
 
 
@@ -258,6 +258,14 @@ def serve(conn: Connection, current: Synchronized, fixture_state: dict[str, Any]
 
 # --- the wizard's side ---
 
+def _reap(process: BaseProcess) -> None:
+    """Wait for a terminated worker; kill it if it has not ended in time."""
+    process.join(EXIT_WAIT_S)
+    if process.is_alive():
+        process.kill()
+        process.join(EXIT_WAIT_S)
+
+
 @dataclass
 class _Running:
     process: BaseProcess
@@ -358,18 +366,16 @@ class SolverProcess:
         return self._running
 
     def _end(self) -> None:
-        """End the running worker (lock held); its reader sees the pipe close and says nothing."""
+        """End the running worker (lock held) without waiting for it: terminated now, killed by a reaper thread if
+        it has not ended within ``EXIT_WAIT_S``; its reader sees the pipe close and says nothing."""
         running, self._running = self._running, None
         self._on_event = {}
         self._current.value = NO_REQUEST
         if running is None:
             return
         running.process.terminate()
-        running.process.join(EXIT_WAIT_S)
-        if running.process.is_alive():
-            running.process.kill()
-            running.process.join(EXIT_WAIT_S)
         running.conn.close()
+        threading.Thread(target=_reap, args=(running.process,), name="fixwizard-solver-reaper", daemon=True).start()
 
     def _read(self, process: BaseProcess, conn: Connection) -> None:
         """The reader thread of one worker: each answer to its request's ``on_event``; a death is said as a Failed."""
