@@ -11,7 +11,8 @@ Each run puts a fixture at a random resting pose (seeded) in the simulated cell 
 sampling screen's) after each; a run reaches a target at the first attempt after which the check says
 "unique" within both of its bounds. Every tap is a real simulated one: the robot moves to the hover pose
 above the chosen point (``workflow.hover``) and taps along its tool axis. The bounds are those the operator
-sees a second or two after the tap: the check's set with the full solve's hull refinement (``refine_check``),
+sees a second or two after the tap: the check's set with the full solve's hull refinement (the sampling screen's
+live pipeline, ``workflow.live_pipeline``),
 computed when the quick bounds are within ``REFINE_WITHIN`` of a target not reached yet (refinement tightens
 them by about 10 %; below that a target is out of reach, so skipping it saves time without changing a count)
 and after ``PAPER_TAPS`` attempts. A run stops once it has reached both targets and made ``PAPER_TAPS``
@@ -46,8 +47,9 @@ from fixwizard.robot.base import NoContact, ProtectiveStop
 from fixwizard.robot.sim import SimulatedCell
 from fixwizard.solver.estimates import Bounds
 from fixwizard.workflow.advice import TapAdvice, reachable_points
-from fixwizard.workflow.hover import HoverPlan, hover_path, next_tap_and_plan, plan_hover
-from fixwizard.workflow.live import LiveCheck, quick_check, refine_check
+from fixwizard.workflow.hover import HoverPlan, hover_path, plan_hover
+from fixwizard.workflow.live import LiveCheck
+from fixwizard.workflow.live_pipeline import NextTap, live_pipeline
 
 LOGO = Path(__file__).resolve().parents[2] / "shared" / "data" / "matlab-logo" / "meshes" / "matlab_logo.ply"
 STRATEGIES = ("guided", "farthest", "random")
@@ -120,6 +122,22 @@ def _worth_refining(bounds: tuple[float, float], reached: list[bool], attempt: i
     return np.isfinite(bounds[0]) and (near or attempt == PAPER_TAPS)
 
 
+def _live(fixture: Fixture, taps: list[np.ndarray], previous: LiveCheck | None, attempt: int, advise: bool,
+          reached: list[bool]) -> tuple[LiveCheck | None, NextTap | None]:
+    """The live pipeline after a tap: the quick check, the next tap (with ``advise``), and the refined check (and the
+    next tap again) only when ``_worth_refining``."""
+    stages = live_pipeline(fixture, np.array(taps), BALL_DIAMETER_M, SAMPLE_BOUND_M, previous=previous,
+                           seed=attempt + 1, advise=advise)
+    check = next(stages, None)
+    if check is None or check.estimate_base_T_cad is None:
+        return check, None
+    next_tap = next(stages) if advise else None
+    if _worth_refining(_bounds(check), reached, attempt):
+        check = next(stages)
+        next_tap = next(stages, next_tap)
+    return check, next_tap
+
+
 def run(fixture: Fixture, seed: int, strategy: str, max_taps: int) -> Run:
     """Tap attempts up to ``max_taps``, or until both targets are reached after at least ``PAPER_TAPS``."""
     cell = SimulatedCell.with_fixture(fixture, seed=seed, ball_diameter_m=BALL_DIAMETER_M,
@@ -132,16 +150,16 @@ def run(fixture: Fixture, seed: int, strategy: str, max_taps: int) -> Run:
     usable = np.ones(len(base_points), bool)
     taps: list[np.ndarray] = []
     tapped_points: list[np.ndarray] = []
-    live = None
+    live = next_tap = None
     bounds = (np.inf, np.inf)
     result = Run()
     reached = [False] * len(TARGETS)
     missed = False
     for attempt in range(1, max_taps + 1):
         plan, by_hand = None, []
-        if strategy == "guided" and live is not None and live.estimate_base_T_cad is not None and not missed:
-            advice, plan = next_tap_and_plan(fixture, live.solution, SAMPLE_BOUND_M, BALL_DIAMETER_M / 2, seed=attempt)
-            if advice is not None and plan is None:  # the operator guides the ball to the nearest point they can
+        if next_tap is not None and next_tap.advice is not None and not missed:
+            advice, plan = next_tap.advice, next_tap.plan
+            if plan is None:  # the operator guides the ball to the nearest point they can
                 by_hand = list(np.argsort(np.linalg.norm(base_points - advice.base_p_point_m, axis=1))[:BY_HAND_TRIES])
         while plan is None:
             if by_hand:
@@ -159,11 +177,8 @@ def run(fixture: Fixture, seed: int, strategy: str, max_taps: int) -> Run:
         if ball is not None:
             taps.append(ball)
             tapped_points.append(plan.advice.base_p_point_m)
-            live = quick_check(fixture, np.array(taps), BALL_DIAMETER_M, SAMPLE_BOUND_M, previous=live)
+            live, next_tap = _live(fixture, taps, live, attempt, strategy == "guided", reached)
             bounds = _bounds(live)
-            if _worth_refining(bounds, reached, attempt):
-                live = refine_check(fixture, live)
-                bounds = _bounds(live)
             if live is not None and not live.solution.contains(cell.truth.base_T_cad):
                 result.coverage_misses += 1
         result.trajectory.append(bounds)

@@ -51,3 +51,12 @@ def file_problem(error: OSError, path: object = None) -> str:
     if code == errno.ENOENT:
         return f"{name or 'the file'} does not exist; check the path"
     return f"cannot read or write {name or 'the file'}: {error.strerror or error}; check the path and the disk"
+
+
+def sentence(error: BaseException, text: str | None = None) -> str:
+    """The error's text (or ``text`` for it) as a sentence, with the error's notes (e.g. that a tap's contact was
+    kept)."""
+    text = str(error) if text is None else text
+    for note in getattr(error, "__notes__", ()):
+        text = f"{text if text.endswith(('.', '!', '?')) else text + '.'} {note}"
+    return text[:1].upper() + text[1:]

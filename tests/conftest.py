@@ -13,6 +13,7 @@ import pytest
 
 from fixwizard.geometry.se3 import read_pose_dir, read_pose_file
 from fixwizard.workflow.import_poses import ball_centres_m
+from fixwizard.workflow.solver_process import SolverProcess
 
 # Distance lattices are cached on disk; tests (and the programs they start) keep theirs in a fresh folder.
 os.environ["FIXWIZARD_CACHE"] = tempfile.mkdtemp(prefix="fixwizard-cache-")
@@ -25,6 +26,13 @@ RUNS = ("student_1", "student_2", "student_3", "expert")
 # position (mm), rotation (deg).
 REFERENCE_BOUNDS = {"student_1": (3.30, 2.65), "student_2": (2.71, 1.61), "student_3": (3.01, 4.05),
                     "expert": (1.59, 1.16)}
+
+
+@pytest.fixture(autouse=True)
+def _solver_processes_end_with_their_test():
+    """A test's solver processes (the wizard's own end on quit) do not outlive it."""
+    yield
+    SolverProcess.close_all()
 
 
 @pytest.fixture(scope="session")

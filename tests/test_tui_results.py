@@ -95,8 +95,10 @@ async def test_cancel_stops_the_solve_and_goes_back(tapped):
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
         await until(pilot, lambda: screen.progress is not None)
+        solving = screen.solver.pid
         await pilot.press("escape")
-        assert app.results == [None] and screen.cancel.is_set()
+        assert app.results == [None] and not screen.running
+        assert screen.solver.pid not in (None, solving)  # the solving process ended, a fresh one waits
         assert tapped.solution is None
 
 

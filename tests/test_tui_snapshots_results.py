@@ -3,16 +3,18 @@ clock, the report folder and the solve time are pinned so that only the screens 
 
 import dataclasses
 import datetime as dt
+import threading
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from fixwizard.solver.search import SearchCancelled, SearchProgress
+from fixwizard.solver.search import SearchProgress
 from fixwizard.solver.solve import solve
 from fixwizard.tui.results import ResultsScreen
 from fixwizard.tui.sampling import SamplingScreen
 from fixwizard.tui.solve_screen import SolveScreen
+from fixwizard.workflow.solver_process import Progress
 from pilot_wait import until
 from tui_cell import ScreenHost, point_above_fixture_m, record_spread_taps, symmetric_cell, wizard_context
 
@@ -21,7 +23,6 @@ pytestmark = pytest.mark.slow  # solves behind the screens (20 s to set up), 15-
 SIZE = (80, 24)
 NOW = dt.datetime(2026, 11, 24, 10, 15, 0)
 SOLVE_S = 4.2
-TIMEOUT_S = 60.0
 
 
 @pytest.fixture(autouse=True)
@@ -72,17 +73,24 @@ def test_sampling_screen_after_eight_taps(snap_compare, tmp_path):
 def test_solve_screen_during_the_search(snap_compare, tmp_path):
     context = demo_context(tmp_path, 3, 1e7, solved=False)
 
-    def paused_solver(*args, progress, cancel, **kwargs):
-        progress(SearchProgress(rotation_level=3, position_level=4, evaluated=663_552, survivors=41_317,
-                                elapsed_s=2.0))
-        cancel.wait(TIMEOUT_S)
-        raise SearchCancelled()
+    class PausedSolver:
+        """The solver process's side the screen uses, paused after one search level."""
+
+        latest_request = 1
+
+        def submit(self, request, on_event):  # answers come from another thread, as the reader's do
+            threading.Thread(target=on_event, args=(Progress(search=SearchProgress(
+                rotation_level=3, position_level=4, evaluated=663_552, survivors=41_317, elapsed_s=2.0)),)).start()
+            return self.latest_request
+
+        def stop(self):
+            self.latest_request = 0
 
     async def progress_shown(pilot) -> None:
         await until(pilot, lambda: pilot.app.screen.progress is not None)
         await pilot.pause(0.5)
 
-    assert snap_compare(ScreenHost(lambda: SolveScreen(context, paused_solver)), terminal_size=SIZE,
+    assert snap_compare(ScreenHost(lambda: SolveScreen(context, PausedSolver())), terminal_size=SIZE,
                         run_before=progress_shown)
     context.session.release()
 

@@ -10,7 +10,8 @@ from scipy.spatial.transform import Rotation
 from fixwizard.demo import demo_cell
 from fixwizard.geometry.se3 import make_transform
 from fixwizard.solver.search import SearchCancelled
-from fixwizard.workflow.live import quick_check, refine_check, tap_surface_distances_m
+from fixwizard.workflow.live import LiveCheck, quick_check, refine_check, tap_surface_distances_m
+from fixwizard.workflow.live_pipeline import NextTap, live_pipeline
 from shapes import as_fixture
 from tui_cell import SAMPLE_BOUND_M, spread_taps
 
@@ -85,3 +86,20 @@ def test_quick_check_stops_when_cancelled(tapped):
     cancel.set()
     with pytest.raises(SearchCancelled):
         quick_check(cell.fixture, base_p_taps, BALL_DIAMETER_M, SAMPLE_BOUND_M, cancel)
+
+
+def test_the_live_pipeline_gives_the_check_the_next_tap_and_the_refined_check_in_turn(tapped):
+    cell, base_p_taps = tapped
+    stages = list(live_pipeline(cell.fixture, base_p_taps, BALL_DIAMETER_M, SAMPLE_BOUND_M))
+    quick, next_tap, refined = stages[:3]
+    assert isinstance(quick, LiveCheck) and not quick.refined and quick.verdict == "unique"
+    assert isinstance(next_tap, NextTap) and next_tap.advice is not None
+    assert isinstance(refined, LiveCheck) and refined.refined and refined.solution.contains(cell.truth.base_T_cad)
+    assert all(isinstance(stage, NextTap) and stage.plan is not None for stage in stages[3:])
+
+
+def test_the_live_pipeline_stops_at_the_check_while_the_pose_is_not_pinned_down(tapped):
+    cell, base_p_taps = tapped
+    assert list(live_pipeline(cell.fixture, base_p_taps[:2], BALL_DIAMETER_M, SAMPLE_BOUND_M)) == []
+    stages = list(live_pipeline(cell.fixture, base_p_taps[:3], BALL_DIAMETER_M, SAMPLE_BOUND_M))
+    assert len(stages) == 1 and stages[0].verdict == "undetermined"

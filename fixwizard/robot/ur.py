@@ -23,7 +23,6 @@ command and may be called from any thread while a tap or move runs.
 import multiprocessing
 import signal
 import socket
-import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -36,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from fixwizard.child_process import real_stderr
 from fixwizard.geometry.se3 import to_ur_pose
 from fixwizard.robot.base import (
     MAX_LINEAR_SPEED_M_S,
@@ -87,18 +87,6 @@ class _LinkProcess:
         self.conn.close()
 
 
-@contextmanager
-def _real_stderr() -> Iterator[None]:
-    """The process's own standard error for the duration: starting a process hands its file descriptor on, and the
-    wizard's Textual app replaces ``sys.stderr`` by a capture without one (fd -1: 'bad value(s) in fds_to_keep')."""
-    captured = sys.stderr
-    sys.stderr = sys.__stderr__
-    try:
-        yield
-    finally:
-        sys.stderr = captured
-
-
 class URRobot:
     """A UR arm at ``host`` implementing ``fixwizard.robot.base.Robot``; ``connect`` before anything else.
 
@@ -135,7 +123,7 @@ class URRobot:
             conn, child_conn = self._context.Pipe()
             process = self._context.Process(target=serve, name="fixwizard-ur-link", daemon=True,
                                             args=(self.host, self.watchdog_hz, child_conn, shared, stop_count))
-            with _real_stderr():
+            with real_stderr():
                 process.start()
             child_conn.close()
             link = self._link = _LinkProcess(process, conn, shared, stop_count)

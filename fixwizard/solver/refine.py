@@ -12,6 +12,7 @@ cell whose children all fail keeps figures of zero: when no cell is left, the se
 """
 
 import threading
+from collections.abc import Callable
 
 import numpy as np
 
@@ -33,16 +34,18 @@ def _outermost(ratios: list[np.ndarray], outer: list[np.ndarray], count: int) ->
 
 
 def refined_largest_figures(problem: SearchProblem, survivors: Survivors, centre: BoundCentre, fix_p_origin: np.ndarray,
-                            budget: float, cancel: threading.Event | None = None) -> np.ndarray | None:
+                            budget: float, cancel: threading.Event | None = None,
+                            rounds: Callable[[int], None] | None = None) -> np.ndarray | None:
     """Largest (CAD-origin distance, rotation angle, point displacement) over the set, refined (see module doc);
-    None when refinement rejects every pose of the set."""
+    None when refinement rejects every pose of the set. ``rounds``: called with each round's number (1-based) as it
+    starts, for progress displays."""
     def pool_of(cells: Survivors) -> tuple[Survivors, np.ndarray]:
         """Cells and their figures (3, N); a refined cell's figures are set to zero (its children hold it)."""
         return cells, cell_bound_figures(cells.cells, centre, fix_p_origin, problem.oracle.hull_vertices_m)
 
     pools = [pool_of(survivors)]
     largest = pools[0][1].max(axis=1)
-    for _ in range(MAX_ROUNDS):
+    for number in range(1, MAX_ROUNDS + 1):
         ratios = [np.where(splittable(cells.cells), np.max(figures / np.maximum(largest[:, None], 1e-300), axis=0),
                            0.0) for cells, figures in pools]
         outer = [ratio > OUTER_FRACTION for ratio in ratios]
@@ -55,6 +58,8 @@ def refined_largest_figures(problem: SearchProblem, survivors: Survivors, centre
             if wanted == 0:
                 break
         budget -= wanted
+        if rounds is not None:
+            rounds(number)
         by_level: dict[tuple[int, int], list[Survivors]] = {}
         for (cells, figures), mask in zip(pools, outer, strict=True):
             if np.any(mask):

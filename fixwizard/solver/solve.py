@@ -8,6 +8,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -66,6 +67,22 @@ class SolveWarning:
 
     code: str
     message: str
+
+
+@dataclass(frozen=True)
+class SolveStage:
+    """A phase of a solve after its search, for progress displays: grouping the set into modes, refining a mode's
+    bounds, sampling its likelihood, weighing the modes, the intervals, or the diagnosis of an empty set. ``mode``
+    of ``modes`` (1-based) for the per-mode phases, else 0; ``round``: the bounds' refinement round (1-based; 0
+    before the first)."""
+
+    name: Literal["modes", "bounds", "samples", "masses", "intervals", "diagnosis"]
+    mode: int = 0
+    modes: int = 0
+    round: int = 0
+
+
+Stage = Callable[[SolveStage], None]
 
 
 @dataclass(frozen=True)
@@ -191,8 +208,8 @@ class _Likelihood:
 
 
 def _modes(problem: SearchProblem, survivors: Survivors, likelihood: _Likelihood, fix_p_origin: np.ndarray,
-           fix_T_cad: np.ndarray, refine_budget: float,
-           cancel: threading.Event | None) -> tuple[list[Mode], np.ndarray, Samples | None]:
+           fix_T_cad: np.ndarray, refine_budget: float, cancel: threading.Event | None,
+           stage: Stage) -> tuple[list[Mode], np.ndarray, Samples | None]:
     """The modes of a non-empty set that refinement does not prove empty, most probable first, each with refined
     bounds; which cells belong to them; and likelihood samples of them all.
 
@@ -205,14 +222,19 @@ def _modes(problem: SearchProblem, survivors: Survivors, likelihood: _Likelihood
     per_mode_samples = max(1, likelihood.max_samples // len(mode_labels))
     oracle = likelihood.fixture.oracle
     found = []
-    for label in mode_labels:
+    for number, label in enumerate(mode_labels, start=1):
+        stage(SolveStage("bounds", number, len(mode_labels)))
         mode_survivors = survivors.subset(labels == label)
         mode_cells = mode_survivors.cells
         centre = bound_centre(mode_cells, fix_p_origin, rotation_center(mode_cells.distinct_rotations()[0]))
+        def refining(round_: int, mode: int = number) -> None:
+            stage(SolveStage("bounds", mode, len(mode_labels), round_))
+
         largest = refined_largest_figures(problem, mode_survivors, centre, fix_p_origin,
-                                          refine_budget / len(mode_labels), cancel)
+                                          refine_budget / len(mode_labels), cancel, refining)
         if largest is None:
             continue
+        stage(SolveStage("samples", number, len(mode_labels)))
         samples = sample_cells(mode_cells, oracle, problem.base_p_taps, problem.ball_radius_m, likelihood.sigma_m,
                                per_mode_samples, likelihood.rng, problem.fixture_radius_m)
         bounds = bounds_from_figures(centre, largest)
@@ -220,6 +242,7 @@ def _modes(problem: SearchProblem, survivors: Survivors, likelihood: _Likelihood
                       ModeLikelihood(mode_cells, samples, bounds.max_point_displacement_m)))
     if not found:
         return [], np.zeros(len(cells), bool), None
+    stage(SolveStage("masses"))
     shares = mode_shares(likelihood.fixture, problem.base_p_taps, problem.ball_radius_m, likelihood.sigma_m,
                          problem.sample_bound_m, [mode for *_, mode in found], likelihood.rng)
     modes = [Mode(float(share), expected_pose(samples, np.ones(len(samples.weights), bool), fix_T_cad), bounds,
@@ -236,7 +259,8 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
           sigma_m: float | None = None, max_cells: float = DEFAULT_MAX_CELLS,
           progress: Callable[[SearchProgress], None] | None = None, cancel: threading.Event | None = None,
           max_samples: int = DEFAULT_MAX_SAMPLES, seed: int = 0, previous: Solution | None = None,
-          hull_cells: float | None = None, diagnose_inconsistent: bool = True, quick: bool = False) -> Solution:
+          hull_cells: float | None = None, diagnose_inconsistent: bool = True, quick: bool = False,
+          stage: Stage | None = None) -> Solution:
     """All poses of ``fixture`` that explain the taps, with estimates; raises InputError for bad input.
 
     ``base_p_taps`` (N, 3): measured ball centres in the robot base frame (m). ``sigma_m``
@@ -248,7 +272,9 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
     refinement may evaluate (default ``HULL_SHARE`` of ``max_cells``). ``diagnose_inconsistent``: look for why no
     pose explains the taps (``diagnose``, seconds of searches) when none does. ``quick``: the search
     goes on at coarse levels only while the taps prune hard (``search.Descent``; for the live check after each tap).
+    ``stage``: called as each phase after the search starts (``SolveStage``).
     """
+    stage = stage or (lambda _: None)
     base_p_taps = np.asarray(base_p_taps, dtype=float)
     sigma_m = sample_bound_m / 3.0 if sigma_m is None else sigma_m
     validate_inputs(base_p_taps, ball_diameter_m, sample_bound_m, sigma_m, max_cells)
@@ -276,6 +302,8 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
     warnings = [SolveWarning(code, message) for code, message in fixture.warnings] + budget_warnings
     fix_T_cad = fixture.fix_T_cad
     def inconsistent() -> Solution:
+        if diagnose_inconsistent:
+            stage(SolveStage("diagnosis"))
         diagnosis = diagnose(problem, min(max_cells, DIAGNOSIS_MAX_CELLS), cancel) if diagnose_inconsistent else None
         stats = SearchStats(0, cells.rotation_level if cells else 0, cells.position_level if cells else 0,
                             time.perf_counter() - started, max_cells)
@@ -290,7 +318,9 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
     fix_p_origin = -fixture.cad_p_center
     hull_cells = max_cells * HULL_SHARE if hull_cells is None else hull_cells
     likelihood = _Likelihood(fixture, sigma_m, max_samples, np.random.default_rng(seed))
-    modes, in_modes, samples = _modes(problem, survivors, likelihood, fix_p_origin, fix_T_cad, hull_cells, cancel)
+    stage(SolveStage("modes"))
+    modes, in_modes, samples = _modes(problem, survivors, likelihood, fix_p_origin, fix_T_cad, hull_cells, cancel,
+                                      stage)
     if not modes or samples is None:
         return inconsistent()
     top = modes[0]
@@ -315,6 +345,7 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
         warnings.append(SolveWarning("undetermined", undetermined_message(why, widest.bounds, fixture.radius_m,
                                                                           max_cells)))
     effective = effective_sample_size(samples.weights)
+    stage(SolveStage("intervals"))
     solution_intervals = intervals(samples, top.base_T_cad, fix_p_origin) if effective >= MIN_INTERVAL_SAMPLES else []
     if not solution_intervals:
         warnings.append(SolveWarning(

@@ -36,6 +36,7 @@ from fixwizard.tui.solve_screen import SolveScreen
 from fixwizard.tui.start import StartScreen
 from fixwizard.tui.status import StatusBar
 from fixwizard.tui.tip_calibration import calibrate_tip_on_screens
+from fixwizard.workflow.solver_process import SolverProcess
 
 T = TypeVar("T")
 STATUS_INTERVAL_S = 0.5
@@ -181,7 +182,7 @@ class FixwizardApp(App[None]):
 
     async def action_quit(self) -> None:
         """Quit; while the robot moves (or an automatic step runs) ask first, then stop it. An automatic step
-        stops after its current motion, and the session stays resumable."""
+        stops after its current motion, a solve at once (its process ends), and the session stays resumable."""
         if self.motion_running():
             def answered(yes: bool | None) -> None:
                 if yes:
@@ -196,6 +197,7 @@ class FixwizardApp(App[None]):
     def _quit_now(self, stop: bool) -> None:
         for cancel in self._motion_cancels:
             cancel.set()
+        SolverProcess.close_all()
         if stop:
             run_in_thread(self, self.context.robot.stop, group="stop")
         self.exit()

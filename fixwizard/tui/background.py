@@ -1,6 +1,6 @@
 """Blocking work (robot calls, files, fits) off the event loop: a thread worker whose result or readable
-error comes back to the event loop. Errors the operator can act on become an error modal; anything else
-is a bug and ends the app as Textual does."""
+error comes back to the event loop; solver requests to a solver process whose answers come back to it too.
+Errors the operator can act on become an error modal; anything else is a bug and ends the app as Textual does."""
 
 from collections.abc import Callable
 from typing import TypeVar
@@ -9,6 +9,7 @@ from textual.dom import DOMNode
 from textual.worker import Worker
 
 from fixwizard.errors import FixwizardError
+from fixwizard.workflow.solver_process import Event, Request, SolverProcess
 
 T = TypeVar("T")
 ShownError = FixwizardError | OSError
@@ -41,3 +42,27 @@ def run_in_thread(node: DOMNode, call: Callable[[], T], on_done: Callable[[T], N
             app.call_from_thread(finish, on_done, result)
 
     return node.run_worker(work, thread=True, group=group, exit_on_error=True)
+
+
+def run_in_solver(node: DOMNode, solver: SolverProcess, request: Request,
+                  on_event: Callable[[Event], None]) -> Callable[[], bool]:
+    """Send ``request`` to ``solver``; each answer is handed to ``on_event`` on the event loop while ``node`` is on
+    the screen and the request is the solver's latest. Returns whether it still is (False once superseded)."""
+    app = node.app
+    request_id = 0
+
+    def current() -> bool:
+        return solver.latest_request == request_id
+
+    def on_loop(event: Event) -> None:
+        if node.is_attached and current():
+            on_event(event)
+
+    def arrived(event: Event) -> None:
+        try:
+            app.call_from_thread(on_loop, event)
+        except RuntimeError:
+            pass  # the app has ended: nobody is left to show it
+
+    request_id = solver.submit(request, arrived)
+    return current

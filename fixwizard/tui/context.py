@@ -10,13 +10,15 @@ from fixwizard.robot.base import Robot
 from fixwizard.robot.sim_hands import SimulatedHands
 from fixwizard.solver.solve import Solution
 from fixwizard.workflow.session import SamplingSession
+from fixwizard.workflow.solver_process import SolverProcess
 
 
 @dataclass
 class WizardContext:
     """State of one wizard run. ``hands`` is set only for a simulated cell (it stands in for the operator's
     hands in freedrive); ``simulated`` marks everything shown and written as SIMULATED. ``calibration_path`` is
-    the saved file of ``calibration`` (a session header names it, so that the session can be resumed)."""
+    the saved file of ``calibration`` (a session header names it, so that the session can be resumed). ``solver``:
+    the worker process that solves for ``fixture`` (``solver_process``)."""
 
     robot: Robot
     robot_name: str
@@ -33,3 +35,13 @@ class WizardContext:
     solution: Solution | None = None
     report_path: Path | None = None
     max_cells: float = 1e7
+    solver: SolverProcess | None = None
+
+    def solver_process(self) -> SolverProcess:
+        """The solver process holding ``fixture``: started on first use, replaced when the fixture changes."""
+        if self.solver is not None and self.solver.fixture is not self.fixture:
+            self.solver.close()
+            self.solver = None
+        if self.solver is None:
+            self.solver = SolverProcess(self.fixture)
+        return self.solver

@@ -7,7 +7,7 @@ from typing import Literal
 
 from textual.widgets import Button
 
-from fixwizard.errors import FixwizardError, InputError, file_problem
+from fixwizard.errors import FixwizardError, InputError, file_problem, sentence
 from fixwizard.robot.base import ConnectionLost, ProtectiveStop, RobotError
 from fixwizard.tui.dialog import Dialog
 
@@ -36,10 +36,7 @@ def error_text(error: FixwizardError | OSError) -> str:
 
 def error_message(error: FixwizardError | OSError) -> str:
     """``error_text`` as a sentence, with the error's notes (e.g. that a tap's contact was kept)."""
-    text = error_text(error)
-    for note in getattr(error, "__notes__", ()):
-        text = f"{text if text.endswith(('.', '!', '?')) else text + '.'} {note}"
-    return text[:1].upper() + text[1:]
+    return sentence(error, error_text(error))
 
 
 class ErrorModal(Dialog[Recovery]):

@@ -20,7 +20,6 @@ from fixwizard.tui.context import WizardContext
 from fixwizard.tui.errors import error_message
 from fixwizard.tui.picture_view import PictureView
 from fixwizard.tui.results_text import (
-    details_lines,
     headline,
     modes_lines,
     summary_lines,
@@ -28,6 +27,7 @@ from fixwizard.tui.results_text import (
     warning_lines,
 )
 from fixwizard.workflow.advice import distinguishing_tap
+from fixwizard.workflow.details import details_lines
 from fixwizard.workflow.wizard_report import default_report_path, write_session_report
 
 Outcome = Literal["resample", "done"]

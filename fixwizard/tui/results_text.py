@@ -1,6 +1,6 @@
 """The results screen's text: the pose in mm and degrees with its UR literal, the guaranteed bounds and
 intervals, warnings, the candidate poses of an ambiguous result with what to tap next, and the cause of an
-inconsistent one (a wrong ball diameter, or a suspect tap); the solver's own figures in ``details_lines``."""
+inconsistent one (a wrong ball diameter, or a suspect tap); the solver's own figures are in ``workflow.details``."""
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -100,31 +100,3 @@ def warning_lines(solution: Solution) -> list[str]:
     if not warnings:
         return [] if solution.warnings else ["Warnings: none."]
     return ["Warnings:", *(f"  - {warning.message}" for warning in warnings)]
-
-
-def details_lines(solution: Solution) -> list[str]:
-    """The solver's own figures, for the Details view: status, search, likelihood samples, the diagnosis."""
-    stats = solution.stats
-    lines = [f"Solver status: {solution.status}.",
-             f"Search: {stats.cells:,} cells survive of a budget of {stats.max_cells:,.0f} (rotation level "
-             f"{stats.rotation_level}, position level {stats.position_level}), {stats.elapsed_s:.1f} s.",
-             f"Effective likelihood samples: {solution.effective_samples:,.0f}.",
-             *(f"Mode {number}: probability {mode.probability:.1%}, within {mode.bounds.position_m * 1e3:.2f} mm, "
-               f"{np.degrees(mode.bounds.rotation_rad):.2f} deg"
-               for number, mode in enumerate(solution.modes, start=1))]
-    if solution.bounds is not None:
-        bounds = solution.bounds
-        lines.append(f"Bounds: position {bounds.position_m * 1e3:.3f} mm, rotation "
-                     f"{np.degrees(bounds.rotation_rad):.3f} deg, "
-                     f"any point {bounds.max_point_displacement_m * 1e3:.3f} "
-                     "mm.")
-    diagnosis = solution.diagnosis
-    if diagnosis is not None:
-        if diagnosis.smallest_bound_m is not None:
-            low, high = diagnosis.smallest_bound_m
-            lines.append(f"Smallest sample bound that explains the taps: between {low * 1e3:.2f} and {high * 1e3:.2f} "
-                         "mm.")
-        if diagnosis.ball_diameter_m is not None:
-            lines.append(f"Ball diameter fitted with the pose: {diagnosis.ball_diameter_m * 1e3:.2f} mm.")
-        lines += [f"Cause {cause.code}: {cause.message}" for cause in diagnosis.causes]
-    return lines

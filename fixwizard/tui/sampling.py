@@ -3,11 +3,11 @@ under the current estimate, undo, and a live quick solve after each tap. Once th
 suggests where to tap next (in words and in a top view) and, on request and after confirmation, moves the
 robot to hover above that point. Dismisses with True to solve.
 
-Robot calls and the quick solve run in thread workers; every tap is journaled (fsynced) by the session
-before the table shows it, so an error never loses a recorded tap.
+Robot calls run in thread workers, the live check (``workflow.live_pipeline``) and "which fixture?" in solver
+processes (``workflow.solver_process``), whose answers and progress arrive on the event loop; every tap is
+journaled (fsynced) by the session before the table shows it, so an error never loses a recorded tap.
 """
 
-import threading
 from collections.abc import Callable
 from typing import TypeVar
 
@@ -21,15 +21,16 @@ from textual.widgets import DataTable, Footer, Static
 from fixwizard.errors import FixwizardError
 from fixwizard.plots.taps_view import taps_view
 from fixwizard.robot.base import NoContact, ProtectiveStop, RobotError, TapResult
-from fixwizard.solver.search import SearchCancelled
 from fixwizard.solver.solve import MIN_TAPS
 from fixwizard.tui import keys
-from fixwizard.tui.choices import fixture_choices
+from fixwizard.tui.background import run_in_solver
+from fixwizard.tui.choices import FixtureChoice, fixture_choices
 from fixwizard.tui.confirm import Confirm, ConfirmMove
 from fixwizard.tui.context import WizardContext
 from fixwizard.tui.dialog import Dialog
 from fixwizard.tui.errors import error_message
 from fixwizard.tui.picture_view import PictureView
+from fixwizard.tui.progress_text import progress_words
 from fixwizard.tui.sampling_text import (
     NO_SAFE_HOVER,
     guide_text,
@@ -40,20 +41,20 @@ from fixwizard.tui.sampling_text import (
     robot_problem_text,
 )
 from fixwizard.workflow.advice import TapAdvice
-from fixwizard.workflow.hover import (
-    HoverPlan,
-    hover_path,
-    next_tap_and_plan,
-    plan_hover,
-)
-from fixwizard.workflow.identify import identify
-from fixwizard.workflow.live import (
-    LiveCheck,
-    quick_check,
-    refine_check,
-    tap_surface_distances_m,
-)
+from fixwizard.workflow.hover import HoverPlan, hover_path
+from fixwizard.workflow.live import LiveView
 from fixwizard.workflow.session import Tap
+from fixwizard.workflow.solver_process import (
+    Event,
+    Failed,
+    Finished,
+    Identified,
+    IdentifyRequest,
+    LiveRequest,
+    NextTap,
+    Progress,
+    SolverProcess,
+)
 
 ROBOT_ACTIONS = {key.method for key in (keys.TAP, keys.UNDO, keys.SOLVE, keys.BACK, keys.GO, keys.HANDS, keys.UNLOCK)}
 HOVER_SPEED_M_S = 0.1
@@ -87,11 +88,13 @@ class SamplingScreen(Screen[bool]):
         super().__init__()
         self.context = context
         self.busy = False
-        self.live: LiveCheck | None = None
+        self.live: LiveView | None = None
         self.advice: TapAdvice | None = None
         self.hover_plan: HoverPlan | None = None  # the robot's safe way above the advised point, if there is one
-        self._live_cancel = threading.Event()
-        self._identify_cancel = threading.Event()
+        self.live_running = False  # a live check of the current taps is on its way
+        self._live_progress: str | None = None  # what it is doing, in words
+        self._distances_mm = np.zeros(0)  # of the first taps from the surface, under the shown check's estimate
+        self._identify: SolverProcess | None = None
         self._spread_index = len(context.session.taps)
         self._stopped = False
 
@@ -118,8 +121,8 @@ class SamplingScreen(Screen[bool]):
         self._run_robot(lambda: self.context.robot.freedrive(True), lambda _: None)
 
     def on_unmount(self) -> None:
-        self._live_cancel.set()  # nobody is left to show them
-        self._identify_cancel.set()
+        self._cancel_live()  # nobody is left to show them; the solver process stays for the solve
+        self._end_identify()
 
     # --- keys ---
 
@@ -152,7 +155,7 @@ class SamplingScreen(Screen[bool]):
             self._problem(f"Tap at least {MIN_TAPS} points before solving; 10-20 over several faces give tight "
                           "bounds.")
             return
-        self._live_cancel.set()
+        self._cancel_live()
         self._run_robot(lambda: self.context.robot.freedrive(False), lambda _: self.dismiss(True),
                         on_failed=lambda _: self.dismiss(True))
 
@@ -162,7 +165,7 @@ class SamplingScreen(Screen[bool]):
 
         def answered(yes: bool | None) -> None:
             if yes:
-                self._live_cancel.set()
+                self._cancel_live()
                 self._run_robot(lambda: self.context.robot.freedrive(False), lambda _: self.dismiss(False),
                                 on_failed=lambda _: self.dismiss(False))
 
@@ -191,34 +194,37 @@ class SamplingScreen(Screen[bool]):
         self.app.push_screen(ConfirmMove("Move the robot?", hover_question(plan, self.context.simulated)), answered)
 
     def action_identify(self) -> None:
-        """Check the taps against every fixture the wizard offers (in a worker) and show which fit."""
+        """Check the taps against every fixture the wizard offers (in a solver process of its own) and show which
+        fit."""
         base_p_taps = self.context.session.base_p_taps
         if len(base_p_taps) < MIN_TAPS:
             self._problem(f"Tap at least {MIN_TAPS} points before asking which fixture this is.")
             return
-        self._identify_cancel.set()
-        cancel = self._identify_cancel = threading.Event()
+        self._end_identify()
+        solver = self._identify = SolverProcess(None)
         choices = fixture_choices(self.context.fixtures_dir)
-        calibration, chosen = self.context.calibration, self.context.fixture.path
+        calibration = self.context.calibration
         self._say(f"Checking the {len(base_p_taps)} taps against {len(choices)} fixtures...")
+        run_in_solver(self, solver, IdentifyRequest(base_p_taps, [(choice.path, choice.units) for choice in choices],
+                                                    calibration.ball_diameter_m, calibration.sample_bound_m),
+                      lambda event: self._identify_event(event, choices))
 
-        def work() -> None:
-            try:
-                verdicts = identify(base_p_taps, [(choice.path, choice.units) for choice in choices],
-                                    calibration.ball_diameter_m, calibration.sample_bound_m, cancel=cancel)
-            except SearchCancelled:
-                return
-            except FixwizardError as error:
-                self.app.call_from_thread(self._problem, error_message(error))
-                return
-            self.app.call_from_thread(self._identified, cancel, identify_text(choices, verdicts, chosen))
-
-        self.run_worker(work, thread=True, group="identify", exclusive=True)
-
-    def _identified(self, cancel: threading.Event, text: str) -> None:
-        if not cancel.is_set() and self.is_attached:
+    def _identify_event(self, event: Event, choices: list[FixtureChoice]) -> None:
+        if isinstance(event, Progress):
+            self._say(f"Checking the taps against {len(choices)} fixtures: {progress_words(event)}...")
+        elif isinstance(event, Identified):
             self._say("")
-            self.app.push_screen(Dialog("Which fixture is this?", text))
+            self.app.push_screen(Dialog("Which fixture is this?",
+                                        identify_text(choices, event.verdicts, self.context.fixture.path)),
+                                 lambda _: self._end_identify())
+        elif isinstance(event, Failed):
+            self._problem(f"Which fixture: {event.message}")
+            self._end_identify()
+
+    def _end_identify(self) -> None:
+        if self._identify is not None:
+            self._identify.close()
+            self._identify = None
 
     def action_details(self) -> None:
         """The live check's technical figures in a dialog."""
@@ -324,60 +330,45 @@ class SamplingScreen(Screen[bool]):
     # --- the live check ---
 
     def _start_live_check(self) -> None:
-        """Cancel the running quick solve and start one for the current taps (from 3 taps on)."""
-        self._live_cancel.set()
-        cancel = self._live_cancel = threading.Event()
-        calibration, fixture = self.context.calibration, self.context.fixture
+        """Supersede the running live check and start one for the current taps (from 3 taps on) in the fixture's
+        solver process, which goes on from its previous check."""
         base_p_taps = self.context.session.base_p_taps
-        previous = self.live
         self.advice = self.hover_plan = None  # they were for the taps before
-        self._show_live(running=len(base_p_taps) >= MIN_TAPS)
-        if len(base_p_taps) < MIN_TAPS:
+        self.live_running = len(base_p_taps) >= MIN_TAPS
+        self._live_progress = None
+        if not self.live_running:
+            self._cancel_live()
+            self._show_live()
             return
+        calibration = self.context.calibration
+        self._show_live()
+        run_in_solver(self, self.context.solver_process(),
+                      LiveRequest(base_p_taps, calibration.ball_diameter_m, calibration.sample_bound_m),
+                      self._live_event)
 
-        def work() -> None:
-            try:
-                check = quick_check(fixture, base_p_taps, calibration.ball_diameter_m, calibration.sample_bound_m,
-                                    cancel, previous=previous)
-            except SearchCancelled:
-                return
-            except FixwizardError as error:
-                self.app.call_from_thread(self._live_failed, cancel, error)
-                return
-            self.app.call_from_thread(self._live_done, cancel, check)
-            if check.estimate_base_T_cad is None or cancel.is_set():
-                return
-            advice, plan = next_tap_and_plan(fixture, check.solution, calibration.sample_bound_m,
-                                             calibration.ball_diameter_m / 2.0)
-            self.app.call_from_thread(self._advice_done, cancel, advice, plan)
-            try:
-                refined = refine_check(fixture, check, cancel)
-            except SearchCancelled:
-                return
-            self.app.call_from_thread(self._live_done, cancel, refined)
-            if advice is not None and plan is None:  # the refined bounds may leave room for a safe way down
-                plan = plan_hover(advice, fixture, [mode.bounds for mode in refined.solution.modes],
-                                  calibration.ball_diameter_m / 2.0)
-                self.app.call_from_thread(self._advice_done, cancel, advice, plan)
+    def _cancel_live(self) -> None:
+        if self.context.solver is not None:
+            self.context.solver.cancel()
+        self.live_running = False
 
-        self.run_worker(work, thread=True, group="live", exclusive=True)
-
-    def _live_done(self, cancel: threading.Event, check: LiveCheck) -> None:
-        if cancel.is_set() or not self.is_attached:
+    def _live_event(self, event: Event) -> None:
+        """One answer of the live check: progress, a check, the next tap, or its end."""
+        if isinstance(event, Progress):
+            self._live_progress = progress_words(event)
+            self._show_live_text()
             return
-        self.live = check
-        self._show_taps()
-        self._show_live(running=False)
-
-    def _advice_done(self, cancel: threading.Event, advice: TapAdvice | None, plan: HoverPlan | None) -> None:
-        if cancel.is_set() or not self.is_attached:
-            return
-        self.advice, self.hover_plan = advice, plan
-        self._show_live(running=False)
-
-    def _live_failed(self, cancel: threading.Event, error: FixwizardError) -> None:
-        if not cancel.is_set() and self.is_attached:
-            self.query_one("#live", Static).update(f"Live check: {error_message(error)}")
+        if isinstance(event, LiveView):
+            self.live, self._live_progress = event, None
+            self._distances_mm = np.zeros(0) if event.distances_m is None else event.distances_m * 1e3
+            self._show_taps()
+        elif isinstance(event, NextTap):
+            self.advice, self.hover_plan = event.advice, event.plan
+        elif isinstance(event, Failed):
+            self.live_running = False
+            self._problem(f"Live check: {event.message}")
+        elif isinstance(event, Finished):
+            self.live_running = False
+        self._show_live()
 
     # --- display ---
 
@@ -390,10 +381,9 @@ class SamplingScreen(Screen[bool]):
         self.query_one("#title", Static).update(
             f"Sampling{' (SIMULATED)' if self.context.simulated else ''}: {len(taps)} "
             f"tap{'s' if len(taps) != 1 else ''} of {self.context.fixture.path.name}")
-        estimate = self.live.estimate_base_T_cad if self.live is not None else None
-        distances_mm = (tap_surface_distances_m(self.context.fixture, taps, self.context.calibration.ball_diameter_m,
-                                                estimate) * 1e3 if estimate is not None and len(taps)
-                        else np.full(len(taps), np.nan))
+        self._distances_mm = self._distances_mm[:len(taps)]  # an undone tap's slot may take a new tap
+        distances_mm = np.full(len(taps), np.nan)
+        distances_mm[:len(self._distances_mm)] = self._distances_mm
         table = self.query_one(DataTable)
         table.clear()
         for number, (base_p_mm, distance_mm) in enumerate(zip(taps * 1e3, distances_mm, strict=True), start=1):
@@ -403,10 +393,16 @@ class SamplingScreen(Screen[bool]):
         if len(taps):
             table.move_cursor(row=len(taps) - 1)
 
-    def _show_live(self, running: bool) -> None:
-        self.query_one("#live", Static).update(live_text(self.live, len(self.context.session.taps), running))
+    def _show_live_text(self) -> None:
+        tap_count = len(self.context.session.taps)
+        newer = self.live_running and (self.live is None or self.live.tap_count != tap_count)
+        progress = (self._live_progress or "starting") if newer else None
+        self.query_one("#live", Static).update(live_text(self.live, tap_count, progress))
+
+    def _show_live(self) -> None:
+        self._show_live_text()
         guide = self.query_one("#guide", Static)
-        text = guide_text(self.advice, self.hover_plan) if self.advice is not None and not running else ""
+        text = guide_text(self.advice, self.hover_plan) if self.advice is not None else ""
         guide.update(text)
         guide.set_class(not text, "-empty")
         top_view = self.query_one("#top-view", PictureView)

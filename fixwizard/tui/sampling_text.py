@@ -7,55 +7,50 @@ import numpy as np
 
 from fixwizard.solver.solve import MIN_TAPS
 from fixwizard.tui.choices import FixtureChoice
-from fixwizard.tui.results_text import details_lines
 from fixwizard.workflow.advice import TapAdvice
-from fixwizard.workflow.ball_check import ball_mismatch
 from fixwizard.workflow.hover import CLEARANCE_M, HoverPlan
 from fixwizard.workflow.identify import MeshVerdict, ranked
-from fixwizard.workflow.live import LiveCheck
+from fixwizard.workflow.live import LiveView
 
 
-def bounds_text(check: LiveCheck) -> str:
-    bounds = check.solution.bounds
+def bounds_text(check: LiveView) -> str:
+    bounds = check.bounds
     return (f"origin within {bounds.position_m * 1e3:.1f} mm, rotation within {np.degrees(bounds.rotation_rad):.1f} "
             f"deg, any point within {bounds.max_point_displacement_m * 1e3:.1f} mm")
 
 
-def live_text(check: LiveCheck | None, tap_count: int, running: bool) -> str:
-    """What the latest quick solve says about the taps; ``running`` when a newer one is on its way."""
+def live_text(check: LiveView | None, tap_count: int, progress: str | None) -> str:
+    """What the latest quick solve says about the taps; ``progress``: what the check of newer taps is doing, in
+    words (None when none is on its way)."""
     if tap_count < MIN_TAPS:
         return (f"Live check: starts at {MIN_TAPS} taps ({MIN_TAPS - tap_count} to go). 10-20 taps over several "
                 "faces give tight bounds.")
     if check is None:
-        return f"Live check of {tap_count} taps: finding the poses that fit your taps..."
-    head = f"Live check of {check.tap_count} taps{' (updating...)' if running else ''}: "
-    solution = check.solution
-    mismatch = ball_mismatch(solution)
-    if mismatch is not None:
-        return head + f"NO POSE FITS these taps with this ball. {mismatch.sentence()}"
+        return f"Checking {tap_count} taps: {progress or 'starting'}..."
+    head = f"Live check of {check.tap_count} taps{f' (checking {tap_count}: {progress}...)' if progress else ''}: "
+    if check.ball_mismatch is not None:
+        return head + f"NO POSE FITS these taps with this ball. {check.ball_mismatch.sentence()}"
     if check.verdict == "inconsistent":
-        diagnosis = solution.diagnosis
-        cause = diagnosis.causes[0].message if diagnosis is not None else "check the mesh, its units and the tip " \
-            "calibration."
+        cause = check.cause or "check the mesh, its units and the tip calibration."
         return head + f"INCONSISTENT, no pose explains the taps. Most likely: {cause}"
     if check.verdict == "undetermined":
         return (head + "the pose is not pinned down yet; keep tapping, on other faces too. Guaranteed so far: "
                 f"{bounds_text(check)}.")
     if check.verdict == "ambiguous":
-        top = solution.modes[0]
-        return (head + f"AMBIGUOUS so far, {len(solution.modes)} candidate poses fit (most likely "
+        top = check.modes[0]
+        return (head + f"AMBIGUOUS so far, {len(check.modes)} candidate poses fit (most likely "
                 f"{top.probability:.0%}); tap features that tell them apart. Guaranteed now: {bounds_text(check)}.")
     tightness = "as tight as the full solve's" if check.refined else "tightening them..."
     return head + f"unique so far. Guaranteed now: {bounds_text(check)}; {tightness}"
 
 
-def live_details(check: LiveCheck | None) -> str:
+def live_details(check: LiveView | None) -> str:
     """The live check's technical figures, for the details dialog (those of the results' Details view)."""
     if check is None:
         return f"No live check yet: it starts at {MIN_TAPS} taps."
     refinement = "the full solve's" if check.refined else "a quick"
     return "\n".join([f"{check.tap_count} taps; bounds from {refinement} hull refinement.",
-                      *details_lines(check.solution)])
+                      *check.details])
 
 
 NO_SAFE_HOVER = ("The possible poses still differ too much for the robot to go there on its own: guide the ball "

@@ -1,8 +1,8 @@
-"""The solve screen: the full solve of the session's taps in a thread worker, with the candidate poses left,
-elapsed time and how far the search has got (its grid levels and cell budget on ``o``); Esc cancels. Dismisses with the
-``Solution`` (also stored in ``context.solution``), or None when cancelled or after an input problem."""
+"""The solve screen: the full solve of the session's taps in the fixture's solver process, with the candidate poses
+left, elapsed time and how far the search has got (its grid levels and cell budget on ``o``), then each phase of the
+estimates in words; Esc cancels (the process is stopped and a fresh one started). Dismisses with the ``Solution``
+(also stored in ``context.solution``), or None when cancelled or after an input problem."""
 
-import threading
 import time
 from collections.abc import Callable
 
@@ -10,17 +10,16 @@ import numpy as np
 from textual.app import ComposeResult
 from textual.screen import Screen
 from textual.widgets import Footer, ProgressBar, Static
-from textual.worker import Worker, WorkerState
 
-from fixwizard.errors import FixwizardError
-from fixwizard.solver.search import SearchCancelled, SearchProgress, search_budget
-from fixwizard.solver.solve import Solution, solve
+from fixwizard.solver.search import SearchProgress, search_budget
+from fixwizard.solver.solve import Solution, SolveStage
 from fixwizard.tui import keys
+from fixwizard.tui.background import run_in_solver
 from fixwizard.tui.context import WizardContext
-from fixwizard.tui.errors import error_message
+from fixwizard.tui.progress_text import stage_words
+from fixwizard.workflow.solver_process import Event, Failed, Progress, Solved, SolveRequest, SolverProcess
 
 TICK_S = 0.25
-Solver = Callable[..., Solution]
 
 
 def budget_used(progress: SearchProgress, max_cells: float) -> float:
@@ -34,7 +33,7 @@ def budget_used(progress: SearchProgress, max_cells: float) -> float:
 
 
 class SolveScreen(Screen[Solution | None]):
-    """Runs the full solve; ``solver`` is ``fixwizard.solver.solve.solve`` (another for tests)."""
+    """Runs the full solve in ``solver`` (default: the context's solver process)."""
 
     BINDINGS = [keys.binding(keys.BACK, "Cancel"), keys.binding(keys.DETAILS)]
     HELP_TITLE = "solving"
@@ -42,12 +41,13 @@ class SolveScreen(Screen[Solution | None]):
                   "Wait for the result, or press Esc to cancel and go back to sampling (the taps are kept).")
     clock: Callable[[], float] = staticmethod(time.monotonic)
 
-    def __init__(self, context: WizardContext, solver: Solver = solve) -> None:
+    def __init__(self, context: WizardContext, solver: SolverProcess | None = None) -> None:
         super().__init__()
         self.context = context
-        self.solver = solver
-        self.cancel = threading.Event()
+        self.solver = solver or context.solver_process()
         self.progress: SearchProgress | None = None
+        self.stage: SolveStage | None = None
+        self.running = False
         self._started = 0.0
         self._budget_shown = 0.0
         self._details = False
@@ -58,7 +58,7 @@ class SolveScreen(Screen[Solution | None]):
                      f"{context.fixture.path.name} that fits your {len(context.session.taps)} taps", id="title",
                      markup=False)
         yield Static("The search keeps every pose that fits the taps and looks closer at each pass. The bar shows "
-                     "how far it has got; d shows the search's own figures.", id="about", markup=False)
+                     "how far it has got; o shows the search's own figures.", id="about", markup=False)
         yield ProgressBar(total=1.0, show_eta=False, id="budget")
         yield Static("", id="figures", markup=False)
         yield Static("", id="problem", classes="-empty", markup=False)
@@ -68,46 +68,38 @@ class SolveScreen(Screen[Solution | None]):
         self._started = self.clock()
         self._show()
         self.set_interval(TICK_S, self._show)
-        self.run_worker(self._solve, thread=True, name="solve")
+        context, calibration = self.context, self.context.calibration
+        self.running = True
+        run_in_solver(self, self.solver, SolveRequest(context.session.base_p_taps, calibration.ball_diameter_m,
+                                                      calibration.sample_bound_m, context.max_cells), self._event)
 
     def on_unmount(self) -> None:
-        self.cancel.set()  # nobody is left to show the result
+        if self.running:  # nobody is left to show the result
+            self.solver.stop()
 
     def action_details(self) -> None:
         self._details = not self._details
         self._show()
 
     def action_back(self) -> None:
-        self.cancel.set()
+        if self.running:
+            self.running = False
+            self.solver.stop()
         self.dismiss(None)
 
-    def _solve(self) -> Solution | FixwizardError | None:
-        """The worker: the solution, an input problem to show, or None when cancelled."""
-        context = self.context
-        calibration = context.calibration
-        try:
-            return self.solver(context.fixture, context.session.base_p_taps, calibration.ball_diameter_m,
-                               calibration.sample_bound_m, max_cells=context.max_cells, progress=self._progressed,
-                               cancel=self.cancel)
-        except SearchCancelled:
-            return None
-        except FixwizardError as error:
-            return error
-
-    def _progressed(self, progress: SearchProgress) -> None:
-        """Called in the worker thread after each level; the timer shows it."""
-        self.progress = progress
-
-    def on_worker_state_changed(self, event: Worker.StateChanged) -> None:
-        if event.worker.name != "solve" or event.state != WorkerState.SUCCESS or self.cancel.is_set():
-            return
-        outcome = event.worker.result
-        if isinstance(outcome, Solution):
-            self.context.solution = outcome
-            self.dismiss(outcome)
-        elif isinstance(outcome, FixwizardError):
+    def _event(self, event: Event) -> None:
+        """One answer of the solver: progress (the timer shows it), the solution, or a problem."""
+        if isinstance(event, Progress):
+            self.progress = event.search or self.progress
+            self.stage = event.stage or self.stage
+        elif isinstance(event, Solved):
+            self.running = False
+            self.context.solution = event.solution
+            self.dismiss(event.solution)
+        elif isinstance(event, Failed):
+            self.running = False
             problem = self.query_one("#problem", Static)
-            problem.update(f"{error_message(outcome)}\nPress Esc to go back to sampling.")
+            problem.update(f"{event.message}\nPress Esc to go back to sampling.")
             problem.remove_class("-empty")
 
     def _show(self) -> None:
@@ -122,7 +114,9 @@ class SolveScreen(Screen[Solution | None]):
             if self._details:
                 lines.append(f"Details: rotation level {progress.rotation_level}, position level "
                              f"{progress.position_level}; {progress.survivors:,} cells of a budget of {max_cells:,.0f}")
-            if progress.final:
+            if progress.final and self.stage is not None:
+                lines.append(f"Search done: {stage_words(self.stage)}...")
+            elif progress.final:
                 lines.append("No pose fits all taps: looking for the tap that does not fit..."
                              if progress.survivors == 0 else "Search done: computing bounds and estimates...")
         lines.insert(0, f"Elapsed: {elapsed_s:.0f} s")

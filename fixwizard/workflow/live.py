@@ -9,13 +9,18 @@ pin the pose down (``undetermined``) no estimate is offered, but the guaranteed 
 """
 
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from fixwizard.fixture import Fixture
-from fixwizard.solver.solve import HULL_SHARE, MIN_TAPS, Solution, solve
+from fixwizard.solver.estimates import Bounds
+from fixwizard.solver.search import SearchProgress
+from fixwizard.solver.solve import HULL_SHARE, MIN_TAPS, Mode, Solution, Stage, solve
 from fixwizard.solver.verdict import Status
+from fixwizard.workflow.ball_check import BallMismatch, ball_mismatch
+from fixwizard.workflow.details import details_lines
 
 LIVE_MAX_CELLS = 1e7  # the full solve's budget: the live bounds are as guaranteed and nearly as tight
 LIVE_HULL_CELLS = 2e5  # less hull refinement than the full solve, for an update in about two seconds
@@ -49,27 +54,60 @@ class LiveCheck:
         return self.solution.base_T_cad if self.verdict in ("unique", "ambiguous") else None
 
 
+@dataclass(frozen=True)
+class LiveView:
+    """What the sampling screen shows of a ``LiveCheck``, small enough to pass between processes: the verdict, the
+    guaranteed bounds (None when inconsistent), the modes, the most likely cause when inconsistent, the estimate
+    (as ``LiveCheck.estimate_base_T_cad``), each tap's distance (m, ``tap_surface_distances_m``) under it, a wrong
+    ball diameter the taps point to, and the solver's own figures (``workflow.details``)."""
+
+    tap_count: int
+    verdict: Status
+    refined: bool
+    bounds: Bounds | None
+    modes: tuple[Mode, ...]
+    cause: str | None
+    estimate_base_T_cad: np.ndarray | None
+    distances_m: np.ndarray | None
+    ball_mismatch: BallMismatch | None
+    details: tuple[str, ...]
+
+    @staticmethod
+    def of(check: LiveCheck, fixture: Fixture) -> "LiveView":
+        solution, estimate = check.solution, check.estimate_base_T_cad
+        diagnosis = solution.diagnosis
+        return LiveView(check.tap_count, check.verdict, check.refined, solution.bounds, tuple(solution.modes),
+                        diagnosis.causes[0].message if diagnosis is not None and diagnosis.causes else None,
+                        estimate, None if estimate is None else tap_surface_distances_m(
+                            fixture, solution.problem.base_p_taps, 2.0 * solution.problem.ball_radius_m, estimate),
+                        ball_mismatch(solution), tuple(details_lines(solution)))
+
+
 def quick_check(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sample_bound_m: float,
                 cancel: threading.Event | None = None, max_cells: float = LIVE_MAX_CELLS,
-                previous: LiveCheck | None = None) -> LiveCheck | None:
+                previous: LiveCheck | None = None, progress: Callable[[SearchProgress], None] | None = None,
+                stage: Stage | None = None) -> LiveCheck | None:
     """A quick solve of the taps (None with fewer than the solver's minimum); raises ``SearchCancelled``
     when ``cancel`` is set meanwhile. With the ``previous`` check of fewer of the same taps, the solve goes
     on from its set (a new tap can only remove poses) instead of starting over. The search is a quick one (coarse
-    levels only while the taps prune hard: a few taps are answered in seconds)."""
+    levels only while the taps prune hard: a few taps are answered in seconds). ``progress`` and ``stage``: as
+    for ``solve``."""
     base_p_taps = np.asarray(base_p_taps, float).reshape(-1, 3)
     if len(base_p_taps) < MIN_TAPS:
         return None
     solution = solve(fixture, base_p_taps, ball_diameter_m, sample_bound_m, max_cells=max_cells, cancel=cancel,
                      max_samples=LIVE_MAX_SAMPLES, previous=None if previous is None else previous.solution,
-                     hull_cells=LIVE_HULL_CELLS, quick=True)
+                     hull_cells=LIVE_HULL_CELLS, quick=True, progress=progress, stage=stage)
     return LiveCheck(solution, len(base_p_taps))
 
 
-def refine_check(fixture: Fixture, check: LiveCheck, cancel: threading.Event | None = None) -> LiveCheck:
+def refine_check(fixture: Fixture, check: LiveCheck, cancel: threading.Event | None = None,
+                 stage: Stage | None = None) -> LiveCheck:
     """The same check with the full solve's hull refinement of its set: bounds as tight as the report's
-    (about a second more). Raises ``SearchCancelled`` when ``cancel`` is set meanwhile."""
+    (about a second more). Raises ``SearchCancelled`` when ``cancel`` is set meanwhile; ``stage``: as for
+    ``solve``."""
     problem = check.solution.problem
     solution = solve(fixture, problem.base_p_taps, 2.0 * problem.ball_radius_m, problem.sample_bound_m,
                      max_cells=check.solution.stats.max_cells, cancel=cancel, max_samples=LIVE_MAX_SAMPLES,
-                     previous=check.solution, hull_cells=REFINED_HULL_CELLS)
+                     previous=check.solution, hull_cells=REFINED_HULL_CELLS, stage=stage)
     return LiveCheck(solution, check.tap_count, refined=True)

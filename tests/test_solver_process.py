@@ -1,0 +1,106 @@
+"""The solver's own process: live checks, a full solve and their progress come back as events; a newer request
+supersedes the running one; a stop or a crash loses no answer the operator needs and the next request is
+answered by a fresh process."""
+
+import os
+import queue
+import signal
+
+import numpy as np
+import pytest
+
+from fixwizard.demo import demo_cell
+from fixwizard.workflow.live import LiveView
+from fixwizard.workflow.solver_process import (
+    Failed,
+    Finished,
+    LiveRequest,
+    Progress,
+    Solved,
+    SolveRequest,
+    SolverProcess,
+)
+from tui_cell import SAMPLE_BOUND_M, spread_taps
+
+WAIT_S = 300.0
+
+
+@pytest.fixture(scope="module")
+def tapped():
+    cell = demo_cell(0)
+    cell.connect()
+    return cell, spread_taps(cell, 12)
+
+
+def events_until_done(events: queue.Queue) -> list:
+    """The events of one request up to its Finished or Failed."""
+    seen = []
+    while not seen or not isinstance(seen[-1], (Finished, Failed)):
+        seen.append(events.get(timeout=WAIT_S))
+    return seen
+
+
+def test_live_checks_go_on_in_the_process_and_the_full_solve_comes_back_usable(tapped):
+    cell, base_p_taps = tapped
+    solver = SolverProcess(cell.fixture)
+    events: queue.Queue = queue.Queue()
+    ball_m = cell.truth.ball_diameter_m
+    solver.submit(LiveRequest(base_p_taps[:2], ball_m, SAMPLE_BOUND_M), events.put)
+    assert events_until_done(events) == [Finished()]  # too few taps: nothing to check
+    solver.submit(LiveRequest(base_p_taps, ball_m, SAMPLE_BOUND_M), events.put)
+    live = events_until_done(events)
+    views = [event for event in live if isinstance(event, LiveView)]
+    assert any(isinstance(event, Progress) and event.search is not None for event in live)
+    assert [view.refined for view in views] == [False, True] and views[-1].verdict == "unique"
+    assert views[-1].distances_m.shape == (12,) and np.all(np.abs(views[-1].distances_m) < 0.005)
+    solver.submit(SolveRequest(base_p_taps, ball_m, SAMPLE_BOUND_M, 1e6), events.put)
+    solved = events_until_done(events)
+    stages = {event.stage.name for event in solved if isinstance(event, Progress) and event.stage is not None}
+    assert {"modes", "bounds", "samples", "intervals"} <= stages
+    solution = next(event.solution for event in solved if isinstance(event, Solved))
+    assert solution.status == "unique" and solution.contains(cell.truth.base_T_cad)
+    assert solution.problem.oracle is cell.fixture.oracle  # the wizard's own, not a copy
+    assert len(solution.tree.levels) == 1 and solution.tree.final.low_m.shape[1] == 0
+    solver.close()
+
+
+def test_a_newer_request_supersedes_the_running_one(tapped):
+    cell, base_p_taps = tapped
+    solver = SolverProcess(cell.fixture)
+    first: queue.Queue = queue.Queue()
+    second: queue.Queue = queue.Queue()
+    solver.submit(SolveRequest(base_p_taps, cell.truth.ball_diameter_m, SAMPLE_BOUND_M, 1e7), first.put)
+    solver.submit(LiveRequest(base_p_taps[:3], cell.truth.ball_diameter_m, SAMPLE_BOUND_M), second.put)
+    views = [event for event in events_until_done(second) if isinstance(event, LiveView)]
+    assert views[-1].tap_count == 3 and views[-1].verdict == "undetermined"
+    assert not any(isinstance(event, Solved) for event in list(first.queue))
+    solver.close()
+
+
+def test_a_crashed_worker_is_a_readable_failure_and_the_next_request_gets_a_fresh_one(tapped):
+    cell, base_p_taps = tapped
+    solver = SolverProcess(cell.fixture)
+    events: queue.Queue = queue.Queue()
+    solver.submit(SolveRequest(base_p_taps, cell.truth.ball_diameter_m, SAMPLE_BOUND_M, 1e7), events.put)
+    crashed = solver.pid
+    os.kill(crashed, signal.SIGKILL)
+    failed = events_until_done(events)[-1]
+    assert isinstance(failed, Failed)
+    assert "stopped unexpectedly" in failed.message and "no tap is lost" in failed.message
+    solver.submit(LiveRequest(base_p_taps[:3], cell.truth.ball_diameter_m, SAMPLE_BOUND_M), events.put)
+    assert isinstance(events_until_done(events)[-1], Finished) and solver.pid != crashed
+    solver.close()
+
+
+def test_stop_ends_the_running_solve_without_an_answer_and_starts_a_fresh_worker(tapped):
+    cell, base_p_taps = tapped
+    solver = SolverProcess(cell.fixture)
+    events: queue.Queue = queue.Queue()
+    solver.submit(SolveRequest(base_p_taps, cell.truth.ball_diameter_m, SAMPLE_BOUND_M, 1e7), events.put)
+    stopped = solver.pid
+    solver.stop()
+    assert solver.pid is not None and solver.pid != stopped
+    solver.submit(LiveRequest(base_p_taps[:3], cell.truth.ball_diameter_m, SAMPLE_BOUND_M), events.put)
+    seen = events_until_done(events)
+    assert isinstance(seen[-1], Finished) and not any(isinstance(event, (Solved, Failed)) for event in seen)
+    solver.close()
