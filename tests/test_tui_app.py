@@ -314,7 +314,7 @@ def test_the_start_screen_describes_stored_calibrations_and_resumes_an_unfinishe
             await choose(pilot, "#calibration", str(tmp_path / "calibrations" / "example_matlab_logo.yaml"))
             details = text_of(app, "#calibration-info")
             assert "calibrated 2026-11-24 03:09 on Universal Robots arm" in details
-            assert "tip max 0.34 mm; proposed sample bound 0.8 mm" in details
+            assert "each tap is trusted to 0.8 mm" in details
             await choose(pilot, "#session", str(path))
             await press_button(pilot, "#continue")
             await until(pilot, lambda: type(app.screen).__name__ == "SamplingScreen")
@@ -392,7 +392,7 @@ def test_the_start_screen_switches_to_a_ur_arm_and_back_to_the_simulated_cell(tm
             await at_start(pilot)
             app.screen.query_one("#robot-host", Input).focus()
             await pilot.press(*"127.0.0.3", "enter")  # nothing listens there
-            await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+            await until(pilot, lambda: isinstance(app.screen, ErrorModal) and bool(app.screen.query("#dialog-message")))
             assert text_of(app, "#dialog-message").startswith("Cannot connect to the robot at 127.0.0.3: port 29999")
             await press_button(pilot, "#ok")
             await until(pilot, lambda: isinstance(app.screen, StartScreen))

@@ -274,15 +274,15 @@ async def test_the_live_check_says_the_ball_diameter_is_wrong_when_the_taps_fit_
     app = ScreenHost(lambda: SamplingScreen(context))
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
-        await until(pilot, lambda: screen.live is not None, timeout_s=120)
+        await until(pilot, lambda: screen.live is not None and screen.live.ball_mismatch is not None, timeout_s=120)
         live = text_of(screen, "#live")
-        fitted_mm = screen.live.solution.diagnosis.ball_diameter_m * 1e3
+        fitted_mm = screen.live.ball_mismatch.fitted_diameter_m * 1e3
         assert abs(fitted_mm - 3.0) < 0.5
         assert live == (f"Live check of 12 taps: NO POSE FITS these taps with this ball. The taps fit a ball of about "
                         f"{fitted_mm:.1f} mm, the tip calibration says 6.0 mm: check the ball (measure it) and "
                         "calibrate the tip again with its diameter. The taps themselves are probably fine.")
         await pilot.press("o")
-        await until(pilot, lambda: isinstance(app.screen, Dialog))
+        await until(pilot, lambda: isinstance(app.screen, Dialog) and bool(app.screen.query("#dialog-message")))
         details = str(app.screen.query_one("#dialog-message", Static).content)
         assert details.startswith("12 taps; bounds from a quick hull refinement.\nSolver status: inconsistent.")
         assert f"Ball diameter fitted with the pose: {fitted_mm:.2f} mm." in details

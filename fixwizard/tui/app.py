@@ -63,6 +63,7 @@ class FixwizardApp(App[None]):
         self.resume = resume
         self._motion_cancels: set[threading.Event] = set()
         self._polling_status = False
+        self._quitting = False  # once set, errors of the steps being stopped are not shown (the app is closing)
         self._left_session: Path | None = None  # the session the operator left sampling from (resumable)
 
     def on_mount(self) -> None:
@@ -195,6 +196,7 @@ class FixwizardApp(App[None]):
         self._quit_now(stop=False)
 
     def _quit_now(self, stop: bool) -> None:
+        self._quitting = True
         for cancel in self._motion_cancels:
             cancel.set()
         SolverProcess.close_all()
@@ -203,7 +205,10 @@ class FixwizardApp(App[None]):
         self.exit()
 
     def show_error(self, error: ShownError) -> None:
-        """The error's message and next step in a modal; then the recovery the operator chose."""
+        """The error's message and next step in a modal; then the recovery the operator chose. Not while quitting:
+        stopping a running step may end it with an error, and the app is closing."""
+        if self._quitting:
+            return
         can_unlock = callable(getattr(self.context.robot, "unlock_protective_stop", None))
         if isinstance(error, ProtectiveStop):
             self.stopped = True
