@@ -157,15 +157,15 @@ def calibrate_tip(run: Run) -> None:
     for pose in range(1, PIVOT_POSES + 1):
         run.press("pivot_simulated_hands")
         run.wait_for("a pivot pose", lambda s, pose=pose: f"Poses captured: {pose}" in s)
-    run.wait_for("the pivot fit", lambda s: "press N for the table points" in s)
+    run.wait_for("the pivot fit", lambda s: "press n for the table points" in s.lower())
     run.press("next_step")
     run.wait_for("the table points step", lambda s: "step 2 of 4" in s)
     for label in "ABC":
         run.press("table_simulated_hands")
         run.wait_for(f"table point {label}", lambda s, label=label: f"{label}: tapped" in s)
-    run.wait_for("all table points", lambda s: "press N for the automatic taps" in s)
+    run.wait_for("all table points", lambda s: "press n for the automatic taps" in s.lower())
     run.press("next_step")
-    run.wait_for("the automatic taps step", lambda s: "step 3 of 4" in s and "Press G to start" in s)
+    run.wait_for("the automatic taps step", lambda s: "step 3 of 4" in s and "press g to start" in s.lower())
     run.press("start_automatic_taps")
     run.wait_for("the calibration result", lambda s: "step 4 of 4" in s and "Accept and save" in s
                  and "Computing..." not in s)
@@ -179,7 +179,7 @@ def tap_count(screen: str) -> int:
 
 def live_settled(screen: str) -> bool:
     """The live check has answered for the current taps (and, when unique, with the full solve's bounds)."""
-    running = ("finding the poses" in screen or "(updating...)" in screen or "tightening them" in screen)
+    running = "Checking " in screen or "(checking " in screen or "tightening them" in screen
     return "Live check" in screen and not running
 
 
