@@ -26,7 +26,7 @@ def available_memory_bytes() -> float:
                 if line.startswith("MemAvailable:"):
                     return float(line.split()[1]) * 1024.0
     except OSError:
-        pass
+        pass  # no /proc (not Linux): fall back to the physical memory
     return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
 
 
