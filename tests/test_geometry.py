@@ -8,7 +8,7 @@ from scipy.spatial.transform import Rotation
 
 from fixwizard.geometry.meb import minimum_enclosing_ball
 from fixwizard.geometry.octree import PositionGrid
-from fixwizard.geometry.se3 import rotation_angle_rad
+from fixwizard.geometry.se3 import quaternion_angle_rad, rotation_angle_rad
 from fixwizard.geometry.so3_grid import RotationGrid
 from fixwizard.geometry.socp_box import ball_intersection_box
 
@@ -142,6 +142,24 @@ def test_the_angle_between_two_rotations_is_the_angle_of_the_relative_rotation_a
     assert rotation_angle_rad(others.reshape(50, 100, 3, 3)).shape == (50, 100)
     assert float(rotation_angle_rad(np.eye(3))) == 0.0
     assert float(rotation_angle_rad(np.diag([1.0, -1.0, -1.0]))) == pytest.approx(np.pi, abs=1e-15)
+
+
+@pytest.mark.parametrize("angle_rad", [0.0, 1e-12, 1e-6, 1e-2, 1.0, np.pi - 1e-6, np.pi])
+def test_the_quaternion_angle_is_the_relative_rotation_angle_for_either_sign(angle_rad):
+    """Also where the dot product rounds to 1 (tiny angles) and near a half turn, whichever sign each quaternion
+    has."""
+    reference = Rotation.random(1000, random_state=9)
+    others = reference * _rotations_by(np.full(1000, angle_rad), 10)
+    signs = np.where(np.random.default_rng(11).random(1000) < 0.5, -1.0, 1.0)[:, None]
+    angles = quaternion_angle_rad(reference.as_quat(), signs * others.as_quat())
+    assert np.allclose(angles, angle_rad, rtol=1e-7, atol=1e-14)
+    assert np.all((angles >= 0.0) & (angles <= np.pi))
+
+
+def test_the_quaternion_angle_matches_the_matrix_angle_for_random_pairs():
+    first, second = Rotation.random(20000, random_state=12), Rotation.random(20000, random_state=13)
+    matrix_angles = rotation_angle_rad(np.swapaxes(first.as_matrix(), 1, 2) @ second.as_matrix())
+    assert np.allclose(quaternion_angle_rad(first.as_quat(), second.as_quat()), matrix_angles, rtol=0.0, atol=1e-13)
 
 
 def test_position_cell_bound_holds_for_points_in_the_cell():

@@ -5,9 +5,11 @@ answered by a fresh process."""
 import os
 import queue
 import signal
+import time
 
 import numpy as np
 import pytest
+import trimesh
 
 from fixwizard.demo import demo_cell
 from fixwizard.workflow.live import LiveView
@@ -20,6 +22,7 @@ from fixwizard.workflow.solver_process import (
     SolveRequest,
     SolverProcess,
 )
+from shapes import as_fixture
 from tui_cell import SAMPLE_BOUND_M, spread_taps
 
 WAIT_S = 300.0
@@ -103,4 +106,21 @@ def test_stop_ends_the_running_solve_without_an_answer_and_starts_a_fresh_worker
     solver.submit(LiveRequest(base_p_taps[:3], cell.truth.ball_diameter_m, SAMPLE_BOUND_M), events.put)
     seen = events_until_done(events)
     assert isinstance(seen[-1], Finished) and not any(isinstance(event, (Solved, Failed)) for event in seen)
+    solver.close()
+
+
+def test_starting_a_worker_and_sending_it_requests_never_waits_for_the_worker():
+    """The wizard calls these on its event loop: with a fixture far larger than a pipe's buffer, they return at
+    once while the worker is still starting (importing, then reading the fixture)."""
+    sphere = trimesh.creation.icosphere(subdivisions=5, radius=0.05)  # 20480 faces: megabytes of state
+    solver = SolverProcess(as_fixture("sphere", sphere))
+    events: queue.Queue = queue.Queue()
+    began = time.monotonic()
+    solver.start()
+    solver.cancel()
+    solver.submit(LiveRequest(np.zeros((2, 3)), 0.003, SAMPLE_BOUND_M), events.put)
+    returned_s = time.monotonic() - began
+    assert events_until_done(events) == [Finished()]  # answered once the worker has the fixture
+    answered_s = time.monotonic() - began
+    assert returned_s < 0.1 * answered_s, (returned_s, answered_s)
     solver.close()

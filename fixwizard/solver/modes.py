@@ -13,6 +13,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
+from fixwizard.geometry.se3 import quaternion_angle_rad
 from fixwizard.solver.cells import CellSet
 
 MODE_LEVEL = 4
@@ -29,8 +30,7 @@ def _touching_components(rotations: Rotation, gammas_rad: np.ndarray) -> np.ndar
         2.0 * np.sin(radius / 4.0), output_type="ndarray") % count
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
     if len(pairs):
-        angles = (Rotation.from_quat(quaternions[pairs[:, 0]]).inv()
-                  * Rotation.from_quat(quaternions[pairs[:, 1]])).magnitude()
+        angles = quaternion_angle_rad(quaternions[pairs[:, 0]], quaternions[pairs[:, 1]])
         pairs = pairs[angles <= (gammas_rad[pairs[:, 0]] + gammas_rad[pairs[:, 1]]) * TOUCH_SLACK]
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(count, count))
     return connected_components(graph, directed=False)[1]

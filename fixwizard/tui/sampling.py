@@ -8,6 +8,7 @@ processes (``workflow.solver_process``), whose answers and progress arrive on th
 journaled (fsynced) by the session before the table shows it, so an error never loses a recorded tap.
 """
 
+import time
 from collections.abc import Callable
 from typing import TypeVar
 
@@ -28,6 +29,7 @@ from fixwizard.tui.choices import FixtureChoice, fixture_choices
 from fixwizard.tui.confirm import Confirm, ConfirmMove
 from fixwizard.tui.context import WizardContext
 from fixwizard.tui.dialog import Dialog
+from fixwizard.tui.doing import TICK_S, Doing, seconds_text
 from fixwizard.tui.errors import error_message
 from fixwizard.tui.picture_view import PictureView
 from fixwizard.tui.progress_text import progress_words
@@ -93,10 +95,12 @@ class SamplingScreen(Screen[bool]):
         self.hover_plan: HoverPlan | None = None  # the robot's safe way above the advised point, if there is one
         self.live_running = False  # a live check of the current taps is on its way
         self._live_progress: str | None = None  # what it is doing, in words
+        self._live_started = 0.0  # time.monotonic() of its start
         self._distances_mm = np.zeros(0)  # of the first taps from the surface, under the shown check's estimate
         self._identify: SolverProcess | None = None
         self._spread_index = len(context.session.taps)
         self._stopped = False
+        self._doing: Doing | None = None  # says what the running robot call does, on the note line
 
     def compose(self) -> ComposeResult:
         yield Static("", id="title", markup=False)
@@ -112,11 +116,15 @@ class SamplingScreen(Screen[bool]):
         yield Footer(compact=True)
 
     def on_mount(self) -> None:
+        self._doing = Doing(self.query_one("#note", Static))
         self.query_one("#top-view").add_class("-empty")
         table = self.query_one(DataTable)
         for column in COLUMNS:
             table.add_column(column, key=column)
         self._show_taps()
+        self.set_interval(TICK_S, self._count_live_seconds)
+        solver = self.context.solver_process()
+        self.run_worker(solver.start, thread=True, group="solver")  # warm (fixture loaded) by the third tap
         self._start_live_check()
         self._run_robot(lambda: self.context.robot.freedrive(True), lambda _: None)
 
@@ -136,7 +144,8 @@ class SamplingScreen(Screen[bool]):
         return True
 
     def action_tap(self) -> None:
-        self._run_robot(self._tap_and_record, self._tap_recorded)
+        self._run_robot(self._tap_and_record, self._tap_recorded,
+                        doing="Tapping: the robot moves the ball along the tool axis until it touches")
 
     def action_undo(self) -> None:
         try:
@@ -157,7 +166,7 @@ class SamplingScreen(Screen[bool]):
             return
         self._cancel_live()
         self._run_robot(lambda: self.context.robot.freedrive(False), lambda _: self.dismiss(True),
-                        on_failed=lambda _: self.dismiss(True))
+                        on_failed=lambda _: self.dismiss(True), doing="Turning freedrive off, then solving")
 
     def action_back(self) -> None:
         """Back to the start screen, after asking: the session stays resumable there (and is selected)."""
@@ -167,7 +176,7 @@ class SamplingScreen(Screen[bool]):
             if yes:
                 self._cancel_live()
                 self._run_robot(lambda: self.context.robot.freedrive(False), lambda _: self.dismiss(False),
-                                on_failed=lambda _: self.dismiss(False))
+                                on_failed=lambda _: self.dismiss(False), doing="Turning freedrive off")
 
         self.app.push_screen(Confirm("Leave sampling?", f"Back to the start screen. The session "
                                      f"{self.context.session.path.name} with its {count} tap"
@@ -189,7 +198,7 @@ class SamplingScreen(Screen[bool]):
             elif move:
                 self._run_robot(lambda: self._move_above(plan), lambda _: self._say(
                     "The ball hovers above the suggested point (freedrive is on again): press "
-                    f"{keys.name(keys.TAP)} to tap it."))
+                    f"{keys.name(keys.TAP)} to tap it."), doing="Moving above the suggested point")
 
         self.app.push_screen(ConfirmMove("Move the robot?", hover_question(plan, self.context.simulated)), answered)
 
@@ -235,7 +244,8 @@ class SamplingScreen(Screen[bool]):
         self._spread_index += 1
         self._run_robot(lambda: self.context.hands.near_spread_point(index),
                         lambda _: self._say("SIMULATED: the operator's hands brought the ball above the fixture; "
-                                            f"press {keys.name(keys.TAP)} to tap."))
+                                            f"press {keys.name(keys.TAP)} to tap."),
+                        doing="SIMULATED: the operator's hands bring the ball above the fixture")
 
     def action_simulated_unlock(self) -> None:
         self.context.hands.cell.unlock()
@@ -247,14 +257,20 @@ class SamplingScreen(Screen[bool]):
     # --- robot work in a thread ---
 
     def _run_robot(self, call: Callable[[], T], on_done: Callable[[T], None],
-                   on_failed: Callable[[ShownError], None] | None = None) -> None:
+                   on_failed: Callable[[ShownError], None] | None = None, doing: str | None = None) -> None:
         """Run a robot call in a thread worker with the robot keys disabled; errors are shown on this screen
-        unless ``on_failed`` takes them."""
+        unless ``on_failed`` takes them. ``doing``: what it does, said at once on the note line with the seconds
+        it takes."""
         self.busy = True
         self.refresh_bindings()
+        if doing is not None and self._doing is not None:
+            self._clear_problem()
+            self._doing.start(doing)
 
         def finish(callback: Callable, result) -> None:
             self.busy = False
+            if self._doing is not None:
+                self._doing.done()
             if self.is_attached:
                 self.refresh_bindings()
                 callback(result)
@@ -336,6 +352,7 @@ class SamplingScreen(Screen[bool]):
         self.advice = self.hover_plan = None  # they were for the taps before
         self.live_running = len(base_p_taps) >= MIN_TAPS
         self._live_progress = None
+        self._live_started = time.monotonic()
         if not self.live_running:
             self._cancel_live()
             self._show_live()
@@ -393,10 +410,19 @@ class SamplingScreen(Screen[bool]):
         if len(taps):
             table.move_cursor(row=len(taps) - 1)
 
+    def _newer_check_running(self) -> bool:
+        return self.live_running and (self.live is None or self.live.tap_count != len(self.context.session.taps))
+
+    def _count_live_seconds(self) -> None:
+        if self._newer_check_running():
+            self._show_live_text()
+
     def _show_live_text(self) -> None:
         tap_count = len(self.context.session.taps)
-        newer = self.live_running and (self.live is None or self.live.tap_count != tap_count)
-        progress = (self._live_progress or "starting") if newer else None
+        progress = None
+        if self._newer_check_running():
+            progress = (self._live_progress or "starting the solver") + seconds_text(time.monotonic()
+                                                                                        - self._live_started)
         self.query_one("#live", Static).update(live_text(self.live, tap_count, progress))
 
     def _show_live(self) -> None:
@@ -416,11 +442,14 @@ class SamplingScreen(Screen[bool]):
         return taps_view(self.context.session.base_p_taps, width, height, self.context.fixture.mesh, estimate,
                          base_p_target=target)
 
-    def _say(self, text: str) -> None:
-        """What just happened, in the note line; clears any problem shown."""
+    def _clear_problem(self) -> None:
         problem = self.query_one("#problem", Static)
         problem.update("")
         problem.add_class("-empty")
+
+    def _say(self, text: str) -> None:
+        """What just happened, in the note line; clears any problem shown."""
+        self._clear_problem()
         note = self.query_one("#note", Static)
         note.update(text)
         note.set_class(not text, "-empty")

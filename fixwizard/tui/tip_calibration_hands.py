@@ -64,7 +64,7 @@ class PivotScreen(CalibrationStepScreen):
         self.run_robot(lambda: self.context.robot.freedrive(True), lambda _: None)
 
     def action_capture(self) -> None:
-        self.run_robot(self.workflow.capture_pivot_pose, lambda _: self._show_fit())
+        self.run_robot(self.workflow.capture_pivot_pose, lambda _: self._show_fit(), doing="Capturing the pose")
 
     def action_simulated_hands(self) -> None:
         hands = self.context.hands
@@ -74,7 +74,8 @@ class PivotScreen(CalibrationStepScreen):
             hands.pivot(pose_index)
             self.workflow.capture_pivot_pose()
 
-        self.run_robot(move_and_capture, lambda _: self._show_fit())
+        self.run_robot(move_and_capture, lambda _: self._show_fit(),
+                       doing="SIMULATED: the operator's hands turn the tool to the next pivot pose")
 
     def action_next(self) -> None:
         if self._fit_ok:
@@ -140,7 +141,8 @@ class TablePointsScreen(CalibrationStepScreen):
         self.run_robot(lambda: self.context.robot.freedrive(True), lambda _: None)
 
     def action_tap(self) -> None:
-        self.run_robot(self._tap, lambda _: self._show_points(), self._tap_failed)
+        self.run_robot(self._tap, lambda _: self._show_points(), self._tap_failed,
+                       doing=f"Tapping {TABLE_POINTS[self._tapped()]}: the robot moves the ball down until it touches")
 
     def action_simulated_hands(self) -> None:
         hands, label = self.context.hands, TABLE_POINTS[self._tapped()]
@@ -149,7 +151,8 @@ class TablePointsScreen(CalibrationStepScreen):
             hands.table_point(label)
             self._tap()
 
-        self.run_robot(place_and_tap, lambda _: self._show_points(), self._tap_failed)
+        self.run_robot(place_and_tap, lambda _: self._show_points(), self._tap_failed,
+                       doing=f"SIMULATED: the hands bring the ball above {label}; then the robot taps it")
 
     def action_next(self) -> None:
         if self._tapped() == len(TABLE_POINTS):

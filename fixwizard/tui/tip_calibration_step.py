@@ -13,6 +13,7 @@ from fixwizard.tui import keys
 from fixwizard.tui.background import ShownError, run_in_thread
 from fixwizard.tui.confirm import Confirm
 from fixwizard.tui.context import WizardContext
+from fixwizard.tui.doing import Doing
 from fixwizard.workflow.robot_calibration import RobotTipCalibration
 
 StepOutcome = Literal["next", "back", "redo"]
@@ -39,6 +40,7 @@ class CalibrationStepScreen(Screen[StepOutcome]):
         with VerticalScroll():
             yield Static(f"Tip calibration, step {self.STEP} of {STEP_COUNT}: {self.TITLE_TEXT}", classes="title")
             yield from self.body()
+            yield Static("", id="doing", classes="state -empty", markup=False)
 
     def body(self) -> ComposeResult:
         yield from ()
@@ -49,16 +51,29 @@ class CalibrationStepScreen(Screen[StepOutcome]):
         return None if self.busy else True
 
     def run_robot(self, call: Callable[[], T], on_done: Callable[[T], None],
-                  on_failed: Callable[[ShownError], None] | None = None) -> None:
-        """Run a robot call in a worker with this step's keys disabled until it finishes."""
+                  on_failed: Callable[[ShownError], None] | None = None, doing: str | None = None) -> None:
+        """Run a robot call in a worker with this step's keys disabled until it finishes; ``doing``: what it does,
+        said at once (with the seconds it takes) on the step's doing line, which is cleared afterwards."""
         self._set_busy(True)
+        line = self.query_one("#doing", Static)
+        shown = None
+        if doing is not None:
+            shown = Doing(line)
+            shown.start(doing)
+
+        def finished() -> None:
+            self._set_busy(False)
+            if shown is not None:
+                shown.done()
+                line.update("")
+                line.add_class("-empty")
 
         def done(result: T) -> None:
-            self._set_busy(False)
+            finished()
             on_done(result)
 
         def failed(error: ShownError) -> None:
-            self._set_busy(False)
+            finished()
             if on_failed is not None:
                 on_failed(error)
 

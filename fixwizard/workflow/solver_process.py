@@ -8,8 +8,9 @@ once; a reader thread hands each answer to the request's ``on_event`` as it arri
 its results (``LiveView`` and ``NextTap`` stages, ``Solved`` or ``Identified``), and last ``Finished`` or ``Failed``
 (a readable message; also when the process dies). A newer request supersedes the running one, which stops at its
 next cancel check (the worker stays, with its fixture and its live check); ``stop`` ends the process at once
-(a fresh one starts warm, loading the fixture), ``close`` for good. The taps live in the session journal, never
-only here.
+(a fresh one starts warm, loading the fixture), ``close`` for good. No call waits on the worker, not even while it
+starts: a sender thread writes the fixture and then each request to its pipe. The taps live in the session
+journal, never only here.
 
 A full solve's ``Solution`` comes back pickled with only the final level of its search tree, without the per-tap
 intervals (the results screen draws the cells; nothing downstream searches on), and with the wizard's own distance
@@ -20,6 +21,7 @@ import io
 import multiprocessing
 import os
 import pickle
+import queue
 import threading
 import traceback
 from collections.abc import Callable
@@ -244,9 +246,14 @@ class _Worker:
                 send(stage)
 
 
-def serve(conn: Connection, current: Synchronized, fixture_state: dict[str, Any] | None) -> None:
-    """The worker process's main: build the fixture and its lattice, then answer requests until the pipe closes."""
+def serve(conn: Connection, current: Synchronized) -> None:
+    """The worker process's main: receive the fixture (its state, or None for identify only) and build it and its
+    lattice, then answer requests until the pipe closes."""
     os.nice(NICENESS)
+    try:
+        fixture_state = pickle.loads(conn.recv_bytes())
+    except (EOFError, OSError):
+        return
     fixture = None if fixture_state is None else _fixture_from_state(fixture_state)
     if fixture is not None:
         distance_grid_for(fixture.oracle)  # the search's lattice, before the first request needs it
@@ -271,9 +278,27 @@ def _reap(process: BaseProcess) -> None:
 
 @dataclass
 class _Running:
+    """A started worker, the thread that reads its answers and the queue of what the sender thread writes to it
+    (the fixture first, then requests; ``_END_SENDER`` ends the sender). Only the sender writes to the pipe, so that
+    no caller waits while the worker is still starting and not yet reading."""
+
     process: BaseProcess
-    conn: Connection
     reader: threading.Thread
+    outbox: "queue.SimpleQueue[object]"
+
+
+_END_SENDER = object()  # queued last: the sender thread ends
+
+
+def _send_all(conn: Connection, outbox: "queue.SimpleQueue[object]") -> None:
+    """The sender thread of one worker: pickle and write each queued message until told to end or the pipe
+    closes (the worker died or was ended; the reader says so)."""
+    while (message := outbox.get()) is not _END_SENDER:
+        try:
+            conn.send_bytes(message if isinstance(message, bytes) else
+                            pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL))
+        except (OSError, ValueError):
+            return
 
 
 class SolverProcess:
@@ -317,10 +342,7 @@ class SolverProcess:
             request_id = self._next_id = self._next_id + 1
             self._on_event = {request_id: on_event}
             self._current.value = request_id
-            try:
-                running.conn.send_bytes(pickle.dumps((request_id, request), protocol=pickle.HIGHEST_PROTOCOL))
-            except OSError:
-                pass  # the worker just died: the reader says so
+            running.outbox.put((request_id, request))
             return request_id
 
     def cancel(self) -> None:
@@ -356,32 +378,38 @@ class SolverProcess:
         if running is not None:
             self._end()
         conn, child_conn = self._context.Pipe()
-        state = None if self.fixture is None else _fixture_state(self.fixture)
         process = self._context.Process(target=serve, name="fixwizard-solver", daemon=True,
-                                        args=(child_conn, self._current, state))
+                                        args=(child_conn, self._current))
         with real_stderr():
             process.start()
         child_conn.close()
-        reader = threading.Thread(target=self._read, args=(process, conn), name="fixwizard-solver-reader",
-                                  daemon=True)
-        self._running = _Running(process, conn, reader)
+        outbox: queue.SimpleQueue[object] = queue.SimpleQueue()
+        outbox.put(None if self.fixture is None else _fixture_state(self.fixture))
+        sender = threading.Thread(target=_send_all, args=(conn, outbox), name="fixwizard-solver-sender", daemon=True)
+        reader = threading.Thread(target=self._read, args=(process, conn, outbox, sender),
+                                  name="fixwizard-solver-reader", daemon=True)
+        self._running = _Running(process, reader, outbox)
+        sender.start()
         reader.start()
         return self._running
 
     def _end(self) -> None:
         """End the running worker (lock held) without waiting for it: terminated now, killed by a reaper thread if
-        it has not ended within ``EXIT_WAIT_S``; its reader sees the pipe close and says nothing."""
+        it has not ended within ``EXIT_WAIT_S``; its reader sees the pipe close, says nothing and closes it."""
         running, self._running = self._running, None
         self._on_event = {}
         self._current.value = NO_REQUEST
         if running is None:
             return
+        running.outbox.put(_END_SENDER)
         running.process.terminate()
-        running.conn.close()
         threading.Thread(target=_reap, args=(running.process,), name="fixwizard-solver-reaper", daemon=True).start()
 
-    def _read(self, process: BaseProcess, conn: Connection) -> None:
-        """The reader thread of one worker: each answer to its request's ``on_event``; a death is said as a Failed."""
+    def _read(self, process: BaseProcess, conn: Connection, outbox: "queue.SimpleQueue[object]",
+              sender: threading.Thread) -> None:
+        """The reader thread of one worker: each answer to its request's ``on_event``; a death is said as a Failed.
+        Once the worker has ended, it ends the sender and closes the pipe (only then: a descriptor closed under
+        another thread's read or write could be reused by the next worker's pipe)."""
         while True:
             try:
                 request_id, event = _loads(conn.recv_bytes(), self.fixture)
@@ -390,6 +418,9 @@ class SolverProcess:
             on_event = self._on_event.get(request_id)
             if on_event is not None:
                 on_event(event)
+        outbox.put(_END_SENDER)
+        sender.join()
+        conn.close()
         with self._lock:
             if self._running is None or self._running.process is not process:
                 return  # stopped on purpose

@@ -1,0 +1,53 @@
+"""What a running robot call is doing, said the moment its key is pressed and counted in seconds while it runs:
+no key goes unanswered while the arm moves (a real tap takes seconds), and no wait passes without a sign of
+progress. The screen writes the outcome once the call is done."""
+
+import time
+
+from textual.timer import Timer
+from textual.widgets import Static
+
+TICK_S = 1.0  # the count of seconds advances this often
+
+
+def seconds_text(elapsed_s: float) -> str:
+    """" (3 s)": the whole seconds a step has taken so far, once there is one."""
+    seconds = int(elapsed_s)
+    return f" ({seconds} s)" if seconds >= 1 else ""
+
+
+def doing_text(what: str, elapsed_s: float) -> str:
+    """``what`` a step is doing, with the seconds it has taken."""
+    return f"{what}...{seconds_text(elapsed_s)}"
+
+
+class Doing:
+    """Says on ``line`` what the running call does and how long it has taken; hides ``line`` (class ``-empty``)
+    again when done unless the screen wrote something else there."""
+
+    def __init__(self, line: Static) -> None:
+        self.line = line
+        self._what = ""
+        self._started = 0.0
+        self._timer: Timer | None = None
+
+    @property
+    def running(self) -> bool:
+        return self._timer is not None
+
+    def start(self, what: str) -> None:
+        """Say ``what`` now (e.g. "Tapping: the robot moves the ball down until it touches") and count seconds."""
+        self.done()
+        self._what, self._started = what, time.monotonic()
+        self._show()
+        self._timer = self.line.set_interval(TICK_S, self._show)
+
+    def done(self) -> None:
+        """Stop counting; the line keeps its text until the screen writes the outcome (or clears it)."""
+        if self._timer is not None:
+            self._timer.stop()
+            self._timer = None
+
+    def _show(self) -> None:
+        self.line.update(doing_text(self._what, time.monotonic() - self._started))
+        self.line.remove_class("-empty")
