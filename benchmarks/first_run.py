@@ -199,7 +199,8 @@ def sample(run: Run, min_taps: int) -> int:
             run.wait_for("the move above the suggestion", lambda s: "hovers above the suggested point" in s)
         else:
             run.press("simulated_move")
-            run.wait_for("the simulated hands", lambda s: "brought the ball above the fixture" in s)
+            # the note's start: a toast (e.g. "Tip calibration saved") may cover its end for a few seconds
+            run.wait_for("the simulated hands", lambda s: "the operator's hands brough" in s)
         run.press("tap")
         run.wait_for(f"tap {taps + 1}", lambda s, taps=taps: tap_count(s) == taps + 1 and "recorded and saved" in s)
         screen = run.wait_for(f"the live check of {taps + 1} taps",

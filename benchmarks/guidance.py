@@ -124,11 +124,13 @@ def _worth_refining(bounds: tuple[float, float], reached: list[bool], attempt: i
 
 def _live(fixture: Fixture, taps: list[np.ndarray], previous: LiveCheck | None, attempt: int, advise: bool,
           reached: list[bool]) -> tuple[LiveCheck | None, NextTap | None]:
-    """The live pipeline after a tap: the quick check, the next tap (with ``advise``), and the refined check (and the
-    next tap again) only when ``_worth_refining``."""
+    """The live pipeline after a tap: the quick check (after the first look), the next tap (with ``advise``), and the
+    refined check (and the next tap again) only when ``_worth_refining``."""
     stages = live_pipeline(fixture, np.array(taps), BALL_DIAMETER_M, SAMPLE_BOUND_M, previous=previous,
                            seed=attempt + 1, advise=advise)
     check = next(stages, None)
+    if check is not None and check.rough and check.verdict != "inconsistent":
+        check = next(stages)  # the quick check of the same set
     if check is None or check.estimate_base_T_cad is None:
         return check, None
     next_tap = next(stages) if advise else None

@@ -64,6 +64,7 @@ def wizard_command(args: argparse.Namespace) -> int:
         raise InputError("the wizard needs an interactive terminal (its input or output is not one here); run "
                          "fixwizard in a terminal or over SSH, or use a command such as `fixwizard solve` in scripts "
                          "(see fixwizard --help)")
+    print("Starting the wizard: loading the fixtures and the solver...", flush=True)  # a second or two of imports
     from fixwizard.tui.app import FixwizardApp
     from fixwizard.tui.launch import simulated_context, ur_context
 

@@ -404,3 +404,27 @@ def test_the_start_screen_switches_to_a_ur_arm_and_back_to_the_simulated_cell(tm
             assert "SIMULATED" in str(app.screen.query_one(StatusBar).render())
             assert context.hands is not None
     asyncio.run(run())
+
+
+def test_a_calibration_step_says_at_once_what_the_robot_does_and_clears_it_after(tmp_path):
+    async def run():
+        app = FixwizardApp(wizard(tmp_path, pace_s=1.6))
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            await press_button(pilot, "#continue")
+            await until(pilot, lambda: isinstance(app.screen, PivotScreen) and not app.screen.busy)
+            for _ in range(app.context.hands.pivot_count):
+                await pilot.press(keys.HANDS.keys)
+                await until(pilot, lambda: not app.screen.busy)
+            await pilot.press("n")
+            await until(pilot, lambda: isinstance(app.screen, TablePointsScreen) and not app.screen.busy)
+            await pilot.press(keys.HANDS.keys)
+            await pilot.pause()
+            doing = app.screen.query_one("#doing", Static)
+            assert str(doing.render()) == "SIMULATED: the hands bring the ball above A; then the robot taps it..."
+            assert doing.display
+            await until(pilot, lambda: str(doing.render()).endswith("taps it... (1 s)"), timeout_s=10.0)
+            await until(pilot, lambda: not app.screen.busy, timeout_s=30.0)
+            assert not doing.display and "A: tapped" in text_of(app, "#points-state")
+
+    asyncio.run(run())

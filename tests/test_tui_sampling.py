@@ -16,6 +16,8 @@ from fixwizard.geometry.se3 import rotation_angle_rad
 from fixwizard.tui.confirm import Confirm, ConfirmMove
 from fixwizard.tui.dialog import Dialog
 from fixwizard.tui.sampling import SamplingScreen
+from fixwizard.tui.sampling_text import live_text
+from fixwizard.workflow.live import LiveView, quick_check
 from fixwizard.workflow.solver_process import NextTap
 from pilot_wait import until
 from tui_cell import ScreenHost, cell_of, record_spread_taps, wizard_context
@@ -286,3 +288,38 @@ async def test_the_live_check_says_the_ball_diameter_is_wrong_when_the_taps_fit_
         details = str(app.screen.query_one("#dialog-message", Static).content)
         assert details.startswith("12 taps; bounds from a quick hull refinement.\nSolver status: inconsistent.")
         assert f"Ball diameter fitted with the pose: {fitted_mm:.2f} mm." in details
+
+
+async def test_a_tap_says_at_once_what_the_robot_does_and_counts_its_seconds(context):
+    """A real tap takes seconds: the note says so the moment the key is pressed, and the count goes on."""
+    cell_of(context).pace_s = 1.6  # each simulated motion takes this long
+    app = ScreenHost(lambda: SamplingScreen(context))
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        await until(pilot, lambda: not screen.busy)
+        await pilot.press("m")  # the simulated hands place the ball: no motion of the arm, no pace
+        await until(pilot, lambda: not screen.busy)
+        await pilot.press("t")
+        await pilot.pause()
+        assert text_of(screen, "#note") == ("Tapping: the robot moves the ball along the tool axis until it "
+                                            "touches...")
+        await until(pilot, lambda: text_of(screen, "#note").endswith("touches... (1 s)"), timeout_s=10.0)
+        await until(pilot, lambda: not screen.busy, timeout_s=30.0)
+        assert text_of(screen, "#note").startswith("Tap 1 recorded and saved.")
+
+
+async def test_the_live_line_says_what_the_running_check_does_for_newer_taps_and_while_tightening(context):
+    record_spread_taps(context, 10)
+    calibration = context.calibration
+    check = quick_check(context.fixture, context.session.base_p_taps, calibration.ball_diameter_m,
+                        calibration.sample_bound_m)
+    view = LiveView.of(check, context.fixture)
+    assert view.verdict == "unique" and not view.refined
+    tightening = live_text(view, 10, "computing the guaranteed bounds, round 2 (3 s)")
+    assert tightening.startswith("Live check of 10 taps: unique so far.")
+    assert tightening.endswith("; tightening them: computing the guaranteed bounds, round 2 (3 s)...")
+    newer = live_text(view, 11, "narrowing the poses, pass 4: 1,234 groups of possible poses left (1 s)")
+    assert newer.startswith("Live check of 10 taps (checking 11: narrowing the poses, pass 4: 1,234 groups of "
+                            "possible poses left (1 s)...): unique so far.")
+    assert newer.endswith("; tightening them...")
+    assert live_text(view, 10, None).endswith("; tightening them...")

@@ -88,18 +88,30 @@ def test_quick_check_stops_when_cancelled(tapped):
         quick_check(cell.fixture, base_p_taps, BALL_DIAMETER_M, SAMPLE_BOUND_M, cancel)
 
 
-def test_the_live_pipeline_gives_the_check_the_next_tap_and_the_refined_check_in_turn(tapped):
+def test_the_live_pipeline_gives_the_first_look_the_check_the_next_tap_and_the_refined_check_in_turn(tapped):
     cell, base_p_taps = tapped
     stages = list(live_pipeline(cell.fixture, base_p_taps, BALL_DIAMETER_M, SAMPLE_BOUND_M))
-    quick, next_tap, refined = stages[:3]
-    assert isinstance(quick, LiveCheck) and not quick.refined and quick.verdict == "unique"
+    first, quick, next_tap, refined = stages[:4]
+    assert isinstance(first, LiveCheck) and first.rough and not first.refined and first.verdict == "unique"
+    assert first.solution.contains(cell.truth.base_T_cad)
+    assert isinstance(quick, LiveCheck) and not quick.rough and not quick.refined and quick.verdict == "unique"
+    assert quick.solution.cells is first.solution.cells  # the same set, only its hull refined
+    assert quick.solution.bounds.position_m <= first.solution.bounds.position_m
+    assert quick.solution.bounds.max_point_displacement_m <= first.solution.bounds.max_point_displacement_m
     assert isinstance(next_tap, NextTap) and next_tap.advice is not None
     assert isinstance(refined, LiveCheck) and refined.refined and refined.solution.contains(cell.truth.base_T_cad)
-    assert all(isinstance(stage, NextTap) and stage.plan is not None for stage in stages[3:])
+    assert all(isinstance(stage, NextTap) and stage.plan is not None for stage in stages[4:])
 
 
 def test_the_live_pipeline_stops_at_the_check_while_the_pose_is_not_pinned_down(tapped):
     cell, base_p_taps = tapped
     assert list(live_pipeline(cell.fixture, base_p_taps[:2], BALL_DIAMETER_M, SAMPLE_BOUND_M)) == []
     stages = list(live_pipeline(cell.fixture, base_p_taps[:3], BALL_DIAMETER_M, SAMPLE_BOUND_M))
-    assert len(stages) == 1 and stages[0].verdict == "undetermined"
+    assert [(stage.rough, stage.verdict) for stage in stages] == [(True, "undetermined"), (False, "undetermined")]
+
+
+def test_the_live_pipeline_stops_at_the_first_look_when_no_pose_fits(tapped):
+    cell, base_p_taps = tapped
+    stretched = base_p_taps[:6] * 1.3  # no rigid motion maps the fixture onto these
+    stages = list(live_pipeline(cell.fixture, stretched, BALL_DIAMETER_M, SAMPLE_BOUND_M))
+    assert len(stages) == 1 and stages[0].rough and stages[0].verdict == "inconsistent"

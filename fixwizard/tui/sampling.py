@@ -410,18 +410,15 @@ class SamplingScreen(Screen[bool]):
         if len(taps):
             table.move_cursor(row=len(taps) - 1)
 
-    def _newer_check_running(self) -> bool:
-        return self.live_running and (self.live is None or self.live.tap_count != len(self.context.session.taps))
-
     def _count_live_seconds(self) -> None:
-        if self._newer_check_running():
+        if self.live_running:
             self._show_live_text()
 
     def _show_live_text(self) -> None:
         tap_count = len(self.context.session.taps)
         progress = None
-        if self._newer_check_running():
-            progress = (self._live_progress or "starting the solver") + seconds_text(time.monotonic()
+        if self.live_running:
+            progress = (self._live_progress or "starting") + seconds_text(time.monotonic()
                                                                                         - self._live_started)
         self.query_one("#live", Static).update(live_text(self.live, tap_count, progress))
 

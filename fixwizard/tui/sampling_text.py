@@ -20,14 +20,15 @@ def bounds_text(check: LiveView) -> str:
 
 
 def live_text(check: LiveView | None, tap_count: int, progress: str | None) -> str:
-    """What the latest quick solve says about the taps; ``progress``: what the check of newer taps is doing, in
-    words (None when none is on its way)."""
+    """What the latest quick solve says about the taps; ``progress``: what the running check is doing, in words
+    (None when none is on its way): of newer taps, or tightening the bounds of these."""
     if tap_count < MIN_TAPS:
         return (f"Live check: starts at {MIN_TAPS} taps ({MIN_TAPS - tap_count} to go). 10-20 taps over several "
                 "faces give tight bounds.")
     if check is None:
         return f"Checking {tap_count} taps: {progress or 'starting'}..."
-    head = f"Live check of {check.tap_count} taps{f' (checking {tap_count}: {progress}...)' if progress else ''}: "
+    newer = progress if check.tap_count != tap_count else None
+    head = f"Live check of {check.tap_count} taps{f' (checking {tap_count}: {newer}...)' if newer else ''}: "
     if check.ball_mismatch is not None:
         return head + f"NO POSE FITS these taps with this ball. {check.ball_mismatch.sentence()}"
     if check.verdict == "inconsistent":
@@ -40,7 +41,8 @@ def live_text(check: LiveView | None, tap_count: int, progress: str | None) -> s
         top = check.modes[0]
         return (head + f"AMBIGUOUS so far, {len(check.modes)} candidate poses fit (most likely "
                 f"{top.probability:.0%}); tap features that tell them apart. Guaranteed now: {bounds_text(check)}.")
-    tightness = "as tight as the full solve's" if check.refined else "tightening them..."
+    tightening = f"tightening them: {progress}..." if progress and not newer else "tightening them..."
+    tightness = "as tight as the full solve's" if check.refined else tightening
     return head + f"unique so far. Guaranteed now: {bounds_text(check)}; {tightness}"
 
 

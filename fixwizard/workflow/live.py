@@ -2,15 +2,17 @@
 from the fixture surface under the pose it estimates.
 
 The quick solve is the real solver with fewer likelihood samples, so what it says is guaranteed: an empty
-set means the taps are inconsistent. After each new tap it goes on from the previous check's set. Its
-bounds come from a light hull refinement; ``refine_check`` then spends the full solve's hull budget on the
-same set, for the bounds the report will give. Its verdict is the solver's status: while the taps do not
-pin the pose down (``undetermined``) no estimate is offered, but the guaranteed bounds are.
+set means the taps are inconsistent. After each new tap it goes on from the previous check's set. ``first_look``
+is the quick search with bounds straight from its cells and a rough estimate, shown first (within about half a
+second once the pose is pinned down); ``quick_check`` of the same taps then takes its set as it is and refines
+the hull lightly; ``refine_check`` spends the full solve's hull budget on the same set, for the bounds the report
+will give. The verdict is the solver's status: while the taps do not pin the pose down (``undetermined``) no
+estimate is offered, but the guaranteed bounds are.
 """
 
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -26,6 +28,7 @@ LIVE_MAX_CELLS = 1e7  # the full solve's budget: the live bounds are as guarante
 LIVE_HULL_CELLS = 2e5  # less hull refinement than the full solve, for an update in about two seconds
 REFINED_HULL_CELLS = HULL_SHARE * LIVE_MAX_CELLS  # the full solve's hull refinement: its bounds
 LIVE_MAX_SAMPLES = 1000
+FIRST_LOOK_SAMPLES = 200  # enough for a rough estimate and the taps' distances under it
 
 
 def tap_surface_distances_m(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float,
@@ -43,6 +46,7 @@ class LiveCheck:
     solution: Solution
     tap_count: int
     refined: bool = False  # the bounds come from the full solve's hull refinement
+    rough: bool = False  # the first look: bounds straight from the search's cells, a rough estimate
 
     @property
     def verdict(self) -> Status:
@@ -86,19 +90,32 @@ class LiveView:
 def quick_check(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sample_bound_m: float,
                 cancel: threading.Event | None = None, max_cells: float = LIVE_MAX_CELLS,
                 previous: LiveCheck | None = None, progress: Callable[[SearchProgress], None] | None = None,
-                stage: Stage | None = None) -> LiveCheck | None:
+                stage: Stage | None = None, hull_cells: float = LIVE_HULL_CELLS,
+                max_samples: int = LIVE_MAX_SAMPLES) -> LiveCheck | None:
     """A quick solve of the taps (None with fewer than the solver's minimum); raises ``SearchCancelled``
     when ``cancel`` is set meanwhile. With the ``previous`` check of fewer of the same taps, the solve goes
-    on from its set (a new tap can only remove poses) instead of starting over. The search is a quick one (coarse
-    levels only while the taps prune hard: a few taps are answered in seconds). ``progress`` and ``stage``: as
-    for ``solve``."""
+    on from its set (a new tap can only remove poses) instead of starting over; of the same taps, it takes that
+    set as it is. The search is a quick one (coarse levels only while the taps prune hard: a few taps are
+    answered in seconds). ``progress`` and ``stage``: as for ``solve``; ``hull_cells``: its hull refinement's
+    budget; ``max_samples``: the likelihood samples of the estimate."""
     base_p_taps = np.asarray(base_p_taps, float).reshape(-1, 3)
     if len(base_p_taps) < MIN_TAPS:
         return None
     solution = solve(fixture, base_p_taps, ball_diameter_m, sample_bound_m, max_cells=max_cells, cancel=cancel,
-                     max_samples=LIVE_MAX_SAMPLES, previous=None if previous is None else previous.solution,
-                     hull_cells=LIVE_HULL_CELLS, quick=True, progress=progress, stage=stage)
+                     max_samples=max_samples, previous=None if previous is None else previous.solution,
+                     hull_cells=hull_cells, quick=True, progress=progress, stage=stage)
     return LiveCheck(solution, len(base_p_taps))
+
+
+def first_look(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sample_bound_m: float,
+               cancel: threading.Event | None = None, previous: LiveCheck | None = None,
+               progress: Callable[[SearchProgress], None] | None = None,
+               stage: Stage | None = None) -> LiveCheck | None:
+    """``quick_check`` without hull refinement and with a rough estimate (``FIRST_LOOK_SAMPLES``): the verdict and
+    bounds straight from the search's cells (guaranteed, looser), shown first."""
+    check = quick_check(fixture, base_p_taps, ball_diameter_m, sample_bound_m, cancel, previous=previous,
+                        progress=progress, stage=stage, hull_cells=0.0, max_samples=FIRST_LOOK_SAMPLES)
+    return None if check is None else replace(check, rough=True)
 
 
 def refine_check(fixture: Fixture, check: LiveCheck, cancel: threading.Event | None = None,

@@ -1,6 +1,7 @@
-"""The live check after a tap as one pipeline, stage by stage: the quick check, then (once it offers an estimate)
-where to tap next with the robot's safe way above it, the refined check, and the way above again when the refined
-bounds make room for one the quick bounds did not. The sampling screen's solver process, the tests and
+"""The live check after a tap as one pipeline, stage by stage: the first look (bounds straight from the search),
+the quick check of the same set, then (once it offers an estimate) where to tap next with the robot's safe way
+above it, the refined check, and the way above again when the refined bounds make room for one the quick bounds
+did not. The sampling screen's solver process, the tests and
 ``benchmarks/guidance.py`` all run it; a consumer may stop early (the generator does no more work than asked for).
 """
 
@@ -15,7 +16,7 @@ from fixwizard.solver.search import SearchProgress
 from fixwizard.solver.solve import Stage
 from fixwizard.workflow.advice import TapAdvice
 from fixwizard.workflow.hover import HoverPlan, next_tap_and_plan, plan_hover
-from fixwizard.workflow.live import LiveCheck, quick_check, refine_check
+from fixwizard.workflow.live import LiveCheck, first_look, quick_check, refine_check
 
 
 @dataclass(frozen=True)
@@ -34,15 +35,21 @@ def live_pipeline(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: fl
                   previous: LiveCheck | None = None, cancel: threading.Event | None = None,
                   progress: Callable[[SearchProgress], None] | None = None, stage: Stage | None = None,
                   seed: int = 0, advise: bool = True) -> Iterator[LiveStage]:
-    """Yield the quick ``LiveCheck`` of the taps (N, 3, base frame, m; nothing with fewer than the solver's minimum);
-    when it offers an estimate, the ``NextTap`` (only with ``advise``), the refined ``LiveCheck`` and, when the
-    refinement makes a way above the advised point safe, that ``NextTap`` again. Lengths in m; ``previous``: the
+    """Yield the first look and the quick ``LiveCheck`` of the taps (N, 3, base frame, m; nothing with fewer than
+    the solver's minimum; only the first look when no pose fits); when the quick check offers an estimate, the
+    ``NextTap`` (only with ``advise``), the refined ``LiveCheck`` and, when the refinement makes a way above the
+    advised point safe, that ``NextTap`` again. Lengths in m; ``previous``: the
     last check of fewer of the same taps (see ``quick_check``); ``seed``: of the advice's candidate points.
     Raises ``SearchCancelled`` when ``cancel`` is set meanwhile."""
-    check = quick_check(fixture, base_p_taps, ball_diameter_m, sample_bound_m, cancel, previous=previous,
-                        progress=progress, stage=stage)
-    if check is None:
+    first = first_look(fixture, base_p_taps, ball_diameter_m, sample_bound_m, cancel, previous=previous,
+                       progress=progress, stage=stage)
+    if first is None:
         return
+    yield first
+    if first.verdict == "inconsistent":
+        return  # nothing to refine: the first look has said why
+    check = quick_check(fixture, base_p_taps, ball_diameter_m, sample_bound_m, cancel, previous=first, stage=stage)
+    assert check is not None  # as many taps as the first look
     yield check
     if check.estimate_base_T_cad is None:
         return
