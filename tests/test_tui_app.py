@@ -63,8 +63,8 @@ async def press_button(pilot: Pilot, selector: str) -> None:
     await pilot.press("enter")
 
 
-async def calibrate_by_hand(pilot: Pilot) -> None:
-    """From the start screen with a new calibration: the pivot and table points with the SIMULATED hands."""
+async def pivot_by_hand(pilot: Pilot) -> None:
+    """From the start screen with a new calibration to the table points: the pivot with the SIMULATED hands."""
     app = pilot.app
     await press_button(pilot, "#continue")
     await until(pilot, lambda: isinstance(app.screen, PivotScreen) and not app.screen.busy)
@@ -73,6 +73,12 @@ async def calibrate_by_hand(pilot: Pilot) -> None:
         await until(pilot, lambda: not app.screen.busy)
     await pilot.press("n")
     await until(pilot, lambda: isinstance(app.screen, TablePointsScreen) and not app.screen.busy)
+
+
+async def calibrate_by_hand(pilot: Pilot) -> None:
+    """From the start screen with a new calibration: the pivot and table points with the SIMULATED hands."""
+    app = pilot.app
+    await pivot_by_hand(pilot)
     for _ in range(3):
         await pilot.press(keys.HANDS.keys)
         await until(pilot, lambda: not app.screen.busy)
@@ -411,13 +417,7 @@ def test_a_calibration_step_says_at_once_what_the_robot_does_and_clears_it_after
         app = FixwizardApp(wizard(tmp_path, pace_s=1.6))
         async with app.run_test(size=SIZE) as pilot:
             await at_start(pilot)
-            await press_button(pilot, "#continue")
-            await until(pilot, lambda: isinstance(app.screen, PivotScreen) and not app.screen.busy)
-            for _ in range(app.context.hands.pivot_count):
-                await pilot.press(keys.HANDS.keys)
-                await until(pilot, lambda: not app.screen.busy)
-            await pilot.press("n")
-            await until(pilot, lambda: isinstance(app.screen, TablePointsScreen) and not app.screen.busy)
+            await pivot_by_hand(pilot)
             await pilot.press(keys.HANDS.keys)
             await pilot.pause()
             doing = app.screen.query_one("#doing", Static)
