@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 from fixwizard.demo import demo_cell
 from fixwizard.geometry.se3 import make_transform
 from fixwizard.solver.search import SearchCancelled
-from fixwizard.workflow.live import LiveCheck, quick_check, refine_check, tap_surface_distances_m
+from fixwizard.workflow.live import LiveCheck, first_look, quick_check, refine_check, tap_surface_distances_m
 from fixwizard.workflow.live_pipeline import NextTap, live_pipeline
 from shapes import as_fixture
 from tui_cell import SAMPLE_BOUND_M, spread_taps
@@ -95,9 +95,7 @@ def test_the_live_pipeline_gives_the_first_look_the_check_the_next_tap_and_the_r
     assert isinstance(first, LiveCheck) and first.rough and not first.refined and first.verdict == "unique"
     assert first.solution.contains(cell.truth.base_T_cad)
     assert isinstance(quick, LiveCheck) and not quick.rough and not quick.refined and quick.verdict == "unique"
-    assert quick.solution.cells is first.solution.cells  # the same set, only its hull refined
-    assert quick.solution.bounds.position_m <= first.solution.bounds.position_m
-    assert quick.solution.bounds.max_point_displacement_m <= first.solution.bounds.max_point_displacement_m
+    assert quick.solution.contains(cell.truth.base_T_cad)
     assert isinstance(next_tap, NextTap) and next_tap.advice is not None
     assert isinstance(refined, LiveCheck) and refined.refined and refined.solution.contains(cell.truth.base_T_cad)
     assert all(isinstance(stage, NextTap) and stage.plan is not None for stage in stages[4:])
@@ -115,3 +113,19 @@ def test_the_live_pipeline_stops_at_the_first_look_when_no_pose_fits(tapped):
     stretched = base_p_taps[:6] * 1.3  # no rigid motion maps the fixture onto these
     stages = list(live_pipeline(cell.fixture, stretched, BALL_DIAMETER_M, SAMPLE_BOUND_M))
     assert len(stages) == 1 and stages[0].rough and stages[0].verdict == "inconsistent"
+
+
+def test_the_first_look_filters_the_previous_set_without_going_deeper_and_the_quick_check_goes_on_from_it(tapped):
+    cell, base_p_taps = tapped
+    before = quick_check(cell.fixture, base_p_taps[:9], BALL_DIAMETER_M, SAMPLE_BOUND_M)
+    first = first_look(cell.fixture, base_p_taps[:10], BALL_DIAMETER_M, SAMPLE_BOUND_M, previous=before)
+    depth = len(before.solution.tree.levels)
+    assert first.rough and len(first.solution.tree.levels) == depth
+    assert first.solution.cells.rotation_level == before.solution.cells.rotation_level
+    assert len(first.solution.cells) <= len(before.solution.cells)  # a new tap only removes poses
+    assert first.solution.contains(cell.truth.base_T_cad)
+    quick = quick_check(cell.fixture, base_p_taps[:10], BALL_DIAMETER_M, SAMPLE_BOUND_M, previous=first)
+    assert len(quick.solution.tree.levels) >= depth and len(first.solution.tree.levels) == depth  # first kept
+    assert quick.solution.contains(cell.truth.base_T_cad)
+    scratch = quick_check(cell.fixture, base_p_taps[:10], BALL_DIAMETER_M, SAMPLE_BOUND_M)
+    assert quick.solution.cells.rotation_level == scratch.solution.cells.rotation_level

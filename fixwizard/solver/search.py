@@ -49,11 +49,13 @@ RESTART_ROOT_SHRINK = 0.95
 # exhaustive search (to prove a set empty) descends as long as its levels together stay within the budget; a quick
 # one (the live check after each tap) goes on at coarse levels only while the taps still prune hard (under
 # PRUNING_RATIO of a level's cells survive): a set of a few taps, which they barely prune, is then answered in
-# seconds, as undetermined.
+# seconds, as undetermined. ``no_deeper`` adds new taps to a previous search without a level below it (the live
+# check's first look after a tap: the previous set filtered against the new tap); a search from scratch then
+# descends as a quick one.
 UNIFORM_SHARE = 1 / 12
 COARSE_FRACTION = 0.05
 PRUNING_RATIO = 0.25
-Descent = Literal["thorough", "quick", "exhaustive"]
+Descent = Literal["thorough", "quick", "exhaustive", "no_deeper"]
 _KERNEL_LOCK = threading.Lock()  # one parallel kernel at a time, whichever thread searches
 
 
@@ -318,7 +320,7 @@ def search_budget(max_cells: float) -> float:
 def _descends(problem: SearchProblem, tree: SearchTree, max_cells: float, descent: Descent) -> bool:
     """Whether the uniform descent splits the finest survivors once more within the cell budget (see ``Descent``)."""
     cells = tree.final.cells
-    if len(cells) == 0 or not splittable(cells):
+    if len(cells) == 0 or not splittable(cells) or descent == "no_deeper":
         return False
     if descent == "exhaustive":  # as long as the budget allows, as a total over the levels
         return tree.spent + 8 * len(cells) <= max_cells
@@ -372,7 +374,16 @@ def search(problem: SearchProblem, max_cells: float = 1e7,
     cells = root_cells(position_grid)
     survivors = filter_cells(problem, cells, cancel=cancel)
     return _descend(problem, SearchTree([survivors], len(cells), len(cells)), max_cells, started, progress, cancel,
-                    descent)
+                    "quick" if descent == "no_deeper" else descent)
+
+
+def descend(problem: SearchProblem, tree: SearchTree, max_cells: float = 1e7,
+            progress: Callable[[SearchProgress], None] | None = None,
+            cancel: threading.Event | None = None, descent: Descent = "thorough") -> SearchTree:
+    """``tree``, searched for ``problem``'s taps, taken further down as ``descent`` says (e.g. after a ``no_deeper``
+    first look); ``tree`` itself is left as it was."""
+    return _descend(problem, SearchTree(list(tree.levels), tree.evaluated, tree.spent), max_cells,
+                    time.perf_counter(), progress, cancel, descent)
 
 
 def worth_extending(problem: SearchProblem, previous: SearchTree) -> bool:

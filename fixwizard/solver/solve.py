@@ -37,11 +37,13 @@ from fixwizard.solver.modes import rotation_modes
 from fixwizard.solver.refine import refined_largest_figures
 from fixwizard.solver.resources import available_memory_bytes, largest_cell_budget, search_peak_bytes
 from fixwizard.solver.search import (
+    Descent,
     SearchProblem,
     SearchProgress,
     SearchTree,
     Survivors,
     add_taps,
+    descend,
     search,
     worth_extending,
 )
@@ -255,11 +257,29 @@ def _modes(problem: SearchProblem, survivors: Survivors, likelihood: _Likelihood
     return sorted(modes, key=lambda mode: -mode.probability), kept, samples
 
 
+def _search_tree(problem: SearchProblem, known: SearchTree | None, same_taps: bool, max_cells: float,
+                 progress: Callable[[SearchProgress], None] | None, cancel: threading.Event | None,
+                 descent: Descent) -> SearchTree | None:
+    """The search tree for ``problem``: from ``known`` (a tree of the same taps, or of fewer of them, or None) where
+    that helps. ``no_deeper`` always goes on from ``known`` (its set as it is, filtered against new taps); otherwise a
+    tree whose root the taps shrink (``worth_extending``) gives way to a search from scratch, which reaches finer
+    cells for the budget, and a tree of the same taps is taken further down."""
+    if known is None:
+        return search(problem, max_cells, progress, cancel, descent)
+    if descent == "no_deeper":
+        return known if same_taps else add_taps(problem, known, max_cells, progress, cancel, descent)
+    if not worth_extending(problem, known):
+        return search(problem, max_cells, progress, cancel, descent)
+    if same_taps:
+        return descend(problem, known, max_cells, progress, cancel, descent)
+    return add_taps(problem, known, max_cells, progress, cancel, descent)
+
+
 def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sample_bound_m: float,
           sigma_m: float | None = None, max_cells: float = DEFAULT_MAX_CELLS,
           progress: Callable[[SearchProgress], None] | None = None, cancel: threading.Event | None = None,
           max_samples: int = DEFAULT_MAX_SAMPLES, seed: int = 0, previous: Solution | None = None,
-          hull_cells: float | None = None, diagnose_inconsistent: bool = True, quick: bool = False,
+          hull_cells: float | None = None, diagnose_inconsistent: bool = True, descent: Descent = "thorough",
           stage: Stage | None = None) -> Solution:
     """All poses of ``fixture`` that explain the taps, with estimates; raises InputError for bad input.
 
@@ -267,11 +287,11 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
     defaults to ``sample_bound_m / 3``. Raises ``SearchCancelled`` if ``cancel`` is set.
     ``previous``: a solution of the same fixture and bounds with fewer taps; when the taps extend its
     taps, the search goes on from its surviving set instead of starting over. With the same taps its set is
-    taken as it is: only the estimates and the hull refinement run again (with a larger ``hull_cells``, to
-    tighten the bounds). ``hull_cells``: the cells hull
+    taken further down as ``descent`` says (``no_deeper``: as it is), and the estimates and the hull refinement
+    run again (with a larger ``hull_cells``, to tighten the bounds). ``hull_cells``: the cells hull
     refinement may evaluate (default ``HULL_SHARE`` of ``max_cells``). ``diagnose_inconsistent``: look for why no
-    pose explains the taps (``diagnose``, seconds of searches) when none does. ``quick``: the search
-    goes on at coarse levels only while the taps prune hard (``search.Descent``; for the live check after each tap).
+    pose explains the taps (``diagnose``, seconds of searches) when none does. ``descent``: how far the search
+    goes down (``search.Descent``; ``quick`` and ``no_deeper`` for the live check after each tap).
     ``stage``: called as each phase after the search starts (``SolveStage``).
     """
     stage = stage or (lambda _: None)
@@ -291,12 +311,8 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
     problem = SearchProblem(fixture.oracle, fixture.radius_m, base_p_taps, ball_diameter_m / 2.0, sample_bound_m)
     known = previous.tree if previous is not None and previous.extends_to(problem) else None
     tree: SearchTree | None
-    if previous is not None and known is not None and len(base_p_taps) == len(previous.problem.base_p_taps):
-        tree = known
-    elif known is not None and worth_extending(problem, known):
-        tree = add_taps(problem, known, max_cells, progress, cancel, "quick" if quick else "thorough")
-    else:
-        tree = search(problem, max_cells, progress, cancel, "quick" if quick else "thorough")
+    same_taps = previous is not None and len(previous.problem.base_p_taps) == len(base_p_taps)
+    tree = _search_tree(problem, known, same_taps, max_cells, progress, cancel, descent)
     survivors = None if tree is None else tree.final
     cells = None if survivors is None else survivors.cells
     warnings = [SolveWarning(code, message) for code, message in fixture.warnings] + budget_warnings

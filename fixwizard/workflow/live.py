@@ -18,7 +18,7 @@ import numpy as np
 
 from fixwizard.fixture import Fixture
 from fixwizard.solver.estimates import Bounds
-from fixwizard.solver.search import SearchProgress
+from fixwizard.solver.search import Descent, SearchProgress
 from fixwizard.solver.solve import HULL_SHARE, MIN_TAPS, Mode, Solution, Stage, solve
 from fixwizard.solver.verdict import Status
 from fixwizard.workflow.ball_check import BallMismatch, ball_mismatch
@@ -91,19 +91,19 @@ def quick_check(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: floa
                 cancel: threading.Event | None = None, max_cells: float = LIVE_MAX_CELLS,
                 previous: LiveCheck | None = None, progress: Callable[[SearchProgress], None] | None = None,
                 stage: Stage | None = None, hull_cells: float = LIVE_HULL_CELLS,
-                max_samples: int = LIVE_MAX_SAMPLES) -> LiveCheck | None:
+                max_samples: int = LIVE_MAX_SAMPLES, descent: Descent = "quick") -> LiveCheck | None:
     """A quick solve of the taps (None with fewer than the solver's minimum); raises ``SearchCancelled``
     when ``cancel`` is set meanwhile. With the ``previous`` check of fewer of the same taps, the solve goes
-    on from its set (a new tap can only remove poses) instead of starting over; of the same taps, it takes that
-    set as it is. The search is a quick one (coarse levels only while the taps prune hard: a few taps are
-    answered in seconds). ``progress`` and ``stage``: as for ``solve``; ``hull_cells``: its hull refinement's
-    budget; ``max_samples``: the likelihood samples of the estimate."""
+    on from its set (a new tap can only remove poses) instead of starting over; of the same taps (a first look),
+    it goes on down from that set. The search is a quick one (coarse levels only while the taps prune hard: a few
+    taps are answered in seconds). ``progress`` and ``stage``: as for ``solve``; ``hull_cells``: its hull
+    refinement's budget; ``max_samples``: the likelihood samples of the estimate; ``descent``: as for ``solve``."""
     base_p_taps = np.asarray(base_p_taps, float).reshape(-1, 3)
     if len(base_p_taps) < MIN_TAPS:
         return None
     solution = solve(fixture, base_p_taps, ball_diameter_m, sample_bound_m, max_cells=max_cells, cancel=cancel,
                      max_samples=max_samples, previous=None if previous is None else previous.solution,
-                     hull_cells=hull_cells, quick=True, progress=progress, stage=stage)
+                     hull_cells=hull_cells, descent=descent, progress=progress, stage=stage)
     return LiveCheck(solution, len(base_p_taps))
 
 
@@ -111,10 +111,12 @@ def first_look(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float
                cancel: threading.Event | None = None, previous: LiveCheck | None = None,
                progress: Callable[[SearchProgress], None] | None = None,
                stage: Stage | None = None) -> LiveCheck | None:
-    """``quick_check`` without hull refinement and with a rough estimate (``FIRST_LOOK_SAMPLES``): the verdict and
-    bounds straight from the search's cells (guaranteed, looser), shown first."""
+    """``quick_check`` that goes no deeper than the ``previous`` check's search (the new taps filter its set; from
+    scratch, as deep as a quick check), without hull refinement and with a rough estimate (``FIRST_LOOK_SAMPLES``):
+    the verdict and bounds straight from the cells (guaranteed, looser), shown first."""
     check = quick_check(fixture, base_p_taps, ball_diameter_m, sample_bound_m, cancel, previous=previous,
-                        progress=progress, stage=stage, hull_cells=0.0, max_samples=FIRST_LOOK_SAMPLES)
+                        progress=progress, stage=stage, hull_cells=0.0, max_samples=FIRST_LOOK_SAMPLES,
+                        descent="no_deeper")
     return None if check is None else replace(check, rough=True)
 
 
@@ -126,5 +128,5 @@ def refine_check(fixture: Fixture, check: LiveCheck, cancel: threading.Event | N
     problem = check.solution.problem
     solution = solve(fixture, problem.base_p_taps, 2.0 * problem.ball_radius_m, problem.sample_bound_m,
                      max_cells=check.solution.stats.max_cells, cancel=cancel, max_samples=LIVE_MAX_SAMPLES,
-                     previous=check.solution, hull_cells=REFINED_HULL_CELLS, stage=stage)
+                     previous=check.solution, hull_cells=REFINED_HULL_CELLS, descent="no_deeper", stage=stage)
     return LiveCheck(solution, check.tap_count, refined=True)

@@ -48,7 +48,8 @@ def live_pipeline(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: fl
     yield first
     if first.verdict == "inconsistent":
         return  # nothing to refine: the first look has said why
-    check = quick_check(fixture, base_p_taps, ball_diameter_m, sample_bound_m, cancel, previous=first, stage=stage)
+    check = quick_check(fixture, base_p_taps, ball_diameter_m, sample_bound_m, cancel, previous=first,
+                        progress=progress, stage=stage)
     assert check is not None  # as many taps as the first look
     yield check
     if check.estimate_base_T_cad is None:
