@@ -9,8 +9,8 @@ from pathlib import Path
 
 from textual.widgets import Static
 
-from fixwizard.tui.sampling import SamplingScreen
-from fixwizard.tui.solve_screen import SolveScreen
+from fixwizard.tui.sampling.screen import SamplingScreen
+from fixwizard.tui.solve.screen import SolveScreen
 from pilot_wait import until
 from tui_cell import ScreenHost, record_spread_taps, wizard_context
 

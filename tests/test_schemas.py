@@ -20,7 +20,7 @@ from fixwizard.demo import DEMO_MESH, DEMO_TAPS, demo_cell, demo_fixture
 from fixwizard.schemas import FILES, load_schema
 from fixwizard.solver.solve import solve
 from fixwizard.tui.context import WizardContext
-from fixwizard.tui.sessions import start_session
+from fixwizard.tui.start.sessions import start_session
 from fixwizard.workflow.session import SamplingSession
 from fixwizard.workflow.wizard_report import session_report
 from test_calibration_helpers import synthetic_steps

@@ -15,16 +15,16 @@ from fixwizard.calibration.store import load_calibration, save_calibration
 from fixwizard.demo import DEMO_MESH, demo_fixture
 from fixwizard.tui import keys
 from fixwizard.tui.app import FixwizardApp
-from fixwizard.tui.confirm import Confirm
 from fixwizard.tui.context import WizardContext
-from fixwizard.tui.errors import ErrorModal
 from fixwizard.tui.launch import simulated_context, ur_context
-from fixwizard.tui.sessions import start_session
-from fixwizard.tui.start import NEW, StartScreen
-from fixwizard.tui.status import StatusBar
-from fixwizard.tui.tip_calibration_auto import AutoTapsScreen
-from fixwizard.tui.tip_calibration_hands import PivotScreen, TablePointsScreen
-from fixwizard.tui.tip_calibration_result import CalibrationResultScreen
+from fixwizard.tui.start.screen import NEW, StartScreen
+from fixwizard.tui.start.sessions import start_session
+from fixwizard.tui.tip_calibration.auto import AutoTapsScreen
+from fixwizard.tui.tip_calibration.hands import PivotScreen, TablePointsScreen
+from fixwizard.tui.tip_calibration.result import CalibrationResultScreen
+from fixwizard.tui.widgets.confirm import Confirm
+from fixwizard.tui.widgets.errors import ErrorModal
+from fixwizard.tui.widgets.status import StatusBar
 from pilot_wait import until
 
 SEED = 3

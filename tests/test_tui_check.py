@@ -17,10 +17,10 @@ from fixwizard.robot.sim import SimulatedCell
 from fixwizard.robot.sim_hands import SimulatedHands
 from fixwizard.solver.solve import solve
 from fixwizard.tui.app import FixwizardApp
-from fixwizard.tui.check import CheckScreen
+from fixwizard.tui.check.screen import CheckScreen
 from fixwizard.tui.context import WizardContext
 from fixwizard.tui.launch import simulated_context
-from fixwizard.tui.start import StartScreen
+from fixwizard.tui.start.screen import StartScreen
 from pilot_wait import until
 from tui_cell import SAMPLE_BOUND_M, ScreenHost, spread_taps, truth_calibration
 

@@ -11,12 +11,12 @@ from textual.widgets import Button, Static
 from fixwizard import report
 from fixwizard.tui.app import FixwizardApp
 from fixwizard.tui.launch import simulated_context
-from fixwizard.tui.results import ResultsScreen
-from fixwizard.tui.sampling import SamplingScreen
-from fixwizard.tui.start import StartScreen
-from fixwizard.tui.tip_calibration_auto import AutoTapsScreen
-from fixwizard.tui.tip_calibration_hands import PivotScreen, TablePointsScreen
-from fixwizard.tui.tip_calibration_result import CalibrationResultScreen
+from fixwizard.tui.results.screen import ResultsScreen
+from fixwizard.tui.sampling.screen import SamplingScreen
+from fixwizard.tui.start.screen import StartScreen
+from fixwizard.tui.tip_calibration.auto import AutoTapsScreen
+from fixwizard.tui.tip_calibration.hands import PivotScreen, TablePointsScreen
+from fixwizard.tui.tip_calibration.result import CalibrationResultScreen
 from pilot_wait import until
 from tui_cell import bounds_contain
 

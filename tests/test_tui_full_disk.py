@@ -8,7 +8,7 @@ import pytest
 from textual.widgets import DataTable, Static
 
 from conftest import fill_disk
-from fixwizard.tui.sampling import SamplingScreen
+from fixwizard.tui.sampling.screen import SamplingScreen
 from fixwizard.workflow.session import SamplingSession
 from pilot_wait import until
 from tui_cell import ScreenHost, record_spread_taps, wizard_context

@@ -21,14 +21,14 @@ import fixwizard.tui
 from fixwizard.calibration.store import load_calibration, save_calibration
 from fixwizard.tui import keys
 from fixwizard.tui.app import FixwizardApp
-from fixwizard.tui.confirm import Confirm
-from fixwizard.tui.help import HelpScreen
-from fixwizard.tui.sampling import SamplingScreen
-from fixwizard.tui.start import NEW, StartScreen
-from fixwizard.tui.status import StatusBar
-from fixwizard.tui.tip_calibration_auto import AutoTapsScreen
-from fixwizard.tui.tip_calibration_hands import PivotScreen, TablePointsScreen
-from fixwizard.tui.tip_calibration_result import CalibrationResultScreen
+from fixwizard.tui.sampling.screen import SamplingScreen
+from fixwizard.tui.start.screen import NEW, StartScreen
+from fixwizard.tui.tip_calibration.auto import AutoTapsScreen
+from fixwizard.tui.tip_calibration.hands import PivotScreen, TablePointsScreen
+from fixwizard.tui.tip_calibration.result import CalibrationResultScreen
+from fixwizard.tui.widgets.confirm import Confirm
+from fixwizard.tui.widgets.help import HelpScreen
+from fixwizard.tui.widgets.status import StatusBar
 from pilot_wait import until
 from test_tui_app import REPO, SIZE, at_start, calibrate_by_hand, press_button, rearm, wizard
 from tui_cell import ScreenHost, record_spread_taps, wizard_context
@@ -36,8 +36,8 @@ from tui_cell import ScreenHost, record_spread_taps, wizard_context
 
 def wizard_screens() -> list[type[Screen]]:
     """Every screen and dialog class the wizard defines."""
-    for module in pkgutil.iter_modules(fixwizard.tui.__path__):
-        importlib.import_module(f"fixwizard.tui.{module.name}")
+    for module in pkgutil.walk_packages(fixwizard.tui.__path__, "fixwizard.tui."):
+        importlib.import_module(module.name)
     found = set()
     for module_name, module in list(sys.modules.items()):
         if module_name.startswith("fixwizard.tui."):

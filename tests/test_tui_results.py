@@ -12,8 +12,8 @@ from textual.widgets import Input, Static
 from fixwizard import report
 from fixwizard.geometry.se3 import format_ur_pose
 from fixwizard.solver.solve import Solution, solve
-from fixwizard.tui.results import ResultsScreen
-from fixwizard.tui.solve_screen import SolveScreen
+from fixwizard.tui.results.screen import ResultsScreen
+from fixwizard.tui.solve.screen import SolveScreen
 from pilot_wait import until
 from tui_cell import (
     ScreenHost,

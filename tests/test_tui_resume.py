@@ -15,10 +15,10 @@ from textual.widgets import Static
 from fixwizard.calibration.store import load_calibration
 from fixwizard.demo import demo_fixture
 from fixwizard.tui.app import FixwizardApp
-from fixwizard.tui.errors import ErrorModal
 from fixwizard.tui.launch import simulated_context
-from fixwizard.tui.sessions import start_session
-from fixwizard.tui.start import NEW, StartScreen
+from fixwizard.tui.start.screen import NEW, StartScreen
+from fixwizard.tui.start.sessions import start_session
+from fixwizard.tui.widgets.errors import ErrorModal
 from fixwizard.workflow.session import SamplingSession
 from pilot_wait import until
 

@@ -13,9 +13,9 @@ from textual.widgets import DataTable, Static
 
 from fixwizard.demo import disc_fixture
 from fixwizard.geometry.se3 import rotation_angle_rad
-from fixwizard.tui.confirm import Confirm, ConfirmMove
-from fixwizard.tui.dialog import Dialog
-from fixwizard.tui.sampling import SamplingScreen
+from fixwizard.tui.sampling.screen import SamplingScreen
+from fixwizard.tui.widgets.confirm import Confirm, ConfirmMove
+from fixwizard.tui.widgets.dialog import Dialog
 from fixwizard.workflow.solver_process import NextTap
 from pilot_wait import until
 from tui_cell import ScreenHost, cell_of, record_spread_taps, wizard_context

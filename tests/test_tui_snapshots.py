@@ -9,10 +9,10 @@ from textual.pilot import Pilot
 from textual.widgets import Input
 
 from fixwizard.tui.app import FixwizardApp
-from fixwizard.tui.errors import ErrorModal
-from fixwizard.tui.help import HelpScreen
-from fixwizard.tui.tip_calibration_hands import PivotScreen, TablePointsScreen
-from fixwizard.tui.tip_calibration_result import CalibrationResultScreen
+from fixwizard.tui.tip_calibration.hands import PivotScreen, TablePointsScreen
+from fixwizard.tui.tip_calibration.result import CalibrationResultScreen
+from fixwizard.tui.widgets.errors import ErrorModal
+from fixwizard.tui.widgets.help import HelpScreen
 from pilot_wait import until
 from test_tui_app import SIZE, at_start, calibrate_by_hand, press_button, wizard
 

@@ -11,9 +11,9 @@ import pytest
 
 from fixwizard.solver.search import SearchProgress
 from fixwizard.solver.solve import solve
-from fixwizard.tui.results import ResultsScreen
-from fixwizard.tui.sampling import SamplingScreen
-from fixwizard.tui.solve_screen import SolveScreen
+from fixwizard.tui.results.screen import ResultsScreen
+from fixwizard.tui.sampling.screen import SamplingScreen
+from fixwizard.tui.solve.screen import SolveScreen
 from fixwizard.workflow.solver_process import Progress
 from pilot_wait import until
 from tui_cell import ScreenHost, point_above_fixture_m, record_spread_taps, symmetric_cell, wizard_context

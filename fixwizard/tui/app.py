@@ -24,18 +24,18 @@ from fixwizard.errors import FixwizardError
 from fixwizard.robot.base import ProtectiveStop, RobotStatus
 from fixwizard.tui import keys
 from fixwizard.tui.background import ShownError, run_in_thread
-from fixwizard.tui.confirm import Confirm
 from fixwizard.tui.context import WizardContext
-from fixwizard.tui.errors import ErrorModal, Recovery, ResumeRefused
-from fixwizard.tui.help import HelpScreen, help_text
 from fixwizard.tui.launch import session_to_resume
-from fixwizard.tui.results import ResultsScreen
-from fixwizard.tui.sampling import SamplingScreen
-from fixwizard.tui.sessions import resume_refusal, resume_session, start_session
-from fixwizard.tui.solve_screen import SolveScreen
-from fixwizard.tui.start import StartScreen
-from fixwizard.tui.status import StatusBar
-from fixwizard.tui.tip_calibration import calibrate_tip_on_screens
+from fixwizard.tui.results.screen import ResultsScreen
+from fixwizard.tui.sampling.screen import SamplingScreen
+from fixwizard.tui.solve.screen import SolveScreen
+from fixwizard.tui.start.screen import StartScreen
+from fixwizard.tui.start.sessions import resume_refusal, resume_session, start_session
+from fixwizard.tui.tip_calibration.steps import calibrate_tip_on_screens
+from fixwizard.tui.widgets.confirm import Confirm
+from fixwizard.tui.widgets.errors import ErrorModal, Recovery, ResumeRefused
+from fixwizard.tui.widgets.help import HelpScreen, help_text
+from fixwizard.tui.widgets.status import StatusBar
 from fixwizard.workflow.solver_process import SolverProcess
 
 T = TypeVar("T")

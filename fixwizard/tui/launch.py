@@ -8,7 +8,7 @@ from fixwizard.robot.base import Robot
 from fixwizard.robot.sim import SimulatedCell
 from fixwizard.robot.sim_hands import SimulatedHands
 from fixwizard.tui.context import WizardContext
-from fixwizard.tui.sessions import newest_unfinished
+from fixwizard.tui.start.sessions import newest_unfinished
 
 # Seconds per simulated tap or move: slow enough to watch the progress, fast enough not to bore.
 SIMULATED_PACE_S = 0.05

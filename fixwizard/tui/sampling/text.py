@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from fixwizard.solver.solve import MIN_TAPS
-from fixwizard.tui.choices import FixtureChoice
+from fixwizard.tui.start.choices import FixtureChoice
 from fixwizard.workflow.advice import TapAdvice
 from fixwizard.workflow.hover import CLEARANCE_M, HoverPlan
 from fixwizard.workflow.identify import MeshVerdict, ranked

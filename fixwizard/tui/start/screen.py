@@ -15,8 +15,10 @@ from fixwizard.demo import DEMO_MESH
 from fixwizard.errors import FixwizardError, MeshError, MeshUnitsError
 from fixwizard.fixture import Fixture, load_fixture
 from fixwizard.tui.background import ShownError, run_in_thread
-from fixwizard.tui.check import CheckScreen
-from fixwizard.tui.choices import (
+from fixwizard.tui.check.screen import CheckScreen
+from fixwizard.tui.context import WizardContext
+from fixwizard.tui.launch import use_simulated_cell, use_ur_arm
+from fixwizard.tui.start.choices import (
     CalibrationChoice,
     calibration_choices,
     describe_calibration,
@@ -24,10 +26,8 @@ from fixwizard.tui.choices import (
     fixture_choices,
     session_choices,
 )
-from fixwizard.tui.context import WizardContext
-from fixwizard.tui.errors import ResumeRefused, error_message
-from fixwizard.tui.launch import use_simulated_cell, use_ur_arm
-from fixwizard.tui.sessions import resume_refusal, resume_session
+from fixwizard.tui.start.sessions import resume_refusal, resume_session
+from fixwizard.tui.widgets.errors import ResumeRefused, error_message
 
 NEW = "new"
 UNITS = [("mm", "mm"), ("m", "m")]

@@ -8,7 +8,7 @@ from textual.containers import Horizontal
 from textual.widgets import ProgressBar, Static
 
 from fixwizard.tui import keys
-from fixwizard.tui.tip_calibration_step import CalibrationStepScreen
+from fixwizard.tui.tip_calibration.step import CalibrationStepScreen
 from fixwizard.workflow.robot_calibration import Cancelled, Step
 
 AUTO_TEXT = (

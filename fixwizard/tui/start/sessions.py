@@ -10,7 +10,7 @@ from fixwizard.calibration.store import load_calibration
 from fixwizard.errors import FixwizardError
 from fixwizard.fixture import load_fixture
 from fixwizard.tui.context import WizardContext
-from fixwizard.tui.errors import ResumeRefused, error_text
+from fixwizard.tui.widgets.errors import ResumeRefused, error_text
 from fixwizard.workflow.session import (
     SUFFIX,
     SamplingSession,

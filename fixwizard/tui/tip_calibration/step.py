@@ -11,8 +11,8 @@ from textual.widgets import Static
 
 from fixwizard.tui import keys
 from fixwizard.tui.background import ShownError, run_in_thread
-from fixwizard.tui.confirm import Confirm
 from fixwizard.tui.context import WizardContext
+from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.workflow.robot_calibration import RobotTipCalibration
 
 StepOutcome = Literal["next", "back", "redo"]

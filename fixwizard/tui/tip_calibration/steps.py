@@ -4,9 +4,9 @@ back with everything recorded kept; redo starts again with nothing recorded."""
 from textual.app import App
 
 from fixwizard.tui.context import WizardContext
-from fixwizard.tui.tip_calibration_auto import AutoTapsScreen
-from fixwizard.tui.tip_calibration_hands import PivotScreen, TablePointsScreen
-from fixwizard.tui.tip_calibration_result import (
+from fixwizard.tui.tip_calibration.auto import AutoTapsScreen
+from fixwizard.tui.tip_calibration.hands import PivotScreen, TablePointsScreen
+from fixwizard.tui.tip_calibration.result import (
     DEFAULT_BALL_DIAMETER_M,
     CalibrationResultScreen,
 )

@@ -16,7 +16,7 @@ from fixwizard.solver.solve import Solution, SolveStage
 from fixwizard.tui import keys
 from fixwizard.tui.background import run_in_solver
 from fixwizard.tui.context import WizardContext
-from fixwizard.tui.progress_text import stage_words
+from fixwizard.tui.solve.progress_text import stage_words
 from fixwizard.workflow.solver_process import Event, Failed, Progress, Solved, SolveRequest, SolverProcess
 
 TICK_S = 0.25

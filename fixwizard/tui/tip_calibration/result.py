@@ -13,8 +13,8 @@ from textual.widgets import Button, Input, Static
 from fixwizard.calibration.calibrate import MAX_BALL_DIAMETER_M
 from fixwizard.calibration.store import TipCalibration, save_calibration
 from fixwizard.calibration.verdict import tip_verdict
-from fixwizard.tui.dialog import Dialog
-from fixwizard.tui.tip_calibration_step import CalibrationStepScreen
+from fixwizard.tui.tip_calibration.step import CalibrationStepScreen
+from fixwizard.tui.widgets.dialog import Dialog
 from fixwizard.workflow.tip_calibration import summary_lines
 
 DEFAULT_BALL_DIAMETER_M = 0.003

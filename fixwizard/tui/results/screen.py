@@ -17,15 +17,15 @@ from fixwizard.errors import FixwizardError
 from fixwizard.plots import rotation_map_for_solution, taps_view_for_solution
 from fixwizard.tui import keys
 from fixwizard.tui.context import WizardContext
-from fixwizard.tui.errors import error_message
-from fixwizard.tui.picture_view import PictureView
-from fixwizard.tui.results_text import (
+from fixwizard.tui.results.text import (
     headline,
     modes_lines,
     summary_lines,
     suspect_lines,
     warning_lines,
 )
+from fixwizard.tui.widgets.errors import error_message
+from fixwizard.tui.widgets.picture_view import PictureView
 from fixwizard.workflow.advice import distinguishing_tap
 from fixwizard.workflow.details import details_lines
 from fixwizard.workflow.wizard_report import default_report_path, write_session_report

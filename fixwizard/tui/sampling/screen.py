@@ -24,14 +24,8 @@ from fixwizard.robot.base import NoContact, ProtectiveStop, RobotError, TapResul
 from fixwizard.solver.solve import MIN_TAPS
 from fixwizard.tui import keys
 from fixwizard.tui.background import run_in_solver
-from fixwizard.tui.choices import FixtureChoice, fixture_choices
-from fixwizard.tui.confirm import Confirm, ConfirmMove
 from fixwizard.tui.context import WizardContext
-from fixwizard.tui.dialog import Dialog
-from fixwizard.tui.errors import error_message
-from fixwizard.tui.picture_view import PictureView
-from fixwizard.tui.progress_text import progress_words
-from fixwizard.tui.sampling_text import (
+from fixwizard.tui.sampling.text import (
     NO_SAFE_HOVER,
     guide_text,
     hover_question,
@@ -40,6 +34,12 @@ from fixwizard.tui.sampling_text import (
     live_text,
     robot_problem_text,
 )
+from fixwizard.tui.solve.progress_text import progress_words
+from fixwizard.tui.start.choices import FixtureChoice, fixture_choices
+from fixwizard.tui.widgets.confirm import Confirm, ConfirmMove
+from fixwizard.tui.widgets.dialog import Dialog
+from fixwizard.tui.widgets.errors import error_message
+from fixwizard.tui.widgets.picture_view import PictureView
 from fixwizard.workflow.advice import TapAdvice
 from fixwizard.workflow.hover import HoverPlan, hover_path
 from fixwizard.workflow.live import LiveView

@@ -9,7 +9,7 @@ from fixwizard.calibration.errors import CalibrationError
 from fixwizard.calibration.pivot import MIN_POSES
 from fixwizard.tui import keys
 from fixwizard.tui.background import ShownError
-from fixwizard.tui.tip_calibration_step import CalibrationStepScreen
+from fixwizard.tui.tip_calibration.step import CalibrationStepScreen
 from fixwizard.workflow.robot_calibration import TABLE_POINTS
 
 PIVOT_TEXT = (

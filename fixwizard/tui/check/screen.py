@@ -29,7 +29,7 @@ from fixwizard.solver.search import SearchCancelled
 from fixwizard.tui import keys
 from fixwizard.tui.background import ShownError, run_in_thread
 from fixwizard.tui.context import WizardContext
-from fixwizard.tui.errors import error_message
+from fixwizard.tui.widgets.errors import error_message
 from fixwizard.workflow.cell_reports import scan
 from fixwizard.workflow.live import tap_surface_distances_m
 from fixwizard.workflow.session import SUFFIX, SamplingSession
