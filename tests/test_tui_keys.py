@@ -107,7 +107,7 @@ def test_question_mark_opens_the_help_of_each_step_with_its_keys_and_the_global_
             assert text.startswith("Find the ball tip roughly") and "Keys on this screen:" in text
             assert "  m       SIM hands: SIMULATED cell only" in text and "  Space   Capture" in text
             assert "  Esc     Back" in text and "  Ctrl+R  Re-arm" in text
-            for _ in range(app.context.hands.pivot_count):
+            for _ in range(app.cell.hands.pivot_count):
                 await pilot.press("m")
                 await until(pilot, lambda: not app.screen.busy)
             await pilot.press("n")
@@ -130,7 +130,7 @@ def test_question_mark_opens_the_help_of_each_step_with_its_keys_and_the_global_
 def test_help_on_the_sampling_screen_lists_its_keys(tmp_path):
     async def run():
         context = wizard_context(tmp_path)
-        app = FixwizardApp(context)
+        app = FixwizardApp(context.cell, sampling=context.sampling)
         async with app.run_test(size=SIZE) as pilot:
             await until(pilot, lambda: isinstance(app.screen, SamplingScreen) and not app.screen.busy)
             text = await open_help(pilot)
@@ -176,7 +176,7 @@ def test_stop_shows_stopped_refuses_motion_until_a_confirmed_rearm(tmp_path):
 def test_a_protective_stop_makes_the_wizard_stopped_and_rearm_waits_for_the_unlock(tmp_path):
     async def run():
         context = wizard_context(tmp_path)
-        app = FixwizardApp(context)
+        app = FixwizardApp(context.cell, sampling=context.sampling)
         async with app.run_test(size=SIZE, notifications=True) as pilot:
             await until(pilot, lambda: isinstance(app.screen, SamplingScreen) and not app.screen.busy)
             sampling = app.screen
@@ -269,7 +269,7 @@ def test_leaving_sampling_asks_and_lands_on_the_start_screen_with_that_session_t
             assert app.screen.query_one("#calibration", Select).value != NEW
             await press_button(pilot, "#continue")
             await until(pilot, lambda: isinstance(app.screen, SamplingScreen) and not app.screen.busy)
-            session_path = context.session.path
+            session_path = app.screen.session.path
             await pilot.press("escape")
             await until(pilot, lambda: isinstance(app.screen, Confirm))
             await pilot.press("y")
@@ -300,7 +300,7 @@ async def assert_in_view(pilot: Pilot, *key_names: str) -> None:
 def test_the_footer_keeps_esc_and_quit_in_view_at_80x24(tmp_path):
     async def run():
         context = wizard_context(tmp_path)
-        app = FixwizardApp(context)
+        app = FixwizardApp(context.cell, sampling=context.sampling)
         async with app.run_test(size=SIZE) as pilot:
             await until(pilot, lambda: isinstance(app.screen, SamplingScreen) and not app.screen.busy)
             await pilot.pause()
@@ -320,7 +320,7 @@ def test_the_footer_keeps_esc_and_quit_in_view_at_80x24(tmp_path):
 async def test_the_newest_tap_stays_in_view_after_25_taps(tmp_path):
     context = wizard_context(tmp_path)
     record_spread_taps(context, 24)
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
         for key in "mt":

@@ -56,7 +56,7 @@ def journal_kinds(context) -> list[str]:
 
 @pytest.mark.slow
 async def test_twelve_taps_fill_the_table_and_the_journal_and_the_live_check_finds_the_pose(context):
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     cell = cell_of(context)
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
@@ -89,7 +89,7 @@ async def test_twelve_taps_fill_the_table_and_the_journal_and_the_live_check_fin
 
 @pytest.mark.slow
 async def test_undo_removes_the_last_tap_and_journals_it(context):
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
         for _ in range(4):
@@ -104,7 +104,7 @@ async def test_undo_removes_the_last_tap_and_journals_it(context):
 
 @pytest.mark.slow
 async def test_protective_stop_during_a_tap_is_explained_and_loses_nothing(context):
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     cell = cell_of(context)
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
@@ -130,7 +130,7 @@ async def test_protective_stop_during_a_tap_is_explained_and_loses_nothing(conte
 @pytest.mark.parametrize("fault, shown", [("connection_loss", "check that the robot is powered on"),
                                           ("no_surface", "found no surface within 20 mm: move the tool closer")])
 async def test_other_robot_problems_say_what_to_do_next(context, fault, shown):
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     cell = cell_of(context)
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
@@ -143,7 +143,7 @@ async def test_other_robot_problems_say_what_to_do_next(context, fault, shown):
 
 
 async def test_solving_needs_three_taps(context):
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
         await tap(pilot, screen)
@@ -154,8 +154,8 @@ async def test_solving_needs_three_taps(context):
 
 
 async def test_a_real_cell_has_no_simulated_keys(context):
-    context.hands, context.simulated = None, False
-    app = ScreenHost(lambda: SamplingScreen(context))
+    context.with_cell(hands=None, simulated=False)
+    app = ScreenHost(lambda: context.sampling_screen())
     async with app.run_test(size=SIZE) as pilot:
         await until(pilot, lambda: not app.screen.busy)
         assert app.screen.check_action("simulated_hands", ()) is False
@@ -164,7 +164,7 @@ async def test_a_real_cell_has_no_simulated_keys(context):
 
 
 async def test_leaving_turns_freedrive_off_and_keeps_the_session_open(context):
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     async with app.run_test(size=SIZE) as pilot:
         await tap(pilot, app.screen)
         await pilot.press("escape")
@@ -178,7 +178,7 @@ async def test_leaving_turns_freedrive_off_and_keeps_the_session_open(context):
 
 @pytest.mark.slow
 async def test_once_the_pose_is_pinned_down_the_screen_suggests_a_tap_and_moves_above_it_after_confirmation(context):
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     cell = cell_of(context)
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
@@ -221,7 +221,7 @@ async def test_once_the_pose_is_pinned_down_the_screen_suggests_a_tap_and_moves_
 
 @pytest.mark.slow
 async def test_when_the_possible_poses_leave_no_safe_way_down_the_screen_asks_to_guide_the_ball_by_hand(context):
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     cell = cell_of(context)
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
@@ -243,10 +243,10 @@ async def test_when_the_possible_poses_leave_no_safe_way_down_the_screen_asks_to
     ("bracket", "Only the chosen fixture fits these taps"),
     ("plate", "The taps do not fit the chosen fixture; they fit Demo bracket (bundled). Leave (Esc), choose it")])
 async def test_which_fixture_checks_the_taps_against_every_offered_mesh(context, tmp_path, chosen, conclusion):
-    context.fixtures_dir = tmp_path / "no-fixtures-here"
+    context.with_cell(fixtures_dir=tmp_path / "no-fixtures-here")
     if chosen == "plate":
         context.fixture = disc_fixture()  # the cell holds the bracket: the operator picked the wrong mesh
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
         await tap(pilot, screen)
@@ -271,7 +271,7 @@ async def test_which_fixture_checks_the_taps_against_every_offered_mesh(context,
 async def test_the_live_check_says_the_ball_diameter_is_wrong_when_the_taps_fit_another_ball(context):
     context.calibration = dataclasses.replace(context.calibration, ball_diameter_m=0.006)  # the ball is 3 mm
     record_spread_taps(context, 12)
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
         await until(pilot, lambda: screen.live is not None and screen.live.ball_mismatch is not None, timeout_s=120)

@@ -15,6 +15,7 @@ from fixwizard.workflow.live import LiveView
 
 def bounds_text(check: LiveView) -> str:
     bounds = check.bounds
+    assert bounds is not None, "only a check that kept poses has bounds"
     return (f"origin within {bounds.position_m * 1e3:.1f} mm, rotation within {np.degrees(bounds.rotation_rad):.1f} "
             f"deg, any point within {bounds.max_point_displacement_m * 1e3:.1f} mm")
 

@@ -3,7 +3,7 @@ back with everything recorded kept; redo starts again with nothing recorded."""
 
 from textual.app import App
 
-from fixwizard.tui.context import WizardContext
+from fixwizard.tui.cell import Cell, SavedCalibration
 from fixwizard.tui.tip_calibration.auto import AutoTapsScreen
 from fixwizard.tui.tip_calibration.hands import PivotScreen, TablePointsScreen
 from fixwizard.tui.tip_calibration.result import (
@@ -15,15 +15,17 @@ from fixwizard.workflow.robot_calibration import RobotTipCalibration
 STEPS = (PivotScreen, TablePointsScreen, AutoTapsScreen, CalibrationResultScreen)
 
 
-async def calibrate_tip_on_screens(app: App, context: WizardContext) -> bool:
-    """Walk the operator through a new tip calibration (call from an async worker). True once one is accepted
-    and saved (``context.calibration`` and ``calibration_path`` set), False when they went back from the pivot."""
-    workflow = RobotTipCalibration(context.robot, DEFAULT_BALL_DIAMETER_M)
+async def calibrate_tip_on_screens(app: App[None], cell: Cell) -> SavedCalibration | None:
+    """Walk the operator through a new tip calibration (call from an async worker): the calibration once one is
+    accepted and saved, None when they went back from the pivot."""
+    workflow = RobotTipCalibration(cell.robot, DEFAULT_BALL_DIAMETER_M)
     step = 0
     while 0 <= step < len(STEPS):
-        outcome = await app.push_screen_wait(STEPS[step](context, workflow))
+        outcome = await app.push_screen_wait(STEPS[step](cell, workflow))
+        if isinstance(outcome, SavedCalibration):
+            return outcome
         if outcome == "redo":
-            workflow, step = RobotTipCalibration(context.robot, DEFAULT_BALL_DIAMETER_M), 0
+            workflow, step = RobotTipCalibration(cell.robot, DEFAULT_BALL_DIAMETER_M), 0
         else:
             step += 1 if outcome == "next" else -1
-    return step == len(STEPS)
+    return None
