@@ -238,7 +238,7 @@ class FixwizardApp(App[None]):
     # --- blocking steps of the flow ---
 
     @work(thread=True, group="flow-step", exit_on_error=False)
-    def _flow_step(self, call: Callable[[], object]) -> object:
+    def _flow_step(self, call: Callable[[], T]) -> T:
         return call()
 
     async def _off_loop(self, call: Callable[[], T]) -> T:
@@ -248,7 +248,7 @@ class FixwizardApp(App[None]):
         except WorkerFailed as failed:
             raise failed.error from None
 
-    async def _in_thread(self, call: Callable[[], T]) -> T | None:
+    async def _step_or_error(self, call: Callable[[], T]) -> T | None:
         """A blocking call of the flow off the event loop; None (and the error shown) when it fails."""
         try:
             return await self._off_loop(call)
@@ -300,11 +300,11 @@ class FixwizardApp(App[None]):
         if tip is None:
             cell = self.cell
             tip = await calibrate_tip_on_screens(self, cell)
-            await self._in_thread(lambda: cell.robot.freedrive(False))
+            await self._step_or_error(lambda: cell.robot.freedrive(False))
             if tip is None:
                 return None
         cell, fixture, saved = self.cell, choice.fixture, tip
-        session = await self._in_thread(lambda: start_session(cell, fixture, saved))
+        session = await self._step_or_error(lambda: start_session(cell, fixture, saved))
         return None if session is None else Sampling(session, fixture, saved)
 
     def _solver_for(self, sampling: Sampling) -> SolverProcess:
@@ -332,7 +332,7 @@ class FixwizardApp(App[None]):
                     break
                 # "resample": the taps change, so a report written no longer describes them
         finally:
-            await self._in_thread(lambda: self._end_session(sampling, report_path))
+            await self._step_or_error(lambda: self._end_session(sampling, report_path))
 
     def _end_session(self, sampling: Sampling, report_path: Path | None) -> None:
         """Close the session naming its report, or release it unfinished."""
