@@ -3,7 +3,7 @@
 Usage (from the repository root):
     .venv/bin/python benchmarks/responsiveness.py [--taps 8] [--max-cells 1e7] [--busy 2]
 
-Drives the real sampling and solve screens with Pilot on the simulated demo cell (the tests' wizard context,
+Drives the real sampling and solve screens with Pilot on the simulated demo cell (the tests' wizard parts,
 tests/loop_lag.py): opens sampling with ``--taps`` spread taps, whose live check starts at once, presses a key
 while it runs, then runs the full solve. Meanwhile ``--busy`` processes spin (``while True: pass``). Prints the
 median and largest lateness of a 10 ms timer during each phase (and how often it passed 100 ms), and the key's

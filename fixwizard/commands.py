@@ -66,11 +66,11 @@ def wizard_command(args: argparse.Namespace) -> int:
                          "(see fixwizard --help)")
     print("Starting the wizard: loading the fixtures and the solver...", flush=True)  # a second or two of imports
     from fixwizard.tui.app import FixwizardApp
-    from fixwizard.tui.launch import simulated_context, ur_context
+    from fixwizard.tui.launch import simulated_cell, ur_cell
 
-    context = ur_context(args.robot) if args.robot else simulated_context(args.seed)
-    FixwizardApp(context, args.resume).run()
-    context.robot.close()
+    app = FixwizardApp(ur_cell(args.robot) if args.robot else simulated_cell(args.seed), args.resume)
+    app.run()
+    app.cell.robot.close()  # the robot chosen last (the start screen can switch it)
     return EXIT_OK
 
 

@@ -9,8 +9,6 @@ from pathlib import Path
 
 from textual.widgets import Static
 
-from fixwizard.tui.sampling import SamplingScreen
-from fixwizard.tui.solve_screen import SolveScreen
 from pilot_wait import until
 from tui_cell import ScreenHost, record_spread_taps, wizard_context
 
@@ -49,7 +47,7 @@ async def measure_wizard(folder: Path, taps: int, max_cells: float) -> Measured:
     """Open sampling with ``taps`` spread taps (its live check starts), press g while it runs, then solve."""
     context = wizard_context(folder, max_cells=max_cells)
     record_spread_taps(context, taps)
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     lag = LoopLag()
     try:
         async with app.run_test(size=SIZE) as pilot:
@@ -67,9 +65,9 @@ async def measure_wizard(folder: Path, taps: int, max_cells: float) -> Measured:
             live_s = time.monotonic() - started
             lag.start("solve")
             started = time.monotonic()
-            solve_screen = SolveScreen(context)
-            app.push_screen(solve_screen)
-            await until(pilot, lambda: context.solution is not None, WAIT_S)
+            solved = []
+            app.push_screen(context.solve_screen(), solved.append)
+            await until(pilot, lambda: bool(solved), WAIT_S)
             solve_s = time.monotonic() - started
             lag.start(None)
     finally:

@@ -19,8 +19,8 @@ from fixwizard.cli import main
 from fixwizard.demo import DEMO_MESH, DEMO_TAPS, demo_cell, demo_fixture
 from fixwizard.schemas import FILES, load_schema
 from fixwizard.solver.solve import solve
-from fixwizard.tui.context import WizardContext
-from fixwizard.tui.sessions import start_session
+from fixwizard.tui.cell import Cell, SavedCalibration
+from fixwizard.tui.start.sessions import start_session
 from fixwizard.workflow.session import SamplingSession
 from fixwizard.workflow.wizard_report import session_report
 from test_calibration_helpers import synthetic_steps
@@ -136,10 +136,10 @@ def test_tip_calibrations_match_the_schema(tmp_path):
 
 
 def test_every_kind_of_session_line_matches_the_schema(tmp_path):
-    context = WizardContext(robot=None, robot_name="SIMULATED demo cell (seed 0)", simulated=True,
-                            sessions_dir=tmp_path / "sessions", fixture=demo_fixture(),
-                            calibration=truth_calibration(demo_cell(0)), calibration_path=tmp_path / "truth.yaml")
-    session = start_session(context)
+    cell = Cell(robot=None, robot_name="SIMULATED demo cell (seed 0)", simulated=True,
+                sessions_dir=tmp_path / "sessions")
+    session = start_session(cell, demo_fixture(), SavedCalibration(truth_calibration(demo_cell(0)),
+                                                                   tmp_path / "truth.yaml"))
     pose = np.eye(4)
     pose[:3, 3] = [0.4, 0.0, 0.2]
     session.record_tap(pose, force={"peak_n": 5.0, "travel_m": 0.004, "settle_s": 0.2})

@@ -15,17 +15,18 @@ from fixwizard.calibration.store import load_calibration, save_calibration
 from fixwizard.demo import DEMO_MESH, demo_fixture
 from fixwizard.tui import keys
 from fixwizard.tui.app import FixwizardApp
-from fixwizard.tui.confirm import Confirm
-from fixwizard.tui.context import WizardContext
-from fixwizard.tui.errors import ErrorModal
-from fixwizard.tui.launch import simulated_context, ur_context
-from fixwizard.tui.sessions import start_session
-from fixwizard.tui.start import NEW, StartScreen
-from fixwizard.tui.status import StatusBar
-from fixwizard.tui.tip_calibration_auto import AutoTapsScreen
-from fixwizard.tui.tip_calibration_hands import PivotScreen, TablePointsScreen
-from fixwizard.tui.tip_calibration_result import CalibrationResultScreen
+from fixwizard.tui.cell import Cell, SavedCalibration
+from fixwizard.tui.launch import simulated_cell, ur_cell
+from fixwizard.tui.start.screen import NEW, StartScreen
+from fixwizard.tui.start.sessions import start_session
+from fixwizard.tui.tip_calibration.auto import AutoTapsScreen
+from fixwizard.tui.tip_calibration.hands import PivotScreen, TablePointsScreen
+from fixwizard.tui.tip_calibration.result import CalibrationResultScreen
+from fixwizard.tui.widgets.confirm import Confirm
+from fixwizard.tui.widgets.errors import ErrorModal
+from fixwizard.tui.widgets.status import StatusBar
 from pilot_wait import until
+from tui_cell import sampling_of, start_fixture
 
 SEED = 3
 SIZE = (80, 24)
@@ -40,13 +41,13 @@ def screen_text(app: FixwizardApp) -> str:
     return "\n".join(str(widget.render()) for widget in app.screen.query(Static))
 
 
-def wizard(tmp_path: Path, pace_s: float = 0.0) -> WizardContext:
-    return simulated_context(SEED, pace_s=pace_s, folder=tmp_path)
+def wizard(tmp_path: Path, pace_s: float = 0.0) -> Cell:
+    return simulated_cell(SEED, pace_s=pace_s, folder=tmp_path)
 
 
 async def at_start(pilot: Pilot) -> None:
     app = pilot.app
-    await until(pilot, lambda: isinstance(app.screen, StartScreen) and app.context.fixture is not None
+    await until(pilot, lambda: isinstance(app.screen, StartScreen) and start_fixture(app) is not None
                 and app.robot_status is not None and app.robot_status.connected)
 
 
@@ -68,7 +69,7 @@ async def pivot_by_hand(pilot: Pilot) -> None:
     app = pilot.app
     await press_button(pilot, "#continue")
     await until(pilot, lambda: isinstance(app.screen, PivotScreen) and not app.screen.busy)
-    for _ in range(app.context.hands.pivot_count):
+    for _ in range(app.cell.hands.pivot_count):
         await pilot.press(keys.HANDS.keys)
         await until(pilot, lambda: not app.screen.busy)
     await pilot.press("n")
@@ -102,7 +103,7 @@ def test_launch_shows_the_start_screen_marked_simulated(tmp_path):
             status = str(app.screen.query_one(StatusBar).render())
             assert status.startswith(" SIMULATED ") and "connected | idle" in status and "F12 STOP" in status
             assert "SIMULATED demo cell (seed 3) (no real arm moves)" in text_of(app, "#robot")
-            assert app.context.fixture.path == DEMO_MESH
+            assert start_fixture(app).path == DEMO_MESH
             assert "160.0 x 90.0 x 60.0 mm (file units: mm)" in text_of(app, "#fixture-info")
             assert app.screen.query_one("#calibration", Select).value == "new"
     asyncio.run(run())
@@ -122,12 +123,12 @@ def test_a_fixture_in_the_wrong_units_is_explained_and_switching_units_loads_it(
             message = text_of(app, "#fixture-info")
             assert "0.16 mm small fixture with units 'mm'" in message and "Switch Units to m" in message
             assert "--mesh-units" not in message  # the wizard has no command-line flags to offer
-            assert app.context.fixture is None
+            assert start_fixture(app) is None
             await press_button(pilot, "#continue")
             assert isinstance(app.screen, StartScreen)
             await choose(pilot, "#units", "m")
-            await until(pilot, lambda: app.context.fixture is not None)
-            assert app.context.fixture.units == "m"
+            await until(pilot, lambda: start_fixture(app) is not None)
+            assert start_fixture(app).units == "m"
             assert "160.0 x 90.0 x 60.0 mm (file units: m)" in text_of(app, "#fixture-info")
             assert "SIMULATED: the simulated cell holds the demo bracket" in text_of(app, "#fixture-info")
     asyncio.run(run())
@@ -143,7 +144,7 @@ def test_a_typed_path_that_is_no_mesh_is_refused_with_the_reason(tmp_path, monke
             await at_start(pilot)
             await pilot.press("tab", "tab", *"notes.txt", "enter")
             await until(pilot, lambda: "notes.txt is not a mesh file fixwizard reads" in text_of(app, "#fixture-info"))
-            assert app.context.fixture is None
+            assert start_fixture(app) is None
     asyncio.run(run())
 
 
@@ -161,13 +162,14 @@ def test_a_new_tip_calibration_through_the_screens_is_saved_and_finds_the_hidden
             assert figures.startswith("GOOD: use this calibration.") and "Each tap will be trusted to" in figures
             assert "condition number" not in figures and "scatter" not in figures  # those are on Details
             await pilot.press("shift+tab", "shift+tab", "end", "ctrl+u", *"sim-tip", "tab", "tab", "enter")
-            await until(pilot, lambda: context.session is not None)
-            return context, context.session
+            await until(pilot, lambda: sampling_of(app) is not None)
+            return context, sampling_of(app).sampling
 
-    context, session = asyncio.run(run())
+    context, sampling = asyncio.run(run())
+    session = sampling.session
     saved = load_calibration(tmp_path / "calibrations" / "sim-tip.yaml")
     assert saved.robot == "SIMULATED demo cell (seed 3)" and saved.ball_diameter_m == 0.003
-    assert context.calibration_path == tmp_path / "calibrations" / "sim-tip.yaml"
+    assert sampling.tip.path == tmp_path / "calibrations" / "sim-tip.yaml"
     assert np.linalg.norm(saved.tcp_p_tip_m - context.robot.truth.tcp_p_tip_m) < 0.0005
     assert saved.sample_bound_m >= context.robot.truth.fk_error_bound_m
     assert session.path.parent == tmp_path / "sessions"
@@ -257,7 +259,7 @@ class StopCounter:
 def test_the_stop_key_halts_the_robot_from_any_screen_and_keeps_the_taps(tmp_path):
     async def run():
         context = wizard(tmp_path, pace_s=0.03)
-        context.robot = StopCounter(context.robot)
+        context = dataclasses.replace(context, robot=StopCounter(context.robot))
         app = FixwizardApp(context)
         async with app.run_test(size=SIZE) as pilot:
             await at_start(pilot)
@@ -300,10 +302,9 @@ def unfinished_session(tmp_path: Path) -> Path:
     """A session with one tap on the demo bracket, calibrated with the stored example calibration."""
     context = wizard(tmp_path)
     shutil.copytree(REPO / "calibrations", tmp_path / "calibrations")
-    context.fixture = demo_fixture()
-    context.calibration_path = tmp_path / "calibrations" / "example_matlab_logo.yaml"
-    context.calibration = load_calibration(context.calibration_path)
-    session = start_session(context)
+    calibration_path = tmp_path / "calibrations" / "example_matlab_logo.yaml"
+    session = start_session(context, demo_fixture(), SavedCalibration(load_calibration(calibration_path),
+                                                                      calibration_path))
     session.record_tap(np.eye(4))
     session.release()
     return session.path
@@ -324,8 +325,9 @@ def test_the_start_screen_describes_stored_calibrations_and_resumes_an_unfinishe
             await choose(pilot, "#session", str(path))
             await press_button(pilot, "#continue")
             await until(pilot, lambda: type(app.screen).__name__ == "SamplingScreen")
-            assert context.session.path == path and len(context.session.taps) == 1
-            assert context.calibration.name == "example_matlab_logo"
+            sampling = app.screen.sampling
+            assert sampling.session.path == path and len(sampling.session.taps) == 1
+            assert sampling.calibration.name == "example_matlab_logo"
     asyncio.run(run())
 
 
@@ -337,7 +339,7 @@ def test_the_start_screen_preselects_the_newest_calibration_of_this_robot_only(t
         save_calibration(dataclasses.replace(example, name=name, created=created, robot=context.robot_name),
                          tmp_path / "calibrations" / f"{name}.yaml")
 
-    async def preselected(context: WizardContext) -> tuple[str, str, str]:
+    async def preselected(context: Cell) -> tuple[str, str, str]:
         async with FixwizardApp(context).run_test(size=SIZE) as pilot:
             await at_start(pilot)
             select = pilot.app.screen.query_one("#calibration", Select)
@@ -362,15 +364,16 @@ def test_resume_opens_the_session_with_its_fixture_and_calibration(tmp_path):
         app = FixwizardApp(resumed, "")
         async with app.run_test(size=SIZE) as pilot:
             await until(pilot, lambda: type(app.screen).__name__ == "SamplingScreen" and app.screen.query(StatusBar))
-            assert resumed.session.path == path and len(resumed.session.taps) == 1
-            assert resumed.fixture.path == DEMO_MESH and resumed.fixture.units == "mm"
-            assert resumed.calibration.name == "example_matlab_logo"
+            sampling = app.screen.sampling
+            assert sampling.session.path == path and len(sampling.session.taps) == 1
+            assert sampling.fixture.path == DEMO_MESH and sampling.fixture.units == "mm"
+            assert sampling.calibration.name == "example_matlab_logo"
     asyncio.run(run())
 
 
 def test_an_unreachable_ur_arm_is_explained_and_nothing_says_simulated(tmp_path):
     async def run():
-        context = ur_context("ur-arm.invalid", folder=tmp_path)
+        context = ur_cell("ur-arm.invalid", folder=tmp_path)
         app = FixwizardApp(context)
         async with app.run_test(size=SIZE) as pilot:
             await until(pilot, lambda: isinstance(app.screen, ErrorModal) and bool(app.screen.query("#reconnect")))
@@ -378,7 +381,7 @@ def test_an_unreachable_ur_arm_is_explained_and_nothing_says_simulated(tmp_path)
             assert message.startswith("Cannot connect to the robot at ur-arm.invalid: port 29999 does not accept")
             assert app.screen.query("#reconnect") and not app.screen.query("#unlock")
             await press_button(pilot, "#ok")
-            await until(pilot, lambda: isinstance(app.screen, StartScreen) and context.fixture is not None)
+            await until(pilot, lambda: isinstance(app.screen, StartScreen) and start_fixture(app) is not None)
             assert "UR arm at ur-arm.invalid | " in str(app.screen.query_one(StatusBar).render())
             assert " DISCONNECTED " in str(app.screen.query_one(StatusBar).render())
             await press_button(pilot, "#continue")
@@ -402,13 +405,13 @@ def test_the_start_screen_switches_to_a_ur_arm_and_back_to_the_simulated_cell(tm
             assert text_of(app, "#dialog-message").startswith("Cannot connect to the robot at 127.0.0.3: port 29999")
             await press_button(pilot, "#ok")
             await until(pilot, lambda: isinstance(app.screen, StartScreen))
-            assert context.robot_name == "UR arm at 127.0.0.3" and not context.simulated and context.hands is None
+            assert app.cell.robot_name == "UR arm at 127.0.0.3" and not app.cell.simulated and app.cell.hands is None
             assert "SIMULATED" not in screen_text(app) + str(app.screen.query_one(StatusBar).render())
             await press_button(pilot, "#use-simulated")
-            await until(pilot, lambda: context.simulated and app.robot_status is not None
+            await until(pilot, lambda: app.cell.simulated and app.robot_status is not None
                         and app.robot_status.connected)
             assert "SIMULATED" in str(app.screen.query_one(StatusBar).render())
-            assert context.hands is not None
+            assert app.cell.hands is not None
     asyncio.run(run())
 
 

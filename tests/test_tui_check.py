@@ -17,12 +17,12 @@ from fixwizard.robot.sim import SimulatedCell
 from fixwizard.robot.sim_hands import SimulatedHands
 from fixwizard.solver.solve import solve
 from fixwizard.tui.app import FixwizardApp
-from fixwizard.tui.check import CheckScreen
-from fixwizard.tui.context import WizardContext
-from fixwizard.tui.launch import simulated_context
-from fixwizard.tui.start import StartScreen
+from fixwizard.tui.cell import Cell, SavedCalibration
+from fixwizard.tui.check.screen import CheckScreen
+from fixwizard.tui.launch import simulated_cell
+from fixwizard.tui.start.screen import StartScreen
 from pilot_wait import until
-from tui_cell import SAMPLE_BOUND_M, ScreenHost, spread_taps, truth_calibration
+from tui_cell import SAMPLE_BOUND_M, ScreenHost, spread_taps, start_fixture, truth_calibration
 
 SIZE = (80, 24)
 SEED = 3
@@ -42,7 +42,7 @@ def calibrated():
                               SAMPLE_BOUND_M / 3, simulated=True), cell
 
 
-def context_for(tmp_path, calibrated, push_m: float = 0.0) -> WizardContext:
+def context_for(tmp_path, calibrated, push_m: float = 0.0) -> tuple[Cell, SavedCalibration]:
     """The calibrated cell (its fixture pushed along x by ``push_m``), its report in reports/, the true tip."""
     data, cell = calibrated
     (tmp_path / "reports").mkdir(exist_ok=True)
@@ -52,9 +52,9 @@ def context_for(tmp_path, calibrated, push_m: float = 0.0) -> WizardContext:
     checked = SimulatedCell.with_fixture(cell.fixture, seed=5, base_T_cad=base_T_cad,
                                          tcp_p_tip_m=cell.truth.tcp_p_tip_m)
     checked.connect()
-    return WizardContext(robot=checked, robot_name="simulated cell", simulated=True,
-                         hands=SimulatedHands(checked, seed=2), reports_dir=tmp_path / "reports",
-                         sessions_dir=tmp_path / "sessions", calibration=truth_calibration(cell))
+    return (Cell(robot=checked, robot_name="simulated cell", simulated=True, hands=SimulatedHands(checked, seed=2),
+                 reports_dir=tmp_path / "reports", sessions_dir=tmp_path / "sessions"),
+            SavedCalibration(truth_calibration(cell), tmp_path / "calibrations" / "truth.yaml"))
 
 
 class CheckHost(ScreenHost):
@@ -94,16 +94,16 @@ async def check(pilot, screen: CheckScreen) -> str:
 @pytest.mark.parametrize("push_m, verdict", [(0.0, "consistent with the report"),
                                              (0.004, "MOVED: no pose the report allows explains the 4 taps")])
 def test_four_suggested_taps_tell_whether_the_fixture_moved(tmp_path, calibrated, push_m, verdict):
-    context = context_for(tmp_path, calibrated, push_m)
+    cell, tip = context_for(tmp_path, calibrated, push_m)
 
     async def run():
-        app = CheckHost(lambda: CheckScreen(context, context.calibration))
+        app = CheckHost(lambda: CheckScreen(cell, tip))
         async with app.run_test(size=SIZE) as pilot:
             screen = app.screen
             await until(pilot, lambda: "Tap 3-5 points spread over the fixture" in text_of(screen, "#check-suggest"))
             assert "SIMULATED" in text_of(screen, "#check-title")
             assert "demo_bracket-1.yaml: unique" in text_of(screen, "#check-report")
-            assert context.robot.status().mode == "freedrive"
+            assert cell.robot.status().mode == "freedrive"
             await tap_suggested(pilot, screen, 4)
             assert screen.query_one(DataTable).row_count == 4
             shown = await check(pilot, screen)
@@ -130,7 +130,7 @@ def test_four_suggested_taps_tell_whether_the_fixture_moved(tmp_path, calibrated
 
 
 def test_the_start_screen_opens_the_check_with_a_stored_tip_calibration(tmp_path, calibrated):
-    context = simulated_context(SEED, pace_s=0.0, folder=tmp_path)
+    context = simulated_cell(SEED, pace_s=0.0, folder=tmp_path)
     context_for(tmp_path, calibrated)  # the report in reports/
     path = tmp_path / "calibrations" / "example.yaml"
     path.parent.mkdir()
@@ -139,7 +139,7 @@ def test_the_start_screen_opens_the_check_with_a_stored_tip_calibration(tmp_path
     async def run():
         app = FixwizardApp(context)
         async with app.run_test(size=SIZE) as pilot:
-            await until(pilot, lambda: isinstance(app.screen, StartScreen) and app.context.fixture is not None)
+            await until(pilot, lambda: isinstance(app.screen, StartScreen) and start_fixture(app) is not None)
             app.screen.query_one("#calibration", Select).value = "new"
             await pilot.pause()
             app.screen.query_one("#check").focus()
@@ -154,7 +154,7 @@ def test_the_start_screen_opens_the_check_with_a_stored_tip_calibration(tmp_path
             button.focus()
             await pilot.press("enter")
             await until(pilot, lambda: isinstance(app.screen, CheckScreen) and app.screen.fixture is not None)
-            assert app.context.calibration.name == "example_matlab_logo"
+            assert app.screen.tip.calibration.name == "example_matlab_logo"
             assert "demo_bracket" in str(app.screen.query_one("#check-fixture", Select).value)
             await pilot.press("escape")
             await until(pilot, lambda: isinstance(app.screen, StartScreen))
@@ -164,11 +164,11 @@ def test_the_start_screen_opens_the_check_with_a_stored_tip_calibration(tmp_path
 
 
 def test_without_reports_the_check_says_to_calibrate_first(tmp_path, calibrated):
-    context = context_for(tmp_path, calibrated)
+    cell, tip = context_for(tmp_path, calibrated)
     (tmp_path / "reports" / "demo_bracket-1.yaml").unlink()
 
     async def run():
-        app = CheckHost(lambda: CheckScreen(context, context.calibration))
+        app = CheckHost(lambda: CheckScreen(cell, tip))
         async with app.run_test(size=SIZE) as pilot:
             screen = app.screen
             await pilot.pause()
@@ -184,7 +184,7 @@ def test_without_reports_the_check_says_to_calibrate_first(tmp_path, calibrated)
 
 
 def test_a_report_whose_mesh_changed_is_explained_and_nothing_is_tapped(tmp_path, calibrated):
-    context = context_for(tmp_path, calibrated)
+    cell, tip = context_for(tmp_path, calibrated)
     data = dict(calibrated[0])
     mesh = tmp_path / "bracket.stl"
     mesh.write_bytes(demo_fixture().path.read_bytes() + b"\0")
@@ -192,7 +192,7 @@ def test_a_report_whose_mesh_changed_is_explained_and_nothing_is_tapped(tmp_path
     report.write(tmp_path / "reports" / "demo_bracket-1.yaml", data)
 
     async def run():
-        app = CheckHost(lambda: CheckScreen(context, context.calibration))
+        app = CheckHost(lambda: CheckScreen(cell, tip))
         async with app.run_test(size=SIZE) as pilot:
             screen = app.screen
             await until(pilot, lambda: "not the one the report" in text_of(screen, "#check-suggest"))

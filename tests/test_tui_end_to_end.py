@@ -3,6 +3,7 @@ calibration, 12 taps, solve, the report written; the report loads and its guaran
 simulator's hidden pose of the fixture."""
 
 import asyncio
+import dataclasses
 
 import pytest
 from textual.pilot import Pilot
@@ -10,15 +11,15 @@ from textual.widgets import Button, Static
 
 from fixwizard import report
 from fixwizard.tui.app import FixwizardApp
-from fixwizard.tui.launch import simulated_context
-from fixwizard.tui.results import ResultsScreen
-from fixwizard.tui.sampling import SamplingScreen
-from fixwizard.tui.start import StartScreen
-from fixwizard.tui.tip_calibration_auto import AutoTapsScreen
-from fixwizard.tui.tip_calibration_hands import PivotScreen, TablePointsScreen
-from fixwizard.tui.tip_calibration_result import CalibrationResultScreen
+from fixwizard.tui.launch import simulated_cell
+from fixwizard.tui.results.screen import ResultsScreen
+from fixwizard.tui.sampling.screen import SamplingScreen
+from fixwizard.tui.start.screen import StartScreen
+from fixwizard.tui.tip_calibration.auto import AutoTapsScreen
+from fixwizard.tui.tip_calibration.hands import PivotScreen, TablePointsScreen
+from fixwizard.tui.tip_calibration.result import CalibrationResultScreen
 from pilot_wait import until
-from tui_cell import bounds_contain
+from tui_cell import bounds_contain, start_fixture
 
 pytestmark = pytest.mark.slow  # the whole wizard from launch to a report, about a minute
 
@@ -36,14 +37,13 @@ async def press_when_ready(pilot: Pilot, key: str) -> None:
 
 
 def test_launch_calibrate_tap_solve_and_write_a_report_holding_the_hidden_pose(tmp_path):
-    context = simulated_context(SEED, pace_s=0.0, folder=tmp_path)
-    context.max_cells = MAX_CELLS
+    context = dataclasses.replace(simulated_cell(SEED, pace_s=0.0, folder=tmp_path), max_cells=MAX_CELLS)
     cell = context.hands.cell
 
     async def run() -> None:
         app = FixwizardApp(context)
         async with app.run_test(size=SIZE) as pilot:
-            await until(pilot, lambda: isinstance(app.screen, StartScreen) and context.fixture is not None
+            await until(pilot, lambda: isinstance(app.screen, StartScreen) and start_fixture(app) is not None
                         and app.robot_status is not None and app.robot_status.connected)
             app.screen.query_one("#continue", Button).focus()
             await pilot.press("enter")  # a new tip calibration is the default
@@ -62,12 +62,12 @@ def test_launch_calibrate_tap_solve_and_write_a_report_holding_the_hidden_pose(t
             app.screen.query_one("#accept", Button).focus()
             await pilot.press("enter")
 
-            await until(pilot, lambda: isinstance(app.screen, SamplingScreen) and context.session is not None)
+            await until(pilot, lambda: isinstance(app.screen, SamplingScreen))
             sampling = app.screen
             for _ in range(TAPS):
                 await press_when_ready(pilot, "m")
                 await press_when_ready(pilot, "t")
-            assert len(context.session.taps) == TAPS
+            assert len(sampling.session.taps) == TAPS
             await pilot.press("s")
 
             await until(pilot, lambda: isinstance(app.screen, ResultsScreen)  # through the solve screen
@@ -75,8 +75,8 @@ def test_launch_calibrate_tap_solve_and_write_a_report_holding_the_hidden_pose(t
             assert sampling.is_attached is False
             assert "UNIQUE" in str(app.screen.query_one("#headline", Static).content)
             await pilot.press("w")
-            assert str(app.screen.query_one("#written", Static).content) == f"Report written to {context.report_path}"
-            written = context.report_path
+            written = app.screen.written
+            assert str(app.screen.query_one("#written", Static).content) == f"Report written to {written}"
             await pilot.press("q")
             await until(pilot, lambda: isinstance(app.screen, StartScreen))
             return written

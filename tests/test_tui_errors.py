@@ -7,7 +7,7 @@ from textual.app import App
 
 from fixwizard.robot.base import ConnectionLost, ProtectiveStop
 from fixwizard.robot.ur_errors import LinkLost, URProtectiveStop
-from fixwizard.tui.errors import ErrorModal, error_message
+from fixwizard.tui.widgets.errors import ErrorModal, error_message
 from pilot_wait import until
 
 

@@ -8,7 +8,6 @@ import pytest
 from textual.widgets import DataTable, Static
 
 from conftest import fill_disk
-from fixwizard.tui.sampling import SamplingScreen
 from fixwizard.workflow.session import SamplingSession
 from pilot_wait import until
 from tui_cell import ScreenHost, record_spread_taps, wizard_context
@@ -25,7 +24,7 @@ def text_of(screen, selector: str) -> str:
 async def test_a_full_disk_mid_session_strands_no_tap(small_disk):
     context = wizard_context(small_disk)
     record_spread_taps(context, 9)  # the journal's last page is nearly full: the disk fills after a tap or two
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     said_saved = list(range(1, 10))
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen

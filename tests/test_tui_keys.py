@@ -21,14 +21,14 @@ import fixwizard.tui
 from fixwizard.calibration.store import load_calibration, save_calibration
 from fixwizard.tui import keys
 from fixwizard.tui.app import FixwizardApp
-from fixwizard.tui.confirm import Confirm
-from fixwizard.tui.help import HelpScreen
-from fixwizard.tui.sampling import SamplingScreen
-from fixwizard.tui.start import NEW, StartScreen
-from fixwizard.tui.status import StatusBar
-from fixwizard.tui.tip_calibration_auto import AutoTapsScreen
-from fixwizard.tui.tip_calibration_hands import PivotScreen, TablePointsScreen
-from fixwizard.tui.tip_calibration_result import CalibrationResultScreen
+from fixwizard.tui.sampling.screen import SamplingScreen
+from fixwizard.tui.start.screen import NEW, StartScreen
+from fixwizard.tui.tip_calibration.auto import AutoTapsScreen
+from fixwizard.tui.tip_calibration.hands import PivotScreen, TablePointsScreen
+from fixwizard.tui.tip_calibration.result import CalibrationResultScreen
+from fixwizard.tui.widgets.confirm import Confirm
+from fixwizard.tui.widgets.help import HelpScreen
+from fixwizard.tui.widgets.status import StatusBar
 from pilot_wait import until
 from test_tui_app import REPO, SIZE, at_start, calibrate_by_hand, press_button, rearm, wizard
 from tui_cell import ScreenHost, record_spread_taps, wizard_context
@@ -36,8 +36,8 @@ from tui_cell import ScreenHost, record_spread_taps, wizard_context
 
 def wizard_screens() -> list[type[Screen]]:
     """Every screen and dialog class the wizard defines."""
-    for module in pkgutil.iter_modules(fixwizard.tui.__path__):
-        importlib.import_module(f"fixwizard.tui.{module.name}")
+    for module in pkgutil.walk_packages(fixwizard.tui.__path__, "fixwizard.tui."):
+        importlib.import_module(module.name)
     found = set()
     for module_name, module in list(sys.modules.items()):
         if module_name.startswith("fixwizard.tui."):
@@ -107,7 +107,7 @@ def test_question_mark_opens_the_help_of_each_step_with_its_keys_and_the_global_
             assert text.startswith("Find the ball tip roughly") and "Keys on this screen:" in text
             assert "  m       SIM hands: SIMULATED cell only" in text and "  Space   Capture" in text
             assert "  Esc     Back" in text and "  Ctrl+R  Re-arm" in text
-            for _ in range(app.context.hands.pivot_count):
+            for _ in range(app.cell.hands.pivot_count):
                 await pilot.press("m")
                 await until(pilot, lambda: not app.screen.busy)
             await pilot.press("n")
@@ -130,7 +130,7 @@ def test_question_mark_opens_the_help_of_each_step_with_its_keys_and_the_global_
 def test_help_on_the_sampling_screen_lists_its_keys(tmp_path):
     async def run():
         context = wizard_context(tmp_path)
-        app = FixwizardApp(context)
+        app = FixwizardApp(context.cell, sampling=context.sampling)
         async with app.run_test(size=SIZE) as pilot:
             await until(pilot, lambda: isinstance(app.screen, SamplingScreen) and not app.screen.busy)
             text = await open_help(pilot)
@@ -176,7 +176,7 @@ def test_stop_shows_stopped_refuses_motion_until_a_confirmed_rearm(tmp_path):
 def test_a_protective_stop_makes_the_wizard_stopped_and_rearm_waits_for_the_unlock(tmp_path):
     async def run():
         context = wizard_context(tmp_path)
-        app = FixwizardApp(context)
+        app = FixwizardApp(context.cell, sampling=context.sampling)
         async with app.run_test(size=SIZE, notifications=True) as pilot:
             await until(pilot, lambda: isinstance(app.screen, SamplingScreen) and not app.screen.busy)
             sampling = app.screen
@@ -269,7 +269,7 @@ def test_leaving_sampling_asks_and_lands_on_the_start_screen_with_that_session_t
             assert app.screen.query_one("#calibration", Select).value != NEW
             await press_button(pilot, "#continue")
             await until(pilot, lambda: isinstance(app.screen, SamplingScreen) and not app.screen.busy)
-            session_path = context.session.path
+            session_path = app.screen.session.path
             await pilot.press("escape")
             await until(pilot, lambda: isinstance(app.screen, Confirm))
             await pilot.press("y")
@@ -300,7 +300,7 @@ async def assert_in_view(pilot: Pilot, *key_names: str) -> None:
 def test_the_footer_keeps_esc_and_quit_in_view_at_80x24(tmp_path):
     async def run():
         context = wizard_context(tmp_path)
-        app = FixwizardApp(context)
+        app = FixwizardApp(context.cell, sampling=context.sampling)
         async with app.run_test(size=SIZE) as pilot:
             await until(pilot, lambda: isinstance(app.screen, SamplingScreen) and not app.screen.busy)
             await pilot.pause()
@@ -320,7 +320,7 @@ def test_the_footer_keeps_esc_and_quit_in_view_at_80x24(tmp_path):
 async def test_the_newest_tap_stays_in_view_after_25_taps(tmp_path):
     context = wizard_context(tmp_path)
     record_spread_taps(context, 24)
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
         for key in "mt":

@@ -12,8 +12,7 @@ from textual.widgets import Input, Static
 from fixwizard import report
 from fixwizard.geometry.se3 import format_ur_pose
 from fixwizard.solver.solve import Solution, solve
-from fixwizard.tui.results import ResultsScreen
-from fixwizard.tui.solve_screen import SolveScreen
+from fixwizard.tui.results.screen import Done
 from pilot_wait import until
 from tui_cell import (
     ScreenHost,
@@ -34,7 +33,7 @@ def text_of(screen, selector: str) -> str:
 
 
 def solved(context) -> None:
-    """Solve the session's taps as the solve screen does and keep the solution in the context."""
+    """Solve the session's taps as the solve screen does and keep the solution for the results screen."""
     calibration = context.calibration
     context.solution = solve(context.fixture, context.session.base_p_taps, calibration.ball_diameter_m,
                              calibration.sample_bound_m, max_cells=context.max_cells)
@@ -51,7 +50,7 @@ def tapped(tmp_path):
 
 @pytest.mark.slow
 async def test_solve_shows_progress_then_results_write_a_report_holding_the_true_pose(tapped):
-    app = ScreenHost(lambda: SolveScreen(tapped))
+    app = ScreenHost(lambda: tapped.solve_screen())
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
         await until(pilot, lambda: screen.progress is not None)
@@ -64,10 +63,11 @@ async def test_solve_shows_progress_then_results_write_a_report_holding_the_true
             assert "Details: rotation level" in text_of(screen, "#figures")
         await until(pilot, lambda: app.results)
         solution = app.results[0]
-        assert isinstance(solution, Solution) and tapped.solution is solution
+        assert isinstance(solution, Solution)
         assert solution.status == "unique"
 
-        app.push_screen(ResultsScreen(tapped), app.results.append)
+        tapped.solution = solution
+        app.push_screen(tapped.results_screen(), app.results.append)
         await pilot.pause()
         results = app.screen
         assert "UNIQUE: one pose of the fixture explains the 12 taps" in text_of(results, "#headline")
@@ -79,19 +79,19 @@ async def test_solve_shows_progress_then_results_write_a_report_holding_the_true
         await pilot.press("w")
         assert text_of(results, "#written") == f"Report written to {tapped.reports_dir.resolve()}/" \
                                                f"{default_path.rsplit('/', 1)[1]}"
-        assert tapped.report_path.is_file()
-        loaded = report.load(tapped.report_path)
+        assert results.written.is_file()
+        loaded = report.load(results.written)
         assert loaded.status == "unique"
         assert bounds_contain(loaded, cell_of(tapped), cell_of(tapped).truth.base_T_cad)
         assert loaded.data["simulated"] is True
         assert loaded.data["session"]["journal"] == str(tapped.session.path)
         assert len(loaded.data["inputs"]["points_m"]) == 12
         await pilot.press("q")
-        assert app.results[-1] == "done"
+        assert app.results[-1] == Done(results.written)
 
 
 async def test_cancel_stops_the_solve_and_goes_back(tapped):
-    app = ScreenHost(lambda: SolveScreen(tapped))
+    app = ScreenHost(lambda: tapped.solve_screen())
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
         await until(pilot, lambda: screen.progress is not None)
@@ -99,12 +99,11 @@ async def test_cancel_stops_the_solve_and_goes_back(tapped):
         await pilot.press("escape")
         assert app.results == [None] and not screen.running
         assert screen.solver.pid not in (None, solving)  # the solving process ended, a fresh one waits
-        assert tapped.solution is None
 
 
 async def test_a_solve_input_problem_is_explained_and_esc_goes_back(tapped):
     tapped.calibration = dataclasses.replace(tapped.calibration, sample_bound_m=0.05)  # 50 mm: a unit mistake
-    app = ScreenHost(lambda: SolveScreen(tapped))
+    app = ScreenHost(lambda: tapped.solve_screen())
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
         await until(pilot, lambda: not screen.query_one("#problem").has_class("-empty"))
@@ -112,14 +111,14 @@ async def test_a_solve_input_problem_is_explained_and_esc_goes_back(tapped):
         assert "A sample bound of 50 mm is implausible for a robot tap" in problem
         assert problem.endswith("Press Esc to go back to sampling.")
         await pilot.press("escape")
-        assert app.results == [None] and tapped.solution is None
+        assert app.results == [None]
 
 
 @pytest.mark.slow
 async def test_the_report_path_can_be_edited_and_a_bad_one_is_explained(tapped, tmp_path):
-    tapped.max_cells = 1e5  # a coarse result is enough to write
+    tapped.with_cell(max_cells=1e5)  # a coarse result is enough to write
     solved(tapped)
-    app = ScreenHost(lambda: ResultsScreen(tapped))
+    app = ScreenHost(lambda: tapped.results_screen())
     blocked = tmp_path / "a-file"
     blocked.write_text("not a folder")
     async with app.run_test(size=SIZE) as pilot:
@@ -139,14 +138,14 @@ async def test_the_report_path_can_be_edited_and_a_bad_one_is_explained(tapped, 
         await pilot.press("enter")
         assert report.load(tmp_path / "elsewhere" / "pose.yaml").status == tapped.solution.status
         await pilot.press("q")
-        assert app.results == ["done"]
+        assert app.results == [Done(results.written)]
 
 
 @pytest.mark.slow
 async def test_an_inconsistent_result_names_the_suspect_and_dropping_it_solves(tapped):
     tapped.session.record_tap(np.eye(4), base_p_ball_m=point_above_fixture_m(tapped, 0.05))
     solved(tapped)
-    app = ScreenHost(lambda: ResultsScreen(tapped))
+    app = ScreenHost(lambda: tapped.results_screen())
     async with app.run_test(size=SIZE) as pilot:
         results = app.screen
         assert "INCONSISTENT: no pose of the fixture explains all 13 taps" in text_of(results, "#headline")
@@ -158,7 +157,7 @@ async def test_an_inconsistent_result_names_the_suspect_and_dropping_it_solves(t
         kinds = [json.loads(line)["kind"] for line in tapped.session.path.read_text().splitlines()[1:]]
         assert kinds == ["tap"] * 13 + ["drop"]
 
-        app.push_screen(SolveScreen(tapped), app.results.append)
+        app.push_screen(tapped.solve_screen(), app.results.append)
         await until(pilot, lambda: len(app.results) == 2)
         again = app.results[1]
         assert again.status == "unique" and again.contains(cell_of(tapped).truth.base_T_cad)
@@ -168,7 +167,7 @@ async def test_an_inconsistent_result_names_the_suspect_and_dropping_it_solves(t
 async def test_a_wrong_ball_diameter_is_said_plainly_instead_of_blaming_a_tap(tapped):
     tapped.calibration = dataclasses.replace(tapped.calibration, ball_diameter_m=0.006)  # the ball is 3 mm
     solved(tapped)
-    app = ScreenHost(lambda: ResultsScreen(tapped))
+    app = ScreenHost(lambda: tapped.results_screen())
     async with app.run_test(size=SIZE) as pilot:
         results = app.screen
         assert "INCONSISTENT" in text_of(results, "#headline")
@@ -189,7 +188,7 @@ async def test_an_ambiguous_result_lists_the_modes_and_says_where_to_tap_next(tm
     record_spread_taps(context, 12)
     solved(context)
     assert context.solution.status == "ambiguous"
-    app = ScreenHost(lambda: ResultsScreen(context))
+    app = ScreenHost(lambda: context.results_screen())
     async with app.run_test(size=SIZE) as pilot:
         summary = text_of(app.screen, "#summary-text")
         assert "AMBIGUOUS: 4 distinct poses explain the 12 taps" in text_of(app.screen, "#headline")

@@ -15,12 +15,14 @@ from textual.widgets import Static
 from fixwizard.calibration.store import load_calibration
 from fixwizard.demo import demo_fixture
 from fixwizard.tui.app import FixwizardApp
-from fixwizard.tui.errors import ErrorModal
-from fixwizard.tui.launch import simulated_context
-from fixwizard.tui.sessions import start_session
-from fixwizard.tui.start import NEW, StartScreen
+from fixwizard.tui.cell import SavedCalibration
+from fixwizard.tui.launch import simulated_cell
+from fixwizard.tui.start.screen import NEW, StartScreen
+from fixwizard.tui.start.sessions import start_session
+from fixwizard.tui.widgets.errors import ErrorModal
 from fixwizard.workflow.session import SamplingSession
 from pilot_wait import until
+from tui_cell import sampling_of, start_fixture
 
 SIZE = (80, 24)
 REPO = Path(__file__).resolve().parents[1]
@@ -28,12 +30,11 @@ REPO = Path(__file__).resolve().parents[1]
 
 def recorded_session(folder: Path, taps: int = 3) -> Path:
     """A released session with ``taps`` taps on the demo bracket, with the stored example calibration."""
-    context = simulated_context(3, pace_s=0.0, folder=folder)
+    cell = simulated_cell(3, pace_s=0.0, folder=folder)
     shutil.copytree(REPO / "calibrations", folder / "calibrations", dirs_exist_ok=True)
-    context.fixture = demo_fixture()
-    context.calibration_path = folder / "calibrations" / "example_matlab_logo.yaml"
-    context.calibration = load_calibration(context.calibration_path)
-    session = start_session(context)
+    calibration_path = folder / "calibrations" / "example_matlab_logo.yaml"
+    session = start_session(cell, demo_fixture(), SavedCalibration(load_calibration(calibration_path),
+                                                                   calibration_path))
     for index in range(taps):
         session.record_tap(np.diag([1.0, 1.0, 1.0, 1.0]) + np.eye(4, k=3) * 0.01 * index)
     session.release()
@@ -56,7 +57,7 @@ def test_a_resume_says_which_session_it_opened_and_shows_every_tap(tmp_path):
     path.write_bytes(b"".join(lines[:11] + [lines[11][:60]] + lines[11:]))  # tap 11 half written, then tap 11
 
     async def run():
-        context = simulated_context(3, pace_s=0.0, folder=tmp_path)
+        context = simulated_cell(3, pace_s=0.0, folder=tmp_path)
         app = FixwizardApp(context, "")
         async with app.run_test(size=SIZE, notifications=True) as pilot:
             await until(pilot, lambda: type(app.screen).__name__ == "SamplingScreen" and "Resumed" in toasts(app))
@@ -64,7 +65,7 @@ def test_a_resume_says_which_session_it_opened_and_shows_every_tap(tmp_path):
             assert f"Resumed the session {path}: 12 taps recorded, fixture demo_bracket.stl" in notice
             assert "tip calibration example_matlab_logo.yaml" in notice
             assert "line 12 of the session journal holds a record that was never finished" in notice
-            assert [tap.id for tap in context.session.taps] == list(range(1, 13))
+            assert [tap.id for tap in app.screen.session.taps] == list(range(1, 13))
             await until(pilot, lambda: app.screen.query_one("#taps").row_count == 12)
     asyncio.run(run())
 
@@ -111,7 +112,7 @@ def test_every_refused_resume_is_explained_on_the_start_screen(tmp_path, spoil, 
     requested = spoil(recorded_session(tmp_path))
 
     async def run():
-        context = simulated_context(3, pace_s=0.0, folder=tmp_path)
+        context = simulated_cell(3, pace_s=0.0, folder=tmp_path)
         app = FixwizardApp(context, requested)
         async with app.run_test(size=SIZE, notifications=True) as pilot:
             await until(pilot, lambda: isinstance(app.screen, ErrorModal))
@@ -123,7 +124,7 @@ def test_every_refused_resume_is_explained_on_the_start_screen(tmp_path, spoil, 
             await pilot.press("escape")
             await until(pilot, lambda: isinstance(app.screen, StartScreen))
             assert reason in str(app.screen.query_one("#resume-problem", Static).render())  # it stays in view
-            assert context.session is None
+            assert sampling_of(app) is None
     asyncio.run(run())
 
 
@@ -131,7 +132,7 @@ def test_a_session_open_in_another_wizard_is_refused_with_the_reason(tmp_path):
     path = recorded_session(tmp_path)
 
     async def run():
-        context = simulated_context(3, pace_s=0.0, folder=tmp_path)
+        context = simulated_cell(3, pace_s=0.0, folder=tmp_path)
         app = FixwizardApp(context, str(path))
         async with app.run_test(size=SIZE, notifications=True) as pilot:
             await until(pilot, lambda: isinstance(app.screen, ErrorModal))
@@ -148,10 +149,10 @@ def test_the_start_screen_resume_says_which_session_it_opened(tmp_path):
     path = recorded_session(tmp_path, taps=2)
 
     async def run():
-        context = simulated_context(3, pace_s=0.0, folder=tmp_path)
+        context = simulated_cell(3, pace_s=0.0, folder=tmp_path)
         app = FixwizardApp(context)
         async with app.run_test(size=SIZE, notifications=True) as pilot:
-            await until(pilot, lambda: isinstance(app.screen, StartScreen) and app.context.fixture is not None)
+            await until(pilot, lambda: isinstance(app.screen, StartScreen) and start_fixture(app) is not None)
             app.screen.query_one("#session").value = str(path)
             await pilot.pause()
             app.screen.query_one("#continue").focus()

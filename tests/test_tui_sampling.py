@@ -13,10 +13,10 @@ from textual.widgets import DataTable, Static
 
 from fixwizard.demo import disc_fixture
 from fixwizard.geometry.se3 import rotation_angle_rad
-from fixwizard.tui.confirm import Confirm, ConfirmMove
-from fixwizard.tui.dialog import Dialog
-from fixwizard.tui.sampling import SamplingScreen
-from fixwizard.tui.sampling_text import live_text
+from fixwizard.tui.sampling.screen import SamplingScreen
+from fixwizard.tui.sampling.text import live_text
+from fixwizard.tui.widgets.confirm import Confirm, ConfirmMove
+from fixwizard.tui.widgets.dialog import Dialog
 from fixwizard.workflow.live import LiveView, quick_check
 from fixwizard.workflow.solver_process import NextTap
 from pilot_wait import until
@@ -58,7 +58,7 @@ def journal_kinds(context) -> list[str]:
 
 @pytest.mark.slow
 async def test_twelve_taps_fill_the_table_and_the_journal_and_the_live_check_finds_the_pose(context):
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     cell = cell_of(context)
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
@@ -91,7 +91,7 @@ async def test_twelve_taps_fill_the_table_and_the_journal_and_the_live_check_fin
 
 @pytest.mark.slow
 async def test_undo_removes_the_last_tap_and_journals_it(context):
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
         for _ in range(4):
@@ -106,7 +106,7 @@ async def test_undo_removes_the_last_tap_and_journals_it(context):
 
 @pytest.mark.slow
 async def test_protective_stop_during_a_tap_is_explained_and_loses_nothing(context):
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     cell = cell_of(context)
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
@@ -132,7 +132,7 @@ async def test_protective_stop_during_a_tap_is_explained_and_loses_nothing(conte
 @pytest.mark.parametrize("fault, shown", [("connection_loss", "check that the robot is powered on"),
                                           ("no_surface", "found no surface within 20 mm: move the tool closer")])
 async def test_other_robot_problems_say_what_to_do_next(context, fault, shown):
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     cell = cell_of(context)
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
@@ -145,7 +145,7 @@ async def test_other_robot_problems_say_what_to_do_next(context, fault, shown):
 
 
 async def test_solving_needs_three_taps(context):
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
         await tap(pilot, screen)
@@ -156,8 +156,8 @@ async def test_solving_needs_three_taps(context):
 
 
 async def test_a_real_cell_has_no_simulated_keys(context):
-    context.hands, context.simulated = None, False
-    app = ScreenHost(lambda: SamplingScreen(context))
+    context.with_cell(hands=None, simulated=False)
+    app = ScreenHost(lambda: context.sampling_screen())
     async with app.run_test(size=SIZE) as pilot:
         await until(pilot, lambda: not app.screen.busy)
         assert app.screen.check_action("simulated_hands", ()) is False
@@ -166,7 +166,7 @@ async def test_a_real_cell_has_no_simulated_keys(context):
 
 
 async def test_leaving_turns_freedrive_off_and_keeps_the_session_open(context):
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     async with app.run_test(size=SIZE) as pilot:
         await tap(pilot, app.screen)
         await pilot.press("escape")
@@ -180,7 +180,7 @@ async def test_leaving_turns_freedrive_off_and_keeps_the_session_open(context):
 
 @pytest.mark.slow
 async def test_once_the_pose_is_pinned_down_the_screen_suggests_a_tap_and_moves_above_it_after_confirmation(context):
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     cell = cell_of(context)
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
@@ -223,7 +223,7 @@ async def test_once_the_pose_is_pinned_down_the_screen_suggests_a_tap_and_moves_
 
 @pytest.mark.slow
 async def test_when_the_possible_poses_leave_no_safe_way_down_the_screen_asks_to_guide_the_ball_by_hand(context):
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     cell = cell_of(context)
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
@@ -245,10 +245,10 @@ async def test_when_the_possible_poses_leave_no_safe_way_down_the_screen_asks_to
     ("bracket", "Only the chosen fixture fits these taps"),
     ("plate", "The taps do not fit the chosen fixture; they fit Demo bracket (bundled). Leave (Esc), choose it")])
 async def test_which_fixture_checks_the_taps_against_every_offered_mesh(context, tmp_path, chosen, conclusion):
-    context.fixtures_dir = tmp_path / "no-fixtures-here"
+    context.with_cell(fixtures_dir=tmp_path / "no-fixtures-here")
     if chosen == "plate":
         context.fixture = disc_fixture()  # the cell holds the bracket: the operator picked the wrong mesh
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
         await tap(pilot, screen)
@@ -273,7 +273,7 @@ async def test_which_fixture_checks_the_taps_against_every_offered_mesh(context,
 async def test_the_live_check_says_the_ball_diameter_is_wrong_when_the_taps_fit_another_ball(context):
     context.calibration = dataclasses.replace(context.calibration, ball_diameter_m=0.006)  # the ball is 3 mm
     record_spread_taps(context, 12)
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
         await until(pilot, lambda: screen.live is not None and screen.live.ball_mismatch is not None, timeout_s=120)
@@ -293,7 +293,7 @@ async def test_the_live_check_says_the_ball_diameter_is_wrong_when_the_taps_fit_
 async def test_a_tap_says_at_once_what_the_robot_does_and_counts_its_seconds(context):
     """A real tap takes seconds: the note says so the moment the key is pressed, and the count goes on."""
     cell_of(context).pace_s = 1.6  # each simulated motion takes this long
-    app = ScreenHost(lambda: SamplingScreen(context))
+    app = ScreenHost(lambda: context.sampling_screen())
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
         await until(pilot, lambda: not screen.busy)

@@ -9,10 +9,10 @@ from textual.pilot import Pilot
 from textual.widgets import Input
 
 from fixwizard.tui.app import FixwizardApp
-from fixwizard.tui.errors import ErrorModal
-from fixwizard.tui.help import HelpScreen
-from fixwizard.tui.tip_calibration_hands import PivotScreen, TablePointsScreen
-from fixwizard.tui.tip_calibration_result import CalibrationResultScreen
+from fixwizard.tui.tip_calibration.hands import PivotScreen, TablePointsScreen
+from fixwizard.tui.tip_calibration.result import CalibrationResultScreen
+from fixwizard.tui.widgets.errors import ErrorModal
+from fixwizard.tui.widgets.help import HelpScreen
 from pilot_wait import until
 from test_tui_app import SIZE, at_start, calibrate_by_hand, press_button, wizard
 
@@ -24,7 +24,7 @@ async def settled(pilot: Pilot) -> None:
     app = pilot.app
     await until(pilot, lambda: not getattr(app.screen, "busy", False))
     app.refresh_robot_status()
-    await until(pilot, lambda: app.robot_status == app.context.robot.status())
+    await until(pilot, lambda: app.robot_status == app.cell.robot.status())
     await pilot.pause()
 
 
@@ -92,7 +92,7 @@ def test_protective_stop_message(snap_compare, tmp_path):
         await pivot_with_three_poses(pilot)
         await pilot.press("n")
         await until(pilot, lambda: isinstance(pilot.app.screen, TablePointsScreen) and not pilot.app.screen.busy)
-        pilot.app.context.robot.inject_fault("protective_stop_during_tap")
+        pilot.app.cell.robot.inject_fault("protective_stop_during_tap")
         await pilot.press("m")
         await until(pilot, lambda: isinstance(pilot.app.screen, ErrorModal))
         await until(pilot, lambda: pilot.app.robot_status.protective_stop)

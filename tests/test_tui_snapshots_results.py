@@ -11,9 +11,8 @@ import pytest
 
 from fixwizard.solver.search import SearchProgress
 from fixwizard.solver.solve import solve
-from fixwizard.tui.results import ResultsScreen
-from fixwizard.tui.sampling import SamplingScreen
-from fixwizard.tui.solve_screen import SolveScreen
+from fixwizard.tui.results.screen import ResultsScreen
+from fixwizard.tui.solve.screen import SolveScreen
 from fixwizard.workflow.solver_process import Progress
 from pilot_wait import until
 from tui_cell import ScreenHost, point_above_fixture_m, record_spread_taps, symmetric_cell, wizard_context
@@ -37,7 +36,7 @@ def demo_context(folder: Path, taps: int, max_cells: float, in_the_air: bool = F
     fixture), solved at ``max_cells`` with the solve time pinned; reports go to ./reports (shown, never written
     here)."""
     context = wizard_context(folder, max_cells=max_cells, cell=symmetric_cell() if symmetric else None)
-    context.reports_dir = Path("reports")
+    context.with_cell(reports_dir=Path("reports"))
     record_spread_taps(context, taps)
     if in_the_air:
         context.session.record_tap(np.eye(4), base_p_ball_m=point_above_fixture_m(context, 0.05))
@@ -66,7 +65,7 @@ def test_sampling_screen_after_eight_taps(snap_compare, tmp_path):
         await pilot.app.workers.wait_for_complete()  # the way above the suggestion may follow the refinement
         await pilot.pause()
 
-    assert snap_compare(ScreenHost(lambda: SamplingScreen(context)), terminal_size=SIZE, run_before=live_check_done)
+    assert snap_compare(ScreenHost(lambda: context.sampling_screen()), terminal_size=SIZE, run_before=live_check_done)
     context.session.release()
 
 
@@ -90,7 +89,7 @@ def test_solve_screen_during_the_search(snap_compare, tmp_path):
         await until(pilot, lambda: pilot.app.screen.progress is not None)
         await pilot.pause(0.5)
 
-    assert snap_compare(ScreenHost(lambda: SolveScreen(context, PausedSolver())), terminal_size=SIZE,
+    assert snap_compare(ScreenHost(lambda: context.solve_screen(PausedSolver())), terminal_size=SIZE,
                         run_before=progress_shown)
     context.session.release()
 
@@ -102,18 +101,18 @@ def test_results_screen_of_a_unique_pose(snap_compare, unique, view):
             await pilot.press("v")
         await pilot.pause(0.2)
 
-    assert snap_compare(ScreenHost(lambda: ResultsScreen(unique)), terminal_size=SIZE, run_before=show_view)
+    assert snap_compare(ScreenHost(lambda: unique.results_screen()), terminal_size=SIZE, run_before=show_view)
 
 
 def test_results_screen_of_an_inconsistent_result(snap_compare, tmp_path):
     context = demo_context(tmp_path, 12, 2.4e6, in_the_air=True)
     assert context.solution.status == "inconsistent"
-    assert snap_compare(ScreenHost(lambda: ResultsScreen(context)), terminal_size=SIZE)
+    assert snap_compare(ScreenHost(lambda: context.results_screen()), terminal_size=SIZE)
     context.session.release()
 
 
 def test_results_screen_of_an_ambiguous_result(snap_compare, tmp_path):
     context = demo_context(tmp_path, 12, 8e6, symmetric=True)
     assert context.solution.status == "ambiguous"
-    assert snap_compare(ScreenHost(lambda: ResultsScreen(context)), terminal_size=SIZE)
+    assert snap_compare(ScreenHost(lambda: context.results_screen()), terminal_size=SIZE)
     context.session.release()

@@ -1,8 +1,11 @@
 """Test helpers for the wizard's sampling, solve and results screens: the demo cell with its hidden truth, a
-tip calibration taken from that truth, a wizard context around them, and a small app hosting one screen."""
+tip calibration taken from that truth, what the wizard's flow would hand those screens, and a small app hosting
+one screen."""
 
+import dataclasses
 import datetime as dt
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -13,13 +16,20 @@ from fixwizard.calibration.residuals import ResidualStats
 from fixwizard.calibration.store import TipCalibration
 from fixwizard.calibration.taps import ball_centres_m
 from fixwizard.demo import demo_cell
+from fixwizard.fixture import Fixture
 from fixwizard.geometry.se3 import rotation_angle_rad, transform_points
 from fixwizard.report import Report
 from fixwizard.robot.sim import SimulatedCell
 from fixwizard.robot.sim_hands import SimulatedHands
+from fixwizard.solver.solve import Solution
 from fixwizard.tui.app import CSS_FILE
-from fixwizard.tui.context import WizardContext
+from fixwizard.tui.cell import Cell, Sampling, SavedCalibration
+from fixwizard.tui.results.screen import ResultsScreen
+from fixwizard.tui.sampling.screen import SamplingScreen
+from fixwizard.tui.solve.screen import SolveScreen
+from fixwizard.tui.start.screen import StartScreen
 from fixwizard.workflow.session import SamplingSession
+from fixwizard.workflow.solver_process import SolverProcess
 
 CELL_SEED = 0
 HANDS_SEED = 1
@@ -40,8 +50,72 @@ def truth_calibration(cell: SimulatedCell) -> TipCalibration:
         tip_standard_error_m=np.zeros(3), steps={})
 
 
+@dataclass
+class WizardParts:
+    """What the wizard's flow hands the sampling, solve and results screens, as a test sets it up: the cell, the
+    session with its fixture and tip calibration, and the fixture's solver process (started on first use). Tests
+    change a part (``dataclasses.replace`` for the cell) before making a screen."""
+
+    cell: Cell
+    session: SamplingSession
+    fixture: Fixture
+    calibration: TipCalibration
+    calibration_path: Path
+    solution: Solution | None = None  # a test's own solve, for the results screen
+    _solver: SolverProcess | None = None
+
+    @property
+    def robot(self):
+        return self.cell.robot
+
+    @property
+    def hands(self) -> SimulatedHands | None:
+        return self.cell.hands
+
+    @property
+    def reports_dir(self) -> Path:
+        return self.cell.reports_dir
+
+    @property
+    def max_cells(self) -> float:
+        return self.cell.max_cells
+
+    def with_cell(self, **changes) -> None:
+        self.cell = dataclasses.replace(self.cell, **changes)
+
+    @property
+    def sampling(self) -> Sampling:
+        return Sampling(self.session, self.fixture, SavedCalibration(self.calibration, self.calibration_path))
+
+    def solver(self) -> SolverProcess:
+        """The solver process of the fixture, as the wizard's flow owns it."""
+        if self._solver is None or self._solver.fixture is not self.fixture:
+            self._solver = SolverProcess(self.fixture)
+        return self._solver
+
+    def sampling_screen(self) -> SamplingScreen:
+        return SamplingScreen(self.cell, self.sampling, self.solver())
+
+    def solve_screen(self, solver: SolverProcess | None = None) -> SolveScreen:
+        return SolveScreen(self.cell, self.sampling, solver or self.solver())
+
+    def results_screen(self) -> ResultsScreen:
+        assert self.solution is not None, "solve first"
+        return ResultsScreen(self.cell, self.sampling, self.solution)
+
+
+def start_fixture(app: App):
+    """The fixture loaded on the start screen shown, if any."""
+    return app.screen.fixture if isinstance(app.screen, StartScreen) else None
+
+
+def sampling_of(app: App) -> SamplingScreen | None:
+    """The sampling screen on the app's stack, if any."""
+    return next((screen for screen in app.screen_stack if isinstance(screen, SamplingScreen)), None)
+
+
 def wizard_context(folder: Path, cell_seed: int = CELL_SEED, max_cells: float = TEST_MAX_CELLS,
-                   cell: SimulatedCell | None = None) -> WizardContext:
+                   cell: SimulatedCell | None = None) -> WizardParts:
     """A simulated demo cell (connected; or ``cell``), the operator's hands, a truth calibration and a new
     session in ``folder``."""
     cell = demo_cell(cell_seed) if cell is None else cell
@@ -52,9 +126,9 @@ def wizard_context(folder: Path, cell_seed: int = CELL_SEED, max_cells: float = 
                                      {"tcp_p_tip_m": calibration.tcp_p_tip_m.tolist(),
                                       "ball_diameter_m": calibration.ball_diameter_m,
                                       "sample_bound_m": calibration.sample_bound_m}, robot="simulated")
-    return WizardContext(robot=cell, robot_name="simulated cell", simulated=True,
-                         hands=SimulatedHands(cell, seed=HANDS_SEED), reports_dir=folder / "reports",
-                         fixture=cell.fixture, calibration=calibration, session=session, max_cells=max_cells)
+    wizard_cell = Cell(robot=cell, robot_name="simulated cell", simulated=True,
+                       hands=SimulatedHands(cell, seed=HANDS_SEED), reports_dir=folder / "reports", max_cells=max_cells)
+    return WizardParts(wizard_cell, session, cell.fixture, calibration, folder / "calibrations" / "truth.yaml")
 
 
 def symmetric_cell() -> SimulatedCell:
@@ -64,7 +138,7 @@ def symmetric_cell() -> SimulatedCell:
     return SimulatedCell.with_fixture(as_fixture("brick"), seed=CELL_SEED)
 
 
-def cell_of(context: WizardContext) -> SimulatedCell:
+def cell_of(context: WizardParts) -> SimulatedCell:
     return context.hands.cell
 
 
@@ -78,7 +152,7 @@ def spread_taps(cell: SimulatedCell, count: int, seed: int = HANDS_SEED) -> np.n
     return ball_centres_m(np.array(poses), cell.truth.tcp_p_tip_m)
 
 
-def record_spread_taps(context: WizardContext, count: int) -> None:
+def record_spread_taps(context: WizardParts, count: int) -> None:
     """Tap ``count`` spread points without the UI and journal them in the context's session."""
     hands = context.hands
     for index in range(count):
@@ -86,7 +160,7 @@ def record_spread_taps(context: WizardContext, count: int) -> None:
         context.session.record_tap(cell_of(context).tap().base_T_tcp_contact)
 
 
-def point_above_fixture_m(context: WizardContext, height_m: float) -> np.ndarray:
+def point_above_fixture_m(context: WizardParts, height_m: float) -> np.ndarray:
     """A ball centre (base frame, m) ``height_m`` above the fixture's highest vertex."""
     cell = cell_of(context)
     base_p_vertices = cell.fixture.mesh.vertices @ cell.truth.base_T_cad[:3, :3].T + cell.truth.base_T_cad[:3, 3]

@@ -7,35 +7,36 @@ After STOP or a protective stop the wizard is STOPPED: the status bar says so an
 ``?`` shows the help of the current screen; quitting while the robot moves asks first. The look of every screen
 is in ``wizard.tcss``."""
 
-import asyncio
 import threading
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TypeVar
 
+from textual import work
 from textual.actions import ActionParseResult
 from textual.app import App
 from textual.dom import DOMNode
 from textual.reactive import var
 from textual.screen import ModalScreen, Screen
 from textual.widgets import Footer
+from textual.worker import WorkerFailed
 
 from fixwizard.errors import FixwizardError
 from fixwizard.robot.base import ProtectiveStop, RobotStatus
 from fixwizard.tui import keys
-from fixwizard.tui.background import ShownError, run_in_thread
-from fixwizard.tui.confirm import Confirm
-from fixwizard.tui.context import WizardContext
-from fixwizard.tui.errors import ErrorModal, Recovery, ResumeRefused
-from fixwizard.tui.help import HelpScreen, help_text
+from fixwizard.tui.cell import Cell, NewSession, Resumed, Sampling, SavedCalibration
 from fixwizard.tui.launch import session_to_resume
-from fixwizard.tui.results import ResultsScreen
-from fixwizard.tui.sampling import SamplingScreen
-from fixwizard.tui.sessions import resume_refusal, resume_session, start_session
-from fixwizard.tui.solve_screen import SolveScreen
-from fixwizard.tui.start import StartScreen
-from fixwizard.tui.status import StatusBar
-from fixwizard.tui.tip_calibration import calibrate_tip_on_screens
+from fixwizard.tui.results.screen import Done, ResultsScreen
+from fixwizard.tui.sampling.screen import SamplingScreen
+from fixwizard.tui.solve.screen import SolveScreen
+from fixwizard.tui.start.screen import StartScreen
+from fixwizard.tui.start.sessions import resume_refusal, resume_session, start_session
+from fixwizard.tui.tip_calibration.steps import calibrate_tip_on_screens
+from fixwizard.tui.widgets.confirm import Confirm
+from fixwizard.tui.widgets.errors import ErrorModal, Recovery, ResumeRefused
+from fixwizard.tui.widgets.help import HelpScreen, help_text
+from fixwizard.tui.widgets.status import StatusBar
+from fixwizard.tui.workers import ShownError, in_thread
 from fixwizard.workflow.solver_process import SolverProcess
 
 T = TypeVar("T")
@@ -45,8 +46,10 @@ CSS_FILE = Path(__file__).with_name("wizard.tcss")  # package data: every screen
 
 
 class FixwizardApp(App[None]):
-    """The wizard on the context's robot; ``resume`` (a session's path, or "" for the newest unfinished one)
-    opens that session straight into sampling, or says on the start screen why it cannot."""
+    """The wizard on ``cell`` (``self.cell``: the start screen can switch the robot); ``resume`` (a session's
+    path, or "" for the newest unfinished one) opens that session straight into sampling, or says on the start
+    screen why it cannot; ``sampling`` (an open session) starts the wizard in sampling instead. The flow (``_flow``)
+    hands each screen what the one before returned and owns the fixture's solver process."""
 
     TITLE = "fixwizard"
     CSS_PATH = CSS_FILE
@@ -57,10 +60,12 @@ class FixwizardApp(App[None]):
     robot_status: var[RobotStatus | None] = var(None)
     stopped: var[bool] = var(False)  # after STOP or a protective stop, until the operator re-arms
 
-    def __init__(self, context: WizardContext, resume: str | None = None) -> None:
+    def __init__(self, cell: Cell, resume: str | None = None, sampling: Sampling | None = None) -> None:
         super().__init__()
-        self.context = context
+        self.cell = cell
         self.resume = resume
+        self._first_sampling = sampling
+        self._solver: SolverProcess | None = None  # the solver process of the session's fixture
         self._motion_cancels: set[threading.Event] = set()
         self._polling_status = False
         self._quitting = False  # once set, errors of the steps being stopped are not shown (the app is closing)
@@ -68,7 +73,7 @@ class FixwizardApp(App[None]):
 
     def on_mount(self) -> None:
         self.screen_change_signal.subscribe(self, self._frame_screen)
-        run_in_thread(self, self.context.robot.connect)
+        in_thread(self, self.cell.robot.connect)
         self.set_interval(STATUS_INTERVAL_S, self.refresh_robot_status)
         self._run_flow()
 
@@ -88,12 +93,13 @@ class FixwizardApp(App[None]):
         if self._polling_status:
             return
         self._polling_status = True
-        self.run_worker(self._poll_status, thread=True, group="status", exit_on_error=False)
+        self._poll_status()
 
+    @work(thread=True, group="status", exit_on_error=False)
     def _poll_status(self) -> None:
         status = None
         try:
-            status = self.context.robot.status()
+            status = self.cell.robot.status()
         except FixwizardError:
             pass
         finally:
@@ -119,11 +125,15 @@ class FixwizardApp(App[None]):
     def forget_cancel(self, cancel: threading.Event) -> None:
         self._motion_cancels.discard(cancel)
 
+    def use_cell(self, cell: Cell) -> None:
+        """The start screen switched the robot: status, STOP and the next steps use ``cell``'s."""
+        self.cell = cell
+
     def action_stop_robot(self) -> None:
         """STOP: cancel automatic steps and halt the robot's motion now, from any screen; STOPPED until re-armed."""
         for cancel in self._motion_cancels:
             cancel.set()
-        run_in_thread(self, self.context.robot.stop, group="stop")
+        in_thread(self, self.cell.robot.stop)
         self.stopped = True
         self.notify(f"STOP sent: the robot halts. Check the cell, then re-arm with {keys.name(keys.REARM)}.",
                     severity="warning")
@@ -152,7 +162,7 @@ class FixwizardApp(App[None]):
         status = self.robot_status
         if status is not None and (status.protective_stop or status.emergency_stop):
             unlock = (f"press {keys.name(keys.UNLOCK)} on the sampling screen or use the error's unlock button"
-                      if self.context.simulated else "unlock it on the teach pendant")
+                      if self.cell.simulated else "unlock it on the teach pendant")
             self.notify(f"The robot is still in a {'protective' if status.protective_stop else 'emergency'} stop: "
                         f"{unlock}, then re-arm.", severity="warning")
             return
@@ -201,7 +211,7 @@ class FixwizardApp(App[None]):
             cancel.set()
         SolverProcess.close_all()
         if stop:
-            run_in_thread(self, self.context.robot.stop, group="stop")
+            in_thread(self, self.cell.robot.stop)
         self.exit()
 
     def show_error(self, error: ShownError) -> None:
@@ -209,25 +219,39 @@ class FixwizardApp(App[None]):
         stopping a running step may end it with an error, and the app is closing."""
         if self._quitting:
             return
-        can_unlock = callable(getattr(self.context.robot, "unlock_protective_stop", None))
+        can_unlock = callable(getattr(self.cell.robot, "unlock_protective_stop", None))
         if isinstance(error, ProtectiveStop):
             self.stopped = True
-        self.push_screen(ErrorModal(error, self.context.simulated, can_unlock), self._recover)
+        self.push_screen(ErrorModal(error, self.cell.simulated, can_unlock), self._recover)
 
     def _recover(self, recovery: Recovery | None) -> None:
-        robot, hands = self.context.robot, self.context.hands
+        robot, hands = self.cell.robot, self.cell.hands
         if recovery == "reconnect":
-            run_in_thread(self, robot.connect, lambda _: self.notify("Connected to the robot again."))
+            in_thread(self, robot.connect, lambda _: self.notify("Connected to the robot again."))
         elif recovery == "unlock" and hands is not None:
-            run_in_thread(self, hands.cell.unlock, lambda _: self.notify("SIMULATED: protective stop unlocked."))
+            in_thread(self, hands.cell.unlock, lambda _: self.notify("SIMULATED: protective stop unlocked."))
         elif recovery == "unlock":
-            run_in_thread(self, robot.unlock_protective_stop,
-                          lambda _: self.notify("Protective stop unlocked. Check the cell, then retry."))
+            unlock: Callable[[], None] | None = getattr(robot, "unlock_protective_stop", None)
+            if unlock is not None:
+                in_thread(self, unlock, lambda _: self.notify("Protective stop unlocked. Check the cell, then retry."))
 
-    async def _in_thread(self, call: Callable[[], T]) -> T | None:
-        """Run a blocking call off the event loop from the flow; None (and the error shown) when it fails."""
+    # --- blocking steps of the flow ---
+
+    @work(thread=True, group="flow-step", exit_on_error=False)
+    def _flow_step(self, call: Callable[[], T]) -> T:
+        return call()
+
+    async def _off_loop(self, call: Callable[[], T]) -> T:
+        """Run a blocking call of the flow in a thread worker and await it; its error is raised here."""
         try:
-            return await asyncio.to_thread(call)
+            return await self._flow_step(call).wait()
+        except WorkerFailed as failed:
+            raise failed.error from None
+
+    async def _step_or_error(self, call: Callable[[], T]) -> T | None:
+        """A blocking call of the flow off the event loop; None (and the error shown) when it fails."""
+        try:
+            return await self._off_loop(call)
         except (FixwizardError, OSError) as error:
             self.show_error(error)
             return None
@@ -237,60 +261,83 @@ class FixwizardApp(App[None]):
     def _run_flow(self) -> None:
         self.run_worker(self._flow(), group="flow", exclusive=True)
 
-    def notify_resumed(self, opened: str) -> None:
+    def notify_resumed(self, resumed: Resumed) -> None:
         """Say which session was resumed (and any record of it that was never finished)."""
-        self.notify(opened, title="Session resumed", timeout=RESUMED_NOTICE_S, markup=False,
-                    severity="warning" if self.context.session and self.context.session.recovered else "information")
+        self.notify(resumed.opened, title="Session resumed", timeout=RESUMED_NOTICE_S, markup=False,
+                    severity="warning" if resumed.sampling.session.recovered else "information")
 
-    async def _resume(self, requested: str) -> ResumeRefused | None:
+    async def _resume(self, requested: str) -> Resumed | ResumeRefused:
         """Resume the session ``--resume`` asked for; the refusal to show on the start screen when it cannot."""
-        context = self.context
+        cell = self.cell
         try:
-            opened = await asyncio.to_thread(lambda: resume_session(context, session_to_resume(context, requested)))
+            resumed = await self._off_loop(lambda: resume_session(cell, session_to_resume(cell, requested)))
         except (FixwizardError, OSError) as error:
             return resume_refusal(requested, error)
-        self.notify_resumed(opened)
-        return None
+        self.notify_resumed(resumed)
+        return resumed
 
     async def _flow(self) -> None:
-        context = self.context
-        refusal = await self._resume(self.resume) if self.resume is not None else None
-        if context.session is not None:
-            await self._sample_until_done()
+        refusal = None
+        if self._first_sampling is not None:
+            await self._sample_until_done(self._first_sampling)
+        elif self.resume is not None:
+            resumed = await self._resume(self.resume)
+            if isinstance(resumed, Resumed):
+                await self._sample_until_done(resumed.sampling)
+            else:
+                refusal = resumed
         while True:
-            await self.push_screen_wait(StartScreen(context, refusal, self._left_session))
+            choice = await self.push_screen_wait(StartScreen(self.cell, refusal, self._left_session))
             refusal = self._left_session = None
-            if context.session is None:
-                if context.calibration is None:
-                    calibrated = await calibrate_tip_on_screens(self, context)
-                    await self._in_thread(lambda: context.robot.freedrive(False))
-                    if not calibrated:
-                        continue
-                context.session = await self._in_thread(lambda: start_session(context))
-                if context.session is None:
-                    continue
-            await self._sample_until_done()
+            sampling = choice.sampling if isinstance(choice, Resumed) else await self._new_session(choice)
+            if sampling is not None:
+                await self._sample_until_done(sampling)
 
-    async def _sample_until_done(self) -> None:
+    async def _new_session(self, choice: NewSession) -> Sampling | None:
+        """A new session for the chosen fixture, after a new tip calibration if none was chosen; None when the
+        operator went back from the calibration or the session could not be created (the error shown)."""
+        tip: SavedCalibration | None = choice.tip
+        if tip is None:
+            cell = self.cell
+            tip = await calibrate_tip_on_screens(self, cell)
+            await self._step_or_error(lambda: cell.robot.freedrive(False))
+            if tip is None:
+                return None
+        cell, fixture, saved = self.cell, choice.fixture, tip
+        session = await self._step_or_error(lambda: start_session(cell, fixture, saved))
+        return None if session is None else Sampling(session, fixture, saved)
+
+    def _solver_for(self, sampling: Sampling) -> SolverProcess:
+        """The solver process holding the session's fixture: started on first use, replaced when the fixture
+        changes."""
+        if self._solver is not None and self._solver.fixture is not sampling.fixture:
+            self._solver.close()
+            self._solver = None
+        if self._solver is None:
+            self._solver = SolverProcess(sampling.fixture)
+        return self._solver
+
+    async def _sample_until_done(self, sampling: Sampling) -> None:
         """Sampling, solve and results until the operator is done or leaves sampling; then the session is
         closed (with its report) or released for a later resume."""
-        context = self.context
+        report_path: Path | None = None
         try:
-            while await self.push_screen_wait(SamplingScreen(context)) is True:
-                if await self.push_screen_wait(SolveScreen(context)) is None:
+            while await self.push_screen_wait(SamplingScreen(self.cell, sampling, self._solver_for(sampling))) is True:
+                solution = await self.push_screen_wait(SolveScreen(self.cell, sampling, self._solver_for(sampling)))
+                if solution is None:
                     continue
-                if await self.push_screen_wait(ResultsScreen(context)) != "resample":
+                outcome = await self.push_screen_wait(ResultsScreen(self.cell, sampling, solution))
+                if isinstance(outcome, Done):
+                    report_path = outcome.report_path
                     break
-                context.report_path = None  # the taps change, so that report no longer describes them
+                # "resample": the taps change, so a report written no longer describes them
         finally:
-            await self._in_thread(self._end_session)
+            await self._step_or_error(lambda: self._end_session(sampling, report_path))
 
-    def _end_session(self) -> None:
-        """Close the session naming its report, or release it unfinished; clear what belonged to it."""
-        context = self.context
-        session, report_path = context.session, context.report_path
-        context.session = context.solution = context.report_path = None
-        if session is None or session.closed:
+    def _end_session(self, sampling: Sampling, report_path: Path | None) -> None:
+        """Close the session naming its report, or release it unfinished."""
+        session = sampling.session
+        if session.closed:
             return
         if report_path is not None:
             session.close(report=str(report_path))

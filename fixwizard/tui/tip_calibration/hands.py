@@ -8,8 +8,8 @@ from textual.widgets import Static
 from fixwizard.calibration.errors import CalibrationError
 from fixwizard.calibration.pivot import MIN_POSES
 from fixwizard.tui import keys
-from fixwizard.tui.background import ShownError
-from fixwizard.tui.tip_calibration_step import CalibrationStepScreen
+from fixwizard.tui.tip_calibration.step import CalibrationStepScreen
+from fixwizard.tui.workers import ShownError
 from fixwizard.workflow.robot_calibration import TABLE_POINTS
 
 PIVOT_TEXT = (
@@ -41,7 +41,7 @@ class PivotScreen(CalibrationStepScreen):
 
     def body(self) -> ComposeResult:
         yield Static(PIVOT_TEXT)
-        if self.context.hands is not None:
+        if self.cell.hands is not None:
             yield Static(f"SIMULATED: no hands can move a simulated arm. Press {keys.name(keys.HANDS)} and the "
                          "simulated hands put the tool in the next pivot pose, then the pose is captured.",
                          classes="simulated")
@@ -61,13 +61,13 @@ class PivotScreen(CalibrationStepScreen):
             super().action_back()
 
     def action_freedrive(self) -> None:
-        self.run_robot(lambda: self.context.robot.freedrive(True), lambda _: None)
+        self.run_robot(lambda: self.cell.robot.freedrive(True), lambda _: None)
 
     def action_capture(self) -> None:
         self.run_robot(self.workflow.capture_pivot_pose, lambda _: self._show_fit(), doing="Capturing the pose")
 
     def action_simulated_hands(self) -> None:
-        hands = self.context.hands
+        hands = self.cell.simulated_hands()
         pose_index = len(self.workflow.poses("pivot"))
 
         def move_and_capture() -> None:
@@ -118,7 +118,7 @@ class TablePointsScreen(CalibrationStepScreen):
         reach_mm = max(rows, cols) * self.workflow.table_spacing_m * 1e3
         yield Static(TABLE_POINTS_TEXT.format(reach_mm=reach_mm))
         yield Static(TABLE_POINTS_PICTURE, markup=False)
-        if self.context.hands is not None:
+        if self.cell.hands is not None:
             yield Static(f"SIMULATED: press {keys.name(keys.HANDS)} and the simulated hands bring the ball above "
                          "the next point, then the robot taps it.", classes="simulated")
         yield Static("", id="points-state", classes="state", markup=False)
@@ -138,14 +138,14 @@ class TablePointsScreen(CalibrationStepScreen):
         return allowed
 
     def action_freedrive(self) -> None:
-        self.run_robot(lambda: self.context.robot.freedrive(True), lambda _: None)
+        self.run_robot(lambda: self.cell.robot.freedrive(True), lambda _: None)
 
     def action_tap(self) -> None:
         self.run_robot(self._tap, lambda _: self._show_points(), self._tap_failed,
                        doing=f"Tapping {TABLE_POINTS[self._tapped()]}: the robot moves the ball down until it touches")
 
     def action_simulated_hands(self) -> None:
-        hands, label = self.context.hands, TABLE_POINTS[self._tapped()]
+        hands, label = self.cell.simulated_hands(), TABLE_POINTS[self._tapped()]
 
         def place_and_tap() -> None:
             hands.table_point(label)
@@ -163,10 +163,10 @@ class TablePointsScreen(CalibrationStepScreen):
 
     def _tap(self) -> None:
         """Freedrive off, tap, and freedrive on again while points are left (worker thread)."""
-        self.context.robot.freedrive(False)
+        self.cell.robot.freedrive(False)
         self.workflow.tap_table_point()
         if self._tapped() < len(TABLE_POINTS):
-            self.context.robot.freedrive(True)
+            self.cell.robot.freedrive(True)
 
     def _tap_failed(self, error: ShownError) -> None:
         self._show_points("Freedrive is off after the failed tap: when the cell is safe, press F and place the "
@@ -176,7 +176,7 @@ class TablePointsScreen(CalibrationStepScreen):
         tapped = self._tapped()
         marks = ["tapped" if index < tapped else "next" if index == tapped else "-"
                  for index in range(len(TABLE_POINTS))]
-        lines = ["   ".join(f"{label}: {mark}" for label, mark in zip(TABLE_POINTS, marks))]
+        lines = ["   ".join(f"{label}: {mark}" for label, mark in zip(TABLE_POINTS, marks, strict=True))]
         if tapped == len(TABLE_POINTS):
             lines.append("All three points are tapped: press N for the automatic taps.")
         if note:

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from fixwizard.solver.solve import MIN_TAPS
-from fixwizard.tui.choices import FixtureChoice
+from fixwizard.tui.start.choices import FixtureChoice
 from fixwizard.workflow.advice import TapAdvice
 from fixwizard.workflow.hover import CLEARANCE_M, HoverPlan
 from fixwizard.workflow.identify import MeshVerdict, ranked
@@ -15,6 +15,7 @@ from fixwizard.workflow.live import LiveView
 
 def bounds_text(check: LiveView) -> str:
     bounds = check.bounds
+    assert bounds is not None, "only a check that kept poses has bounds"
     return (f"origin within {bounds.position_m * 1e3:.1f} mm, rotation within {np.degrees(bounds.rotation_rad):.1f} "
             f"deg, any point within {bounds.max_point_displacement_m * 1e3:.1f} mm")
 

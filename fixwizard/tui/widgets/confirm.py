@@ -7,7 +7,7 @@ from collections.abc import Iterable
 from textual.widgets import Button
 
 from fixwizard.tui import keys
-from fixwizard.tui.dialog import Dialog
+from fixwizard.tui.widgets.dialog import Dialog
 
 
 class Confirm(Dialog[bool]):

@@ -8,9 +8,9 @@ from pathlib import Path
 from fixwizard.calibration.errors import CalibrationFileError
 from fixwizard.calibration.store import load_calibration
 from fixwizard.errors import FixwizardError
-from fixwizard.fixture import load_fixture
-from fixwizard.tui.context import WizardContext
-from fixwizard.tui.errors import ResumeRefused, error_text
+from fixwizard.fixture import Fixture, load_fixture
+from fixwizard.tui.cell import Cell, Resumed, Sampling, SavedCalibration
+from fixwizard.tui.widgets.errors import ResumeRefused, error_text
 from fixwizard.workflow.session import (
     SUFFIX,
     SamplingSession,
@@ -19,29 +19,27 @@ from fixwizard.workflow.session import (
 )
 
 
-def start_session(context: WizardContext) -> SamplingSession:
-    """Create ``sessions_dir/<fixture>-<time>.jsonl`` for the context's fixture and tip calibration."""
-    fixture, calibration = context.fixture, context.calibration
-    if fixture is None or calibration is None or context.calibration_path is None:
-        raise SessionError("a session needs a fixture and a saved tip calibration: choose both on the start screen")
+def start_session(cell: Cell, fixture: Fixture, tip: SavedCalibration) -> SamplingSession:
+    """Create ``sessions_dir/<fixture>-<time>.jsonl`` for ``fixture`` and the tip calibration."""
+    calibration = tip.calibration
     fixture_info = {"name": fixture.path.stem, "path": str(fixture.path.resolve()), "units": fixture.units,
                     "sha256": fixture.sha256}
-    tip_info = {"name": calibration.name, "calibration": str(context.calibration_path.resolve()),
+    tip_info = {"name": calibration.name, "calibration": str(tip.path.resolve()),
                 "tcp_p_tip_m": calibration.tcp_p_tip_m.tolist(), "ball_diameter_m": calibration.ball_diameter_m,
                 "sample_bound_m": calibration.sample_bound_m}
-    path = context.sessions_dir / f"{fixture.path.stem}-{datetime.now():%Y%m%d-%H%M%S}{SUFFIX}"
-    return SamplingSession.create(path, fixture_info, tip_info, robot=context.robot_name)
+    path = cell.sessions_dir / f"{fixture.path.stem}-{datetime.now():%Y%m%d-%H%M%S}{SUFFIX}"
+    return SamplingSession.create(path, fixture_info, tip_info, robot=cell.robot_name)
 
 
-def resume_session(context: WizardContext, path: Path) -> str:
-    """Open the session at ``path`` and set the context's session, fixture and tip calibration from it; returns
-    what was opened, in words. Refused when it was recorded on another robot or its mesh changed since."""
+def resume_session(cell: Cell, path: Path) -> Resumed:
+    """Open the session at ``path`` with the fixture and tip calibration it names, and say what was opened, in
+    words. Refused when it was recorded on another robot or its mesh changed since."""
     session = SamplingSession.open(path)
     try:
         header = session.header
-        if header.get("robot") != context.robot_name:
+        if header.get("robot") != cell.robot_name:
             raise SessionError(f"the session {path.name} was recorded on '{header.get('robot')}', not on "
-                               f"'{context.robot_name}': resume it with that robot, or start a new session")
+                               f"'{cell.robot_name}': resume it with that robot, or start a new session")
         fixture_info, tip_info = header["fixture"], header["tip"]
         fixture = load_fixture(fixture_info["path"], fixture_info["units"])
         if fixture.sha256 != fixture_info["sha256"]:
@@ -60,9 +58,8 @@ def resume_session(context: WizardContext, path: Path) -> str:
     except BaseException:
         session.release()
         raise
-    context.session, context.fixture = session, fixture
-    context.calibration, context.calibration_path = calibration, calibration_path
-    return resumed_text(session, fixture.path, calibration_path)
+    return Resumed(Sampling(session, fixture, SavedCalibration(calibration, calibration_path)),
+                   resumed_text(session, fixture.path, calibration_path))
 
 
 def resumed_text(session: SamplingSession, mesh: Path, calibration_path: Path) -> str:

@@ -21,15 +21,14 @@ from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Select, Static
 
 from fixwizard import report
-from fixwizard.calibration.store import TipCalibration
 from fixwizard.errors import FixwizardError
 from fixwizard.fixture import Fixture
 from fixwizard.robot.base import RobotError, TapResult
 from fixwizard.solver.search import SearchCancelled
 from fixwizard.tui import keys
-from fixwizard.tui.background import ShownError, run_in_thread
-from fixwizard.tui.context import WizardContext
-from fixwizard.tui.errors import error_message
+from fixwizard.tui.cell import Cell, SavedCalibration
+from fixwizard.tui.widgets.errors import error_message
+from fixwizard.tui.workers import ShownError, in_thread
 from fixwizard.workflow.cell_reports import scan
 from fixwizard.workflow.live import tap_surface_distances_m
 from fixwizard.workflow.session import SUFFIX, SamplingSession
@@ -51,7 +50,7 @@ CHECKS_FOLDER = "checks"
 
 
 class CheckScreen(Screen[None]):
-    """Check a calibrated fixture with a few new taps, on the context's robot and tip calibration."""
+    """Check a calibrated fixture with a few new taps, on the cell's robot with the stored tip calibration ``tip``."""
 
     BINDINGS: ClassVar[list[BindingType]] = [
         keys.binding(keys.BACK),
@@ -65,11 +64,12 @@ class CheckScreen(Screen[None]):
                   "ball 5-10 mm above the surface, then tap) and check: the taps either fit the report's pose, or "
                   "prove the fixture has moved. Esc goes back to the start screen.")
 
-    def __init__(self, context: WizardContext, calibration: TipCalibration) -> None:
+    def __init__(self, cell: Cell, tip: SavedCalibration) -> None:
         super().__init__()
-        self.context = context
-        self.calibration = calibration
-        self.reports = {name: loaded for name, loaded in scan(context.reports_dir).newest.items()
+        self.cell = cell
+        self.tip = tip
+        self.calibration = tip.calibration
+        self.reports = {name: loaded for name, loaded in scan(cell.reports_dir).newest.items()
                         if loaded.pose_to_use() is not None}
         self.busy = False
         self.loaded: report.Report | None = None
@@ -81,7 +81,7 @@ class CheckScreen(Screen[None]):
         self._cancel = threading.Event()
 
     def compose(self) -> ComposeResult:
-        simulated = " (SIMULATED)" if self.context.simulated else ""
+        simulated = " (SIMULATED)" if self.cell.simulated else ""
         yield Static(f"Check a calibrated fixture{simulated}: is it still where its report says?", id="check-title",
                      markup=False)
         options = [(f"{name}: {loaded.status}{' SIMULATED' if loaded.simulated else ''}, {loaded.path.name}", name)
@@ -101,11 +101,11 @@ class CheckScreen(Screen[None]):
         for column in COLUMNS:
             table.add_column(column, key=column)
         if not self.reports:
-            self._say(f"No report with a pose in {self.context.reports_dir}: calibrate a fixture first (Esc goes "
+            self._say(f"No report with a pose in {self.cell.reports_dir}: calibrate a fixture first (Esc goes "
                       "back).")
             return
         self._choose(str(self.query_one("#check-fixture", Select).value))
-        self._run(lambda: self.context.robot.freedrive(True), lambda _: None)
+        self._run(lambda: self.cell.robot.freedrive(True), lambda _: None)
 
     def on_unmount(self) -> None:
         self._cancel.set()
@@ -149,7 +149,7 @@ class CheckScreen(Screen[None]):
             if self.loaded is loaded:
                 self.query_one("#check-suggest", Static).update(f"{error_message(error)}")
 
-        run_in_thread(self, load, loaded_mesh, failed, group="check-load", modal=False)
+        in_thread(self, load, loaded_mesh, failed, modal=False)
 
     def _show_suggestions(self) -> None:
         lines = [f"Tap {SUGGESTED_TAPS[0]}-{SUGGESTED_TAPS[1]} points spread over the fixture, e.g.:"]
@@ -160,7 +160,7 @@ class CheckScreen(Screen[None]):
     # --- keys ---
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
-        if action in keys.SIMULATED_ACTIONS and self.context.hands is None:
+        if action in keys.SIMULATED_ACTIONS and self.cell.hands is None:
             return False
         if action in ROBOT_ACTIONS and self.busy:
             return None
@@ -208,10 +208,10 @@ class CheckScreen(Screen[None]):
                 self._say("")
                 self._show_verdict()
 
-        run_in_thread(self, work, done, group="check", modal=True)
+        in_thread(self, work, done, modal=True)
 
     def action_simulated_hands(self) -> None:
-        hands = self.context.hands
+        hands = self.cell.hands
         if not self.points or hands is None:
             self._say("No suggested point yet.")
             return
@@ -223,7 +223,7 @@ class CheckScreen(Screen[None]):
 
     def action_back(self) -> None:
         self._cancel.set()
-        self._run(lambda: self.context.robot.freedrive(False), lambda _: self._leave(),
+        self._run(lambda: self.cell.robot.freedrive(False), lambda _: self._leave(),
                   on_failed=lambda _: self._leave())
 
     def _leave(self) -> None:
@@ -243,13 +243,12 @@ class CheckScreen(Screen[None]):
             if callback is not None:
                 callback(value)
 
-        run_in_thread(self, call, lambda value: finish(on_done, value),
-                      lambda error: finish(on_failed or (lambda _: self._show_taps()), error),
-                      group="check-robot", modal=on_failed is None)
+        in_thread(self, call, lambda value: finish(on_done, value),
+                  lambda error: finish(on_failed or (lambda _: self._show_taps()), error), modal=on_failed is None)
 
     def _tap_and_record(self) -> None:
         """Freedrive off, tap, journal the tap, freedrive on again (also after a failed tap)."""
-        robot = self.context.robot
+        robot = self.cell.robot
         try:
             robot.freedrive(False)
             try:
@@ -277,14 +276,14 @@ class CheckScreen(Screen[None]):
         if self.journal is None:
             loaded, fixture, calibration = self.loaded, self.fixture, self.calibration
             assert loaded is not None and fixture is not None  # taps wait for the mesh
-            folder = self.context.sessions_dir / CHECKS_FOLDER
+            folder = self.cell.sessions_dir / CHECKS_FOLDER
             path = folder / f"{loaded.name}-{dt.datetime.now():%Y%m%d-%H%M%S-%f}{SUFFIX}"
             self.journal = SamplingSession.create(
                 path, {"name": loaded.name, "path": str(fixture.path.resolve()), "units": fixture.units,
                        "sha256": fixture.sha256, "report": str(loaded.path.resolve())},
-                {"name": calibration.name, "calibration": str(self.context.calibration_path or ""),
+                {"name": calibration.name, "calibration": str(self.tip.path),
                  "tcp_p_tip_m": calibration.tcp_p_tip_m.tolist(), "ball_diameter_m": calibration.ball_diameter_m,
-                 "sample_bound_m": calibration.sample_bound_m}, robot=self.context.robot_name)
+                 "sample_bound_m": calibration.sample_bound_m}, robot=self.cell.robot_name)
         return self.journal
 
     def _finish_journal(self) -> None:

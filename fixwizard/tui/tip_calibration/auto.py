@@ -8,7 +8,8 @@ from textual.containers import Horizontal
 from textual.widgets import ProgressBar, Static
 
 from fixwizard.tui import keys
-from fixwizard.tui.tip_calibration_step import CalibrationStepScreen
+from fixwizard.tui.tip_calibration.step import CalibrationStepScreen
+from fixwizard.tui.workers import services
 from fixwizard.workflow.robot_calibration import Cancelled, Step
 
 AUTO_TEXT = (
@@ -63,10 +64,10 @@ class AutoTapsScreen(CalibrationStepScreen):
         return allowed
 
     def action_go(self) -> None:
-        robot, workflow, app = self.context.robot, self.workflow, self.app
+        robot, workflow, app = self.cell.robot, self.workflow, self.app
         cancel = threading.Event()
         self._cancel = cancel
-        app.cancel_on_stop(cancel)
+        services(self).cancel_on_stop(cancel)
 
         def progress(step: Step, done: int, total: int) -> None:
             app.call_from_thread(self._progress, step, done)
@@ -102,7 +103,7 @@ class AutoTapsScreen(CalibrationStepScreen):
 
     def _ended(self, outcome: Exception | None) -> None:
         if self._cancel is not None:
-            self.app.forget_cancel(self._cancel)
+            services(self).forget_cancel(self._cancel)
         self._cancel = None
         self.refresh_bindings()
         if outcome is None:

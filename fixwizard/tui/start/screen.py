@@ -1,6 +1,7 @@
 """The start screen: the robot, the fixture (listed or typed, with its units and size), the tip calibration
-(stored or new) and, when there are any, an unfinished session to resume. It fills the context and
-dismisses with True; the app decides what comes next. "Check a calibrated fixture" opens ``CheckScreen`` over it
+(stored or new) and, when there are any, an unfinished session to resume. It dismisses with what the operator
+chose (``NewSession``: the fixture and a stored tip calibration or none yet; or the ``Resumed`` session); the app
+decides what comes next. "Check a calibrated fixture" opens ``CheckScreen`` over it
 (with the chosen stored tip calibration); back from there is back here."""
 
 from collections.abc import Callable
@@ -14,9 +15,10 @@ from textual.widgets import Button, Input, Select, Static
 from fixwizard.demo import DEMO_MESH
 from fixwizard.errors import FixwizardError, MeshError, MeshUnitsError
 from fixwizard.fixture import Fixture, load_fixture
-from fixwizard.tui.background import ShownError, run_in_thread
-from fixwizard.tui.check import CheckScreen
-from fixwizard.tui.choices import (
+from fixwizard.tui.cell import Cell, NewSession, Resumed, SavedCalibration, StartChoice
+from fixwizard.tui.check.screen import CheckScreen
+from fixwizard.tui.launch import switch_to_simulated, switch_to_ur_arm
+from fixwizard.tui.start.choices import (
     CalibrationChoice,
     calibration_choices,
     describe_calibration,
@@ -24,19 +26,19 @@ from fixwizard.tui.choices import (
     fixture_choices,
     session_choices,
 )
-from fixwizard.tui.context import WizardContext
-from fixwizard.tui.errors import ResumeRefused, error_message
-from fixwizard.tui.launch import use_simulated_cell, use_ur_arm
-from fixwizard.tui.sessions import resume_refusal, resume_session
+from fixwizard.tui.start.sessions import resume_refusal, resume_session
+from fixwizard.tui.widgets.errors import ResumeRefused, error_message
+from fixwizard.tui.workers import ShownError, in_thread, services
 
 NEW = "new"
 UNITS = [("mm", "mm"), ("m", "m")]
 
 
-class StartScreen(Screen[bool]):
+class StartScreen(Screen[StartChoice]):
     """Choose robot, fixture, tip calibration, or an unfinished session to resume. ``refusal`` is why a
     requested resume (``--resume``) failed: shown in a message and kept at the top of the screen. ``left`` is
-    the session the operator just left sampling from: it is selected to resume."""
+    the session the operator just left sampling from: it is selected to resume. Switching the robot here makes
+``cell`` a new one and tells the app (``use_cell``)."""
 
     HELP_TITLE = "start"
     HELP_ABOUT = ("Choose the robot (the simulated demo cell, or type a UR arm's IP address), the fixture's mesh "
@@ -45,19 +47,20 @@ class StartScreen(Screen[bool]):
                   "calibration. Then Continue; \"Check a calibrated fixture\" tests whether a fixture has moved.")
 
 
-    def __init__(self, context: WizardContext, refusal: ResumeRefused | None = None, left: Path | None = None) -> None:
+    def __init__(self, cell: Cell, refusal: ResumeRefused | None = None, left: Path | None = None) -> None:
         super().__init__()
-        self.context = context
+        self.cell = cell
         self.refusal = refusal
         self.left = left
-        self._fixtures = fixture_choices(context.fixtures_dir)
-        self._calibrations = {str(choice.path): choice for choice in calibration_choices(context.calibrations_dir)}
-        self._sessions = session_choices(context.sessions_dir)
+        self.fixture: Fixture | None = None  # the selected fixture once it has loaded
+        self._fixtures = fixture_choices(cell.fixtures_dir)
+        self._calibrations = {str(choice.path): choice for choice in calibration_choices(cell.calibrations_dir)}
+        self._sessions = session_choices(cell.sessions_dir)
         self._requested: tuple[Path, str] | None = None
         self._loaded: tuple[Path, str] | None = None
 
     def compose(self) -> ComposeResult:
-        robot_note = " (no real arm moves)" if self.context.simulated else ""
+        robot_note = " (no real arm moves)" if self.cell.simulated else ""
         with VerticalScroll():
             yield Static("Start: choose the fixture and the tip calibration. Tab moves between fields, Enter "
                          "opens a list or presses a button.", classes="title")
@@ -65,11 +68,11 @@ class StartScreen(Screen[bool]):
                 yield Static(error_message(self.refusal), id="resume-problem", classes="refusal", markup=False)
             with Horizontal(classes="row"):
                 yield Static("Robot", classes="label")
-                yield Static(f"{self.context.robot_name}{robot_note}", id="robot", markup=False)
+                yield Static(f"{self.cell.robot_name}{robot_note}", id="robot", markup=False)
             yield Input(placeholder="or type a UR arm's IP address and press Enter", id="robot-host",
                         compact=True)
             yield Button("Use the simulated demo cell", id="use-simulated", compact=True,
-                         classes="" if not self.context.simulated else "-hidden")
+                         classes="" if not self.cell.simulated else "-hidden")
             with Horizontal(classes="row"):
                 yield Static("Fixture", classes="label")
                 yield Select([(choice.label, str(choice.path)) for choice in self._fixtures], id="fixture",
@@ -105,7 +108,7 @@ class StartScreen(Screen[bool]):
             self._show_session()
         self._load_fixture()
         if self.refusal is not None:
-            self.app.show_error(self.refusal)
+            services(self).show_error(self.refusal)
 
     def _preselected_session(self) -> str:
         """The session just left (to resume it), else a new one."""
@@ -114,7 +117,7 @@ class StartScreen(Screen[bool]):
     def _preselected_calibration(self) -> str:
         """The newest calibration made on this robot (choices are newest first), else a new calibration."""
         return next((key for key, choice in self._calibrations.items()
-                     if choice.calibration is not None and choice.calibration.robot == self.context.robot_name), NEW)
+                     if choice.calibration is not None and choice.calibration.robot == self.cell.robot_name), NEW)
 
     @staticmethod
     def _calibration_label(choice: CalibrationChoice) -> str:
@@ -154,7 +157,7 @@ class StartScreen(Screen[bool]):
         if not text:
             return
         if event.input.id == "robot-host":
-            self._switch_robot(lambda: use_ur_arm(self.context, text))
+            self._switch_robot(lambda cell: switch_to_ur_arm(cell, text))
             return
         path = Path(text).expanduser()
         fixture_select = self.query_one("#fixture", Select)
@@ -169,18 +172,18 @@ class StartScreen(Screen[bool]):
         if selected == self._requested:
             return
         self._requested, self._loaded = selected, None
-        self.context.fixture = None
+        self.fixture = None
         self._show_fixture("loading...", problem=False)
-        run_in_thread(self, lambda: load_fixture(*selected), lambda fixture: self._fixture_loaded(selected, fixture),
-                      lambda error: self._fixture_failed(selected, error), group="fixture", modal=False)
+        in_thread(self, lambda: load_fixture(*selected), lambda fixture: self._fixture_loaded(selected, fixture),
+                  lambda error: self._fixture_failed(selected, error), modal=False)
 
     def _fixture_loaded(self, selected: tuple[Path, str], fixture: Fixture) -> None:
         if selected != self._selected_fixture():
             return
         self._loaded = selected
-        self.context.fixture = fixture
+        self.fixture = fixture
         text = describe_fixture(fixture)
-        if self.context.simulated and fixture.path.resolve() != DEMO_MESH:
+        if self.cell.simulated and fixture.path.resolve() != DEMO_MESH:
             text += "\nSIMULATED: the simulated cell holds the demo bracket, so taps will not fit this mesh"
         self._show_fixture(text, problem=False)
 
@@ -223,36 +226,38 @@ class StartScreen(Screen[bool]):
         elif event.button.id == "check":
             self._check()
         elif event.button.id == "use-simulated":
-            self._switch_robot(lambda: use_simulated_cell(self.context))
+            self._switch_robot(switch_to_simulated)
 
-    def _switch_robot(self, switch: Callable[[], None]) -> None:
-        """Close the robot, switch the context to another one and connect it (worker thread); a failed
-        connection shows its message and leaves the new robot chosen, disconnected, for a reconnect."""
+    def _switch_robot(self, switch: Callable[[Cell], Cell]) -> None:
+        """Close the robot, switch to another cell and connect its robot (worker thread); a failed connection
+        shows its message and leaves the new robot chosen, disconnected, for a reconnect."""
 
-        def switch_and_connect() -> None:
-            switch()
-            self.app.call_from_thread(self._show_robot)
-            self.context.robot.connect()
+        def switch_and_connect() -> Cell:
+            cell = switch(self.cell)
+            self.app.call_from_thread(self._show_robot, cell)
+            cell.robot.connect()
+            return cell
 
-        run_in_thread(self, switch_and_connect, lambda _: self.notify(f"Connected to {self.context.robot_name}."),
-                      group="robot")
+        in_thread(self, switch_and_connect, lambda cell: self.notify(f"Connected to {cell.robot_name}."))
 
-    def _show_robot(self) -> None:
-        note = " (no real arm moves)" if self.context.simulated else ""
-        self.query_one("#robot", Static).update(f"{self.context.robot_name}{note}")
-        self.query_one("#use-simulated", Button).set_class(self.context.simulated, "-hidden")
-        self.app.refresh_robot_status()
+    def _show_robot(self, cell: Cell) -> None:
+        self.cell = cell
+        services(self).use_cell(cell)
+        note = " (no real arm moves)" if cell.simulated else ""
+        self.query_one("#robot", Static).update(f"{cell.robot_name}{note}")
+        self.query_one("#use-simulated", Button).set_class(cell.simulated, "-hidden")
+        services(self).refresh_robot_status()
 
-    def _resume(self, path: Path) -> str:
-        """Resume the session chosen in the list (worker thread); what was opened, in words."""
+    def _resume(self, path: Path) -> Resumed:
+        """Resume the session chosen in the list (worker thread)."""
         try:
-            return resume_session(self.context, path)
+            return resume_session(self.cell, path)
         except (FixwizardError, OSError) as error:
             raise resume_refusal(path, error) from error
 
-    def _resumed(self, opened: str) -> None:
-        self.app.notify_resumed(opened)
-        self.dismiss(True)
+    def _resumed(self, resumed: Resumed) -> None:
+        services(self).notify_resumed(resumed)
+        self.dismiss(resumed)
 
     def _check(self) -> None:
         """Check a calibrated fixture (``CheckScreen``) with the chosen stored tip calibration: its tip and ball."""
@@ -264,22 +269,20 @@ class StartScreen(Screen[bool]):
         if choice.calibration is None:
             self.notify("That tip calibration cannot be read; choose another.", severity="warning")
             return
-        self.context.calibration, self.context.calibration_path = choice.calibration, choice.path
-        self.app.push_screen(CheckScreen(self.context, choice.calibration))
+        self.app.push_screen(CheckScreen(self.cell, SavedCalibration(choice.calibration, choice.path)))
 
     def _continue(self) -> None:
         session_value = str(self.query_one("#session", Select).value) if self._sessions else NEW
         if session_value != NEW:
-            run_in_thread(self, lambda: self._resume(Path(session_value)), self._resumed, group="session")
+            in_thread(self, lambda: self._resume(Path(session_value)), self._resumed)
             return
-        if self.context.fixture is None or self._loaded != self._selected_fixture():
+        if self.fixture is None or self._loaded != self._selected_fixture():
             self.notify("Choose a fixture that loads first (see the message under Fixture).", severity="warning")
             return
         choice = self._chosen_calibration()
         if choice is not None and choice.calibration is None:
             self.notify("That tip calibration cannot be read; choose another or a new one.", severity="warning")
             return
-        self.context.calibration = None if choice is None else choice.calibration
-        self.context.calibration_path = None if choice is None else choice.path
-        self.context.session = None
-        self.dismiss(True)
+        tip = None if choice is None or choice.calibration is None else \
+            SavedCalibration(choice.calibration, choice.path)
+        self.dismiss(NewSession(self.fixture, tip))

@@ -1,5 +1,6 @@
 """What every tip-calibration screen shares: the step title, the workflow it drives, robot calls in a
-worker with the step's keys disabled meanwhile, and dismissing with "next", "back" or "redo"."""
+worker with the step's keys disabled meanwhile, and dismissing with "next", "back" or "redo" (the last step with
+the saved calibration instead of "next")"""
 
 from collections.abc import Callable
 from typing import Literal, TypeVar
@@ -10,13 +11,13 @@ from textual.screen import Screen
 from textual.widgets import Static
 
 from fixwizard.tui import keys
-from fixwizard.tui.background import ShownError, run_in_thread
-from fixwizard.tui.confirm import Confirm
-from fixwizard.tui.context import WizardContext
-from fixwizard.tui.doing import Doing
+from fixwizard.tui.cell import Cell, SavedCalibration
+from fixwizard.tui.widgets.confirm import Confirm
+from fixwizard.tui.widgets.doing import Doing
+from fixwizard.tui.workers import ShownError, in_thread
 from fixwizard.workflow.robot_calibration import RobotTipCalibration
 
-StepOutcome = Literal["next", "back", "redo"]
+StepOutcome = Literal["next", "back", "redo"] | SavedCalibration
 T = TypeVar("T")
 STEP_COUNT = 4
 
@@ -29,9 +30,9 @@ class CalibrationStepScreen(Screen[StepOutcome]):
     TITLE_TEXT = ""
     HELP_ABOUT = ""
 
-    def __init__(self, context: WizardContext, workflow: RobotTipCalibration) -> None:
+    def __init__(self, cell: Cell, workflow: RobotTipCalibration) -> None:
         super().__init__()
-        self.context = context
+        self.cell = cell
         self.workflow = workflow
         self.busy = False
         self.HELP_TITLE = f"tip calibration, step {self.STEP} of {STEP_COUNT}: {self.TITLE_TEXT}"
@@ -46,7 +47,7 @@ class CalibrationStepScreen(Screen[StepOutcome]):
         yield from ()
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
-        if action in keys.SIMULATED_ACTIONS and self.context.hands is None:
+        if action in keys.SIMULATED_ACTIONS and self.cell.hands is None:
             return False
         return None if self.busy else True
 
@@ -77,7 +78,7 @@ class CalibrationStepScreen(Screen[StepOutcome]):
             if on_failed is not None:
                 on_failed(error)
 
-        run_in_thread(self, call, done, failed)
+        in_thread(self, call, done, failed)
 
     def _set_busy(self, busy: bool) -> None:
         self.busy = busy

@@ -13,8 +13,9 @@ from textual.widgets import Button, Input, Static
 from fixwizard.calibration.calibrate import MAX_BALL_DIAMETER_M
 from fixwizard.calibration.store import TipCalibration, save_calibration
 from fixwizard.calibration.verdict import tip_verdict
-from fixwizard.tui.dialog import Dialog
-from fixwizard.tui.tip_calibration_step import CalibrationStepScreen
+from fixwizard.tui.cell import SavedCalibration
+from fixwizard.tui.tip_calibration.step import CalibrationStepScreen
+from fixwizard.tui.widgets.dialog import Dialog
 from fixwizard.workflow.tip_calibration import summary_lines
 
 DEFAULT_BALL_DIAMETER_M = 0.003
@@ -42,7 +43,7 @@ def details_lines(calibration: TipCalibration) -> list[str]:
 
 
 class CalibrationResultScreen(CalibrationStepScreen):
-    """Show the calibration; Accept saves it and fills the context, Redo starts again."""
+    """Show the calibration; Accept saves it and dismisses with it, Redo starts again."""
 
     STEP = 4
     TITLE_TEXT = "result"
@@ -56,7 +57,7 @@ class CalibrationResultScreen(CalibrationStepScreen):
         yield Static("Computing...", id="result-figures", markup=False)
         with Horizontal(classes="field"):
             yield Static("Save as", classes="field-label")
-            yield Input(default_name(self.context.simulated), id="name", compact=True)
+            yield Input(default_name(self.cell.simulated), id="name", compact=True)
         with Horizontal(classes="field"):
             yield Static("Ball diameter", classes="field-label")
             yield Input(f"{DEFAULT_BALL_DIAMETER_M * 1e3:g}", id="ball-diameter", compact=True, type="number")
@@ -68,7 +69,7 @@ class CalibrationResultScreen(CalibrationStepScreen):
 
     def on_mount(self) -> None:
         self.query_one("#accept", Button).disabled = True
-        self.run_robot(lambda: self.workflow.result(robot=self.context.robot_name), self._show_result,
+        self.run_robot(lambda: self.workflow.result(robot=self.cell.robot_name), self._show_result,
                        self._show_problem)
         self.query_one("#accept", Button).focus()
 
@@ -99,7 +100,7 @@ class CalibrationResultScreen(CalibrationStepScreen):
         if not NAME_PATTERN.fullmatch(name):
             self.notify("Give a file name of letters, digits, '-', '_' or '.'.", severity="warning")
             return
-        path = self.context.calibrations_dir / f"{name}.yaml"
+        path = self.cell.calibrations_dir / f"{name}.yaml"
         if path.exists():
             self.notify(f"{path} exists already: choose another name.", severity="warning")
             return
@@ -113,14 +114,13 @@ class CalibrationResultScreen(CalibrationStepScreen):
             return
         self.run_robot(lambda: self._save(name, ball_diameter_m, path), self._saved)
 
-    def _save(self, name: str, ball_diameter_m: float, path: Path) -> tuple[TipCalibration, Path]:
+    def _save(self, name: str, ball_diameter_m: float, path: Path) -> SavedCalibration:
         """The calibration with the operator's name and ball diameter, written to ``path`` (worker thread)."""
         self.workflow.ball_diameter_m = ball_diameter_m
-        calibration = self.workflow.result(name, self.context.robot_name)
-        return calibration, save_calibration(calibration, path)
+        calibration = self.workflow.result(name, self.cell.robot_name)
+        return SavedCalibration(calibration, save_calibration(calibration, path))
 
-    def _saved(self, saved: tuple[TipCalibration, Path]) -> None:
-        self.context.calibration, self.context.calibration_path = saved
-        self.notify(f"Tip calibration saved to {saved[1]}")
-        self.dismiss("next")
+    def _saved(self, saved: SavedCalibration) -> None:
+        self.notify(f"Tip calibration saved to {saved.path}")
+        self.dismiss(saved)
 

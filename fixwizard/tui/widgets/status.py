@@ -7,6 +7,7 @@ from textual.widgets import Static
 
 from fixwizard.robot.base import RobotStatus
 from fixwizard.tui import keys
+from fixwizard.tui.workers import services
 
 
 def status_text(status: RobotStatus | None, robot_name: str, simulated: bool, stopped: bool = False) -> Text:
@@ -47,8 +48,8 @@ class StatusBar(Static):
         self.watch(self.app, "stopped", lambda _: self._show())
 
     def _show(self) -> None:
-        app = self.app
-        status, context, stopped = app.robot_status, app.context, app.stopped
-        self.update(status_text(status, context.robot_name, context.simulated, stopped))
+        app = services(self)
+        status, cell, stopped = app.robot_status, app.cell, app.stopped
+        self.update(status_text(status, cell.robot_name, cell.simulated, stopped))
         self.set_class(stopped or (status is not None and (not status.connected or status.protective_stop
                                                            or status.emergency_stop)), "-alarm")

@@ -1,7 +1,7 @@
 """The solve screen: the full solve of the session's taps in the fixture's solver process, with the candidate poses
 left, elapsed time and how far the search has got (its grid levels and cell budget on ``o``), then each phase of the
-estimates in words; Esc cancels (the process is stopped and a fresh one started). Dismisses with the ``Solution``
-(also stored in ``context.solution``), or None when cancelled or after an input problem."""
+estimates in words; Esc cancels (the process is stopped and a fresh one started). Dismisses with the ``Solution``,
+or None when cancelled or after an input problem."""
 
 import time
 from collections.abc import Callable
@@ -14,9 +14,9 @@ from textual.widgets import Footer, ProgressBar, Static
 from fixwizard.solver.search import SearchProgress, search_budget
 from fixwizard.solver.solve import Solution, SolveStage
 from fixwizard.tui import keys
-from fixwizard.tui.background import run_in_solver
-from fixwizard.tui.context import WizardContext
-from fixwizard.tui.progress_text import stage_words
+from fixwizard.tui.cell import Cell, Sampling
+from fixwizard.tui.solve.progress_text import stage_words
+from fixwizard.tui.workers import run_in_solver
 from fixwizard.workflow.solver_process import Event, Failed, Progress, Solved, SolveRequest, SolverProcess
 
 TICK_S = 0.25
@@ -33,7 +33,7 @@ def budget_used(progress: SearchProgress, max_cells: float) -> float:
 
 
 class SolveScreen(Screen[Solution | None]):
-    """Runs the full solve in ``solver`` (default: the context's solver process)."""
+    """Runs the full solve of ``sampling``'s taps in ``solver`` (the fixture's solver process)."""
 
     BINDINGS = [keys.binding(keys.BACK, "Cancel"), keys.binding(keys.DETAILS)]
     HELP_TITLE = "solving"
@@ -41,10 +41,11 @@ class SolveScreen(Screen[Solution | None]):
                   "Wait for the result, or press Esc to cancel and go back to sampling (the taps are kept).")
     clock: Callable[[], float] = staticmethod(time.monotonic)
 
-    def __init__(self, context: WizardContext, solver: SolverProcess | None = None) -> None:
+    def __init__(self, cell: Cell, sampling: Sampling, solver: SolverProcess) -> None:
         super().__init__()
-        self.context = context
-        self.solver = solver or context.solver_process()
+        self.cell = cell
+        self.sampling = sampling
+        self.solver = solver
         self.progress: SearchProgress | None = None
         self.stage: SolveStage | None = None
         self.running = False
@@ -53,9 +54,9 @@ class SolveScreen(Screen[Solution | None]):
         self._details = False
 
     def compose(self) -> ComposeResult:
-        context = self.context
-        yield Static(f"Solving{' (SIMULATED)' if context.simulated else ''}: every pose of "
-                     f"{context.fixture.path.name} that fits your {len(context.session.taps)} taps", id="title",
+        sampling = self.sampling
+        yield Static(f"Solving{' (SIMULATED)' if self.cell.simulated else ''}: every pose of "
+                     f"{sampling.fixture.path.name} that fits your {len(sampling.session.taps)} taps", id="title",
                      markup=False)
         yield Static("The search keeps every pose that fits the taps and looks closer at each pass. The bar shows "
                      "how far it has got; o shows the search's own figures.", id="about", markup=False)
@@ -68,10 +69,10 @@ class SolveScreen(Screen[Solution | None]):
         self._started = self.clock()
         self._show()
         self.set_interval(TICK_S, self._show)
-        context, calibration = self.context, self.context.calibration
+        sampling, calibration = self.sampling, self.sampling.calibration
         self.running = True
-        run_in_solver(self, self.solver, SolveRequest(context.session.base_p_taps, calibration.ball_diameter_m,
-                                                      calibration.sample_bound_m, context.max_cells), self._event)
+        run_in_solver(self, self.solver, SolveRequest(sampling.session.base_p_taps, calibration.ball_diameter_m,
+                                                      calibration.sample_bound_m, self.cell.max_cells), self._event)
 
     def on_unmount(self) -> None:
         if self.running:  # nobody is left to show the result
@@ -94,7 +95,6 @@ class SolveScreen(Screen[Solution | None]):
             self.stage = event.stage or self.stage
         elif isinstance(event, Solved):
             self.running = False
-            self.context.solution = event.solution
             self.dismiss(event.solution)
         elif isinstance(event, Failed):
             self.running = False
@@ -104,7 +104,7 @@ class SolveScreen(Screen[Solution | None]):
 
     def _show(self) -> None:
         elapsed_s = self.clock() - self._started
-        progress, max_cells = self.progress, self.context.max_cells
+        progress, max_cells = self.progress, self.cell.max_cells
         if progress is None:
             lines = ["Preparing the fixture's distance map...", "Candidate poses left: -"]
         else:

@@ -50,7 +50,8 @@ def calibration_choices(calibrations_dir: Path) -> list[CalibrationChoice]:
             readable.append(CalibrationChoice(path, load_calibration(path)))
         except CalibrationFileError as error:
             unreadable.append(CalibrationChoice(path, None, str(error)))
-    return sorted(readable, key=lambda choice: choice.calibration.created, reverse=True) + unreadable
+    return sorted(readable, key=lambda choice: choice.calibration.created if choice.calibration else "",
+                  reverse=True) + unreadable
 
 
 def describe_calibration(calibration: TipCalibration) -> str:

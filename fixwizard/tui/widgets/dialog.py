@@ -2,7 +2,7 @@
 subclasses choose the buttons and the result. n or Esc closes it as its first button would."""
 
 from collections.abc import Iterable
-from typing import TypeVar
+from typing import TypeVar, cast
 
 from textual.app import ComposeResult
 from textual.containers import Horizontal, Vertical, VerticalScroll
@@ -42,7 +42,7 @@ class Dialog(ModalScreen[ResultType]):
         self.query_one(f"#{self.focused_id}", Button).focus()
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
-        self.dismiss(event.button.id)
+        self.dismiss(cast(ResultType, event.button.id))  # a plain dialog's result is the button's id
 
     def action_no(self) -> None:
-        self.dismiss("ok")
+        self.dismiss(cast(ResultType, "ok"))

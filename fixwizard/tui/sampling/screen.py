@@ -10,10 +10,11 @@ journaled (fsynced) by the session before the table shows it, so an error never 
 
 import time
 from collections.abc import Callable
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 from rich.text import Text
+from textual import work
 from textual.app import ComposeResult
 from textual.containers import Horizontal
 from textual.screen import Screen
@@ -24,16 +25,8 @@ from fixwizard.plots.taps_view import taps_view
 from fixwizard.robot.base import NoContact, ProtectiveStop, RobotError, TapResult
 from fixwizard.solver.solve import MIN_TAPS
 from fixwizard.tui import keys
-from fixwizard.tui.background import run_in_solver
-from fixwizard.tui.choices import FixtureChoice, fixture_choices
-from fixwizard.tui.confirm import Confirm, ConfirmMove
-from fixwizard.tui.context import WizardContext
-from fixwizard.tui.dialog import Dialog
-from fixwizard.tui.doing import TICK_S, Doing, seconds_text
-from fixwizard.tui.errors import error_message
-from fixwizard.tui.picture_view import PictureView
-from fixwizard.tui.progress_text import progress_words
-from fixwizard.tui.sampling_text import (
+from fixwizard.tui.cell import Cell, Sampling
+from fixwizard.tui.sampling.text import (
     NO_SAFE_HOVER,
     guide_text,
     hover_question,
@@ -42,6 +35,14 @@ from fixwizard.tui.sampling_text import (
     live_text,
     robot_problem_text,
 )
+from fixwizard.tui.solve.progress_text import progress_words
+from fixwizard.tui.start.choices import FixtureChoice, fixture_choices
+from fixwizard.tui.widgets.confirm import Confirm, ConfirmMove
+from fixwizard.tui.widgets.dialog import Dialog
+from fixwizard.tui.widgets.doing import TICK_S, Doing, seconds_text
+from fixwizard.tui.widgets.errors import error_message
+from fixwizard.tui.widgets.picture_view import PictureView
+from fixwizard.tui.workers import run_in_solver, services
 from fixwizard.workflow.advice import TapAdvice
 from fixwizard.workflow.hover import HoverPlan, hover_path
 from fixwizard.workflow.live import LiveView
@@ -66,7 +67,8 @@ ShownError = FixwizardError | OSError
 
 
 class SamplingScreen(Screen[bool]):
-    """Tap the fixture; dismisses with True to solve, False to leave (asks; the session stays resumable)."""
+    """Tap the fixture of ``sampling`` (the live check in ``solver``, the fixture's solver process); dismisses with
+    True to solve, False to leave (asks; the session stays resumable)."""
 
     BINDINGS = [
         keys.binding(keys.BACK),
@@ -86,9 +88,12 @@ class SamplingScreen(Screen[bool]):
                   "for you). Solve when the check says unique. Esc goes back to the start screen; the session "
                   "stays there to resume.")
 
-    def __init__(self, context: WizardContext) -> None:
+    def __init__(self, cell: Cell, sampling: Sampling, solver: SolverProcess) -> None:
         super().__init__()
-        self.context = context
+        self.cell = cell
+        self.sampling = sampling
+        self.session, self.fixture, self.calibration = sampling.session, sampling.fixture, sampling.calibration
+        self.solver = solver
         self.busy = False
         self.live: LiveView | None = None
         self.advice: TapAdvice | None = None
@@ -98,7 +103,7 @@ class SamplingScreen(Screen[bool]):
         self._live_started = 0.0  # time.monotonic() of its start
         self._distances_mm = np.zeros(0)  # of the first taps from the surface, under the shown check's estimate
         self._identify: SolverProcess | None = None
-        self._spread_index = len(context.session.taps)
+        self._spread_index = len(sampling.session.taps)
         self._stopped = False
         self._doing: Doing | None = None  # says what the running robot call does, on the note line
 
@@ -123,10 +128,9 @@ class SamplingScreen(Screen[bool]):
             table.add_column(column, key=column)
         self._show_taps()
         self.set_interval(TICK_S, self._count_live_seconds)
-        solver = self.context.solver_process()
-        self.run_worker(solver.start, thread=True, group="solver")  # warm (fixture loaded) by the third tap
+        self.run_worker(self.solver.start, thread=True, group="solver")  # warm (fixture loaded) by the third tap
         self._start_live_check()
-        self._run_robot(lambda: self.context.robot.freedrive(True), lambda _: None)
+        self._run_robot(lambda: self.cell.robot.freedrive(True), lambda _: None)
 
     def on_unmount(self) -> None:
         self._cancel_live()  # nobody is left to show them; the solver process stays for the solve
@@ -135,7 +139,7 @@ class SamplingScreen(Screen[bool]):
     # --- keys ---
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
-        if action in keys.SIMULATED_ACTIONS and self.context.hands is None:
+        if action in keys.SIMULATED_ACTIONS and self.cell.hands is None:
             return False
         if action == keys.UNLOCK.action and not self._stopped:
             return False
@@ -149,37 +153,37 @@ class SamplingScreen(Screen[bool]):
 
     def action_undo(self) -> None:
         try:
-            tap = self.context.session.undo()
+            tap = self.session.undo()
         except (FixwizardError, OSError) as error:
             self._problem(error_message(error))
             return
         if tap is None:
             self._say("There is no tap to undo.")
             return
-        self._say(f"Tap {len(self.context.session.taps) + 1} undone; the journal keeps it, marked undone.")
+        self._say(f"Tap {len(self.session.taps) + 1} undone; the journal keeps it, marked undone.")
         self._taps_changed()
 
     def action_solve(self) -> None:
-        if len(self.context.session.taps) < MIN_TAPS:
+        if len(self.session.taps) < MIN_TAPS:
             self._problem(f"Tap at least {MIN_TAPS} points before solving; 10-20 over several faces give tight "
                           "bounds.")
             return
         self._cancel_live()
-        self._run_robot(lambda: self.context.robot.freedrive(False), lambda _: self.dismiss(True),
+        self._run_robot(lambda: self.cell.robot.freedrive(False), lambda _: self.dismiss(True),
                         on_failed=lambda _: self.dismiss(True), doing="Turning freedrive off, then solving")
 
     def action_back(self) -> None:
         """Back to the start screen, after asking: the session stays resumable there (and is selected)."""
-        count = len(self.context.session.taps)
+        count = len(self.session.taps)
 
         def answered(yes: bool | None) -> None:
             if yes:
                 self._cancel_live()
-                self._run_robot(lambda: self.context.robot.freedrive(False), lambda _: self.dismiss(False),
+                self._run_robot(lambda: self.cell.robot.freedrive(False), lambda _: self.dismiss(False),
                                 on_failed=lambda _: self.dismiss(False), doing="Turning freedrive off")
 
         self.app.push_screen(Confirm("Leave sampling?", f"Back to the start screen. The session "
-                                     f"{self.context.session.path.name} with its {count} tap"
+                                     f"{self.session.path.name} with its {count} tap"
                                      f"{'' if count == 1 else 's'} stays saved; it is selected there to resume.",
                                      "Leave", "Stay"), answered)
 
@@ -194,25 +198,25 @@ class SamplingScreen(Screen[bool]):
 
         def answered(move: bool | None) -> None:
             if move and getattr(self.app, "stopped", False):
-                self.app.refuse_motion()
+                services(self).refuse_motion()
             elif move:
                 self._run_robot(lambda: self._move_above(plan), lambda _: self._say(
                     "The ball hovers above the suggested point (freedrive is on again): press "
                     f"{keys.name(keys.TAP)} to tap it."), doing="Moving above the suggested point")
 
-        self.app.push_screen(ConfirmMove("Move the robot?", hover_question(plan, self.context.simulated)), answered)
+        self.app.push_screen(ConfirmMove("Move the robot?", hover_question(plan, self.cell.simulated)), answered)
 
     def action_identify(self) -> None:
         """Check the taps against every fixture the wizard offers (in a solver process of its own) and show which
         fit."""
-        base_p_taps = self.context.session.base_p_taps
+        base_p_taps = self.session.base_p_taps
         if len(base_p_taps) < MIN_TAPS:
             self._problem(f"Tap at least {MIN_TAPS} points before asking which fixture this is.")
             return
         self._end_identify()
         solver = self._identify = SolverProcess(None)
-        choices = fixture_choices(self.context.fixtures_dir)
-        calibration = self.context.calibration
+        choices = fixture_choices(self.cell.fixtures_dir)
+        calibration = self.calibration
         self._say(f"Checking the {len(base_p_taps)} taps against {len(choices)} fixtures...")
         run_in_solver(self, solver, IdentifyRequest(base_p_taps, [(choice.path, choice.units) for choice in choices],
                                                     calibration.ball_diameter_m, calibration.sample_bound_m),
@@ -224,7 +228,7 @@ class SamplingScreen(Screen[bool]):
         elif isinstance(event, Identified):
             self._say("")
             self.app.push_screen(Dialog("Which fixture is this?",
-                                        identify_text(choices, event.verdicts, self.context.fixture.path)),
+                                        identify_text(choices, event.verdicts, self.fixture.path)),
                                  lambda _: self._end_identify())
         elif isinstance(event, Failed):
             self._problem(f"Which fixture: {event.message}")
@@ -242,13 +246,14 @@ class SamplingScreen(Screen[bool]):
     def action_simulated_hands(self) -> None:
         index = self._spread_index
         self._spread_index += 1
-        self._run_robot(lambda: self.context.hands.near_spread_point(index),
+        hands = self.cell.simulated_hands()
+        self._run_robot(lambda: hands.near_spread_point(index),
                         lambda _: self._say("SIMULATED: the operator's hands brought the ball above the fixture; "
                                             f"press {keys.name(keys.TAP)} to tap."),
                         doing="SIMULATED: the operator's hands bring the ball above the fixture")
 
     def action_simulated_unlock(self) -> None:
-        self.context.hands.cell.unlock()
+        self.cell.simulated_hands().cell.unlock()
         self._stopped = False
         self.refresh_bindings()
         self._say("SIMULATED: the protective stop is unlocked, as on the teach pendant. Check the cell and re-arm "
@@ -256,8 +261,8 @@ class SamplingScreen(Screen[bool]):
 
     # --- robot work in a thread ---
 
-    def _run_robot(self, call: Callable[[], T], on_done: Callable[[T], None],
-                   on_failed: Callable[[ShownError], None] | None = None, doing: str | None = None) -> None:
+    def _run_robot(self, call: Callable[[], T], on_done: Callable[[T], object],
+                   on_failed: Callable[[ShownError], object] | None = None, doing: str | None = None) -> None:
         """Run a robot call in a thread worker with the robot keys disabled; errors are shown on this screen
         unless ``on_failed`` takes them. ``doing``: what it does, said at once on the note line with the seconds
         it takes."""
@@ -266,28 +271,29 @@ class SamplingScreen(Screen[bool]):
         if doing is not None and self._doing is not None:
             self._clear_problem()
             self._doing.start(doing)
+        self._robot_call(call, on_done, on_failed or self._robot_failed)
 
-        def finish(callback: Callable, result) -> None:
-            self.busy = False
-            if self._doing is not None:
-                self._doing.done()
-            if self.is_attached:
-                self.refresh_bindings()
-                callback(result)
+    @work(thread=True, group="robot")
+    def _robot_call(self, call: Callable[[], T], on_done: Callable[[T], object],
+                    on_failed: Callable[[ShownError], object]) -> None:
+        try:
+            result = call()
+        except (FixwizardError, OSError) as error:
+            self.app.call_from_thread(self._robot_finished, on_failed, error)
+        else:
+            self.app.call_from_thread(self._robot_finished, on_done, result)
 
-        def work() -> None:
-            try:
-                result = call()
-            except (FixwizardError, OSError) as error:
-                self.app.call_from_thread(finish, on_failed or self._robot_failed, error)
-            else:
-                self.app.call_from_thread(finish, on_done, result)
-
-        self.run_worker(work, thread=True, group="robot")
+    def _robot_finished(self, callback: Callable[[Any], object], result: object) -> None:
+        self.busy = False
+        if self._doing is not None:
+            self._doing.done()
+        if self.is_attached:
+            self.refresh_bindings()
+            callback(result)
 
     def _tap_and_record(self) -> Tap:
         """Freedrive off, tap, journal the tap, freedrive on again (also after a failed tap)."""
-        robot = self.context.robot
+        robot = self.cell.robot
         try:
             robot.freedrive(False)
             try:
@@ -298,8 +304,8 @@ class SamplingScreen(Screen[bool]):
                     raise
                 # the contact was recorded before the fault (while retracting, or the link went down): keep it
                 tap = self._record(recorded)
-                error.add_note(f"The contact was saved as tap {len(self.context.session.taps)}.")
-                error.recorded_tap = tap
+                error.add_note(f"The contact was saved as tap {len(self.session.taps)}.")
+                error.recorded_tap = tap  # type: ignore[attr-defined]  # _robot_failed shows the table with it
                 raise
             return self._record(result)
         finally:
@@ -309,13 +315,13 @@ class SamplingScreen(Screen[bool]):
                 pass  # the tap's own error (or the next robot call) tells the operator
 
     def _record(self, result: TapResult) -> Tap:
-        return self.context.session.record_tap(
+        return self.session.record_tap(
             result.base_T_tcp_contact,
             force={"peak_n": result.peak_force_n, "travel_m": result.travel_m, "settle_s": result.settle_s})
 
     def _move_above(self, plan: HoverPlan) -> None:
         """Freedrive off, the three moves of ``hover_path``, freedrive on again (also after a failed move)."""
-        robot, calibration = self.context.robot, self.context.calibration
+        robot, calibration = self.cell.robot, self.calibration
         try:
             robot.freedrive(False)
             for base_T_tcp in hover_path(plan, calibration.tcp_p_tip_m, robot.base_T_tcp()):
@@ -328,7 +334,7 @@ class SamplingScreen(Screen[bool]):
 
     def _tap_recorded(self, tap: Tap) -> None:
         self._stopped = False
-        count = len(self.context.session.taps)
+        count = len(self.session.taps)
         self._say(f"Tap {count} recorded and saved. Move to the next point and press {keys.name(keys.TAP)}.")
         self._taps_changed()
 
@@ -337,8 +343,8 @@ class SamplingScreen(Screen[bool]):
             self._taps_changed()
         self._stopped = self._stopped or isinstance(error, ProtectiveStop)
         self.refresh_bindings()
-        text = robot_problem_text(error_message(error), len(self.context.session.taps), self.context.session.path)
-        if isinstance(error, NoContact) and self.context.hands is not None:
+        text = robot_problem_text(error_message(error), len(self.session.taps), self.session.path)
+        if isinstance(error, NoContact) and self.cell.hands is not None:
             text += (f"\nSIMULATED: press {keys.name(keys.HANDS)} and the simulated hands bring the ball above the "
                      "fixture.")
         self._problem(text)
@@ -348,7 +354,7 @@ class SamplingScreen(Screen[bool]):
     def _start_live_check(self) -> None:
         """Supersede the running live check and start one for the current taps (from 3 taps on) in the fixture's
         solver process, which goes on from its previous check."""
-        base_p_taps = self.context.session.base_p_taps
+        base_p_taps = self.session.base_p_taps
         self.advice = self.hover_plan = None  # they were for the taps before
         self.live_running = len(base_p_taps) >= MIN_TAPS
         self._live_progress = None
@@ -357,15 +363,14 @@ class SamplingScreen(Screen[bool]):
             self._cancel_live()
             self._show_live()
             return
-        calibration = self.context.calibration
+        calibration = self.calibration
         self._show_live()
-        run_in_solver(self, self.context.solver_process(),
+        run_in_solver(self, self.solver,
                       LiveRequest(base_p_taps, calibration.ball_diameter_m, calibration.sample_bound_m),
                       self._live_event)
 
     def _cancel_live(self) -> None:
-        if self.context.solver is not None:
-            self.context.solver.cancel()
+        self.solver.cancel()
         self.live_running = False
 
     def _live_event(self, event: Event) -> None:
@@ -394,10 +399,10 @@ class SamplingScreen(Screen[bool]):
         self._start_live_check()
 
     def _show_taps(self) -> None:
-        taps = self.context.session.base_p_taps
+        taps = self.session.base_p_taps
         self.query_one("#title", Static).update(
-            f"Sampling{' (SIMULATED)' if self.context.simulated else ''}: {len(taps)} "
-            f"tap{'s' if len(taps) != 1 else ''} of {self.context.fixture.path.name}")
+            f"Sampling{' (SIMULATED)' if self.cell.simulated else ''}: {len(taps)} "
+            f"tap{'s' if len(taps) != 1 else ''} of {self.fixture.path.name}")
         self._distances_mm = self._distances_mm[:len(taps)]  # an undone tap's slot may take a new tap
         distances_mm = np.full(len(taps), np.nan)
         distances_mm[:len(self._distances_mm)] = self._distances_mm
@@ -415,11 +420,10 @@ class SamplingScreen(Screen[bool]):
             self._show_live_text()
 
     def _show_live_text(self) -> None:
-        tap_count = len(self.context.session.taps)
+        tap_count = len(self.session.taps)
         progress = None
         if self.live_running:
-            progress = (self._live_progress or "starting") + seconds_text(time.monotonic()
-                                                                                        - self._live_started)
+            progress = (self._live_progress or "starting") + seconds_text(time.monotonic() - self._live_started)
         self.query_one("#live", Static).update(live_text(self.live, tap_count, progress))
 
     def _show_live(self) -> None:
@@ -436,7 +440,7 @@ class SamplingScreen(Screen[bool]):
         """The taps over the fixture at the live estimate, and the suggested next tap."""
         estimate = self.live.estimate_base_T_cad if self.live is not None else None
         target = self.advice.base_p_point_m if self.advice is not None else None
-        return taps_view(self.context.session.base_p_taps, width, height, self.context.fixture.mesh, estimate,
+        return taps_view(self.session.base_p_taps, width, height, self.fixture.mesh, estimate,
                          base_p_target=target)
 
     def _clear_problem(self) -> None:

@@ -39,8 +39,9 @@ def bounds_text(bounds: Bounds) -> str:
 
 def summary_lines(solution: Solution) -> list[str]:
     """The expected pose, its guaranteed bounds and the 95/99 % intervals (unique or ambiguous)."""
-    bounds = solution.bounds
-    lines = ["Fixture pose (CAD frame in the robot base frame, most probable):", *pose_lines(solution.base_T_cad),
+    base_T_cad, bounds = solution.base_T_cad, solution.bounds
+    assert base_T_cad is not None and bounds is not None, "a unique or ambiguous solution has a pose and bounds"
+    lines = ["Fixture pose (CAD frame in the robot base frame, most probable):", *pose_lines(base_T_cad),
              "Guaranteed: the true pose lies within these of the centre pose",
              f"  centre    {format_ur_pose(bounds.base_T_cad_center)}",
              f"  {bounds_text(bounds)}",

@@ -9,7 +9,7 @@ from textual.widgets import Button
 
 from fixwizard.errors import FixwizardError, InputError, file_problem, sentence
 from fixwizard.robot.base import ConnectionLost, ProtectiveStop, RobotError
-from fixwizard.tui.dialog import Dialog
+from fixwizard.tui.widgets.dialog import Dialog
 
 Recovery = Literal["ok", "reconnect", "unlock"]
 

@@ -1,10 +1,12 @@
 """The results screen: the solution in words and numbers, pictures of the rotation set and of the taps on
 the fixture, the solver's own figures (Details), the report (default path shown, editable) and what to do next.
 Dismisses with "resample"
-(back to sampling, after dropping the suspect tap of an inconsistent result if asked) or "done"."""
+(back to sampling, after dropping the suspect tap of an inconsistent result if asked) or ``Done`` (with the report
+written, if any)."""
 
 import datetime as dt
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
@@ -15,27 +17,36 @@ from textual.widgets import Footer, Input, Label, Static, TabbedContent, TabPane
 
 from fixwizard.errors import FixwizardError
 from fixwizard.plots import rotation_map_for_solution, taps_view_for_solution
+from fixwizard.solver.solve import Solution
 from fixwizard.tui import keys
-from fixwizard.tui.context import WizardContext
-from fixwizard.tui.errors import error_message
-from fixwizard.tui.picture_view import PictureView
-from fixwizard.tui.results_text import (
+from fixwizard.tui.cell import Cell, Sampling
+from fixwizard.tui.results.text import (
     headline,
     modes_lines,
     summary_lines,
     suspect_lines,
     warning_lines,
 )
+from fixwizard.tui.widgets.errors import error_message
+from fixwizard.tui.widgets.picture_view import PictureView
 from fixwizard.workflow.advice import distinguishing_tap
 from fixwizard.workflow.details import details_lines
 from fixwizard.workflow.wizard_report import default_report_path, write_session_report
 
-Outcome = Literal["resample", "done"]
+
+@dataclass(frozen=True)
+class Done:
+    """The operator is done with this session; ``report_path`` is the report written for its taps, if any."""
+
+    report_path: Path | None
+
+
+Outcome = Literal["resample"] | Done
 TABS = ("summary", "rotations", "taps", "details")
 
 
 class ResultsScreen(Screen[Outcome]):
-    """Shows ``context.solution`` for the session's taps and writes the report."""
+    """Shows ``solution`` for the taps of ``sampling`` and writes the report."""
 
     BINDINGS = [
         keys.binding(keys.BACK),
@@ -56,17 +67,18 @@ class ResultsScreen(Screen[Outcome]):
                   "it elsewhere) and finish (Done). Resample, or Esc, goes back to sampling to add taps.")
     now: Callable[[], dt.datetime] = staticmethod(dt.datetime.now)
 
-    def __init__(self, context: WizardContext) -> None:
+    def __init__(self, cell: Cell, sampling: Sampling, solution: Solution) -> None:
         super().__init__()
-        self.context = context
-        self.solution = context.solution
+        self.cell = cell
+        self.sampling = sampling
+        self.solution = solution
         self.written: Path | None = None
         self._warned_unwritten = False
 
     def compose(self) -> ComposeResult:
-        context, solution = self.context, self.solution
-        simulated = "SIMULATED: " if context.simulated else ""
-        yield Static(f"{simulated}{headline(solution, len(context.session.taps))}", id="headline", markup=False)
+        cell, sampling, solution = self.cell, self.sampling, self.solution
+        simulated = "SIMULATED: " if cell.simulated else ""
+        yield Static(f"{simulated}{headline(solution, len(sampling.session.taps))}", id="headline", markup=False)
         with TabbedContent(id="views"):
             with TabPane("Summary", id="summary"):
                 yield VerticalScroll(Static("\n".join(self._summary()), id="summary-text", markup=False))
@@ -74,12 +86,12 @@ class ResultsScreen(Screen[Outcome]):
                 yield self._rotations_view()
             with TabPane("Taps on fixture", id="taps"):
                 yield PictureView(lambda width, height: taps_view_for_solution(
-                    solution, context.fixture, context.session.base_p_taps, width, height), id="taps-view")
+                    solution, sampling.fixture, sampling.session.base_p_taps, width, height), id="taps-view")
             with TabPane("Details", id="details"):
                 yield VerticalScroll(Static("\n".join(details_lines(solution)), id="details-text", markup=False))
         with Horizontal(id="report-row"):
             yield Label("Report:")
-            path = default_report_path(context.reports_dir, context.fixture, self.now())
+            path = default_report_path(cell.reports_dir, sampling.fixture, self.now())
             yield Input(str(path), id="report-path", compact=True)
         yield Static("Press w to write the report there (e to edit the path first).", id="written", markup=False)
         yield Footer(compact=True)
@@ -95,7 +107,7 @@ class ResultsScreen(Screen[Outcome]):
             lines = summary_lines(solution)
             if solution.status == "ambiguous":
                 first, second = solution.modes[0].base_T_cad, solution.modes[1].base_T_cad
-                lines += modes_lines(solution, distinguishing_tap(self.context.fixture, first, second))
+                lines += modes_lines(solution, distinguishing_tap(self.sampling.fixture, first, second))
         return [*lines, *warning_lines(solution), "The solver's own figures: View (v) > Details."]
 
     def _rotations_view(self) -> PictureView | Static:
@@ -139,22 +151,23 @@ class ResultsScreen(Screen[Outcome]):
         self.action_leave_path()
 
     def action_write(self) -> None:
-        context = self.context
+        sampling = self.sampling
         target = self.query_one("#report-path", Input).value.strip()
         if not target:
             self._say("Type where the report should go (e), then press w.", problem=True)
             return
         try:
-            self.written = write_session_report(target, self.solution, context.fixture, context.session,
-                                                context.calibration, context.simulated)
+            self.written = write_session_report(target, self.solution, sampling.fixture, sampling.session,
+                                                sampling.calibration, self.cell.simulated)
         except (FixwizardError, OSError) as error:
             self._say(f"The report was not written: {error_message(error)}", problem=True)
             return
-        context.report_path = self.written
         self._say(f"Report written to {self.written}")
 
     def action_drop_suspect(self) -> None:
-        session, suspect = self.context.session, self.solution.suspect_tap
+        session, suspect = self.sampling.session, self.solution.suspect_tap
+        if suspect is None:  # the key is disabled then
+            return
         try:
             session.drop(session.taps[suspect.index].id)
         except (FixwizardError, OSError) as error:
@@ -171,7 +184,7 @@ class ResultsScreen(Screen[Outcome]):
             self._say("The report is not written yet: press w to write it, or q again to finish without it.",
                       problem=True)
             return
-        self.dismiss("done")
+        self.dismiss(Done(self.written))
 
     def _say(self, text: str, problem: bool = False) -> None:
         written = self.query_one("#written", Static)
