@@ -40,8 +40,17 @@ from fixwizard.robot.ur_state import ControllerState
 from ur_loopback import LoopbackProcess
 from ur_loopback.arm import SURFACE_STIFFNESS_N_M
 
-# any loopback address works; set UR_LOOPBACK_HOST=127.0.0.2 to test beside something holding 127.0.0.1's ports
-HOST = os.environ.get("UR_LOOPBACK_HOST", "127.0.0.1")
+
+
+def private_loopback_host() -> str:
+    """A loopback address of this test run's own (every 127.x.y.z is the loopback on Linux): the controller's fixed
+    ports there clash with no other program or parallel run holding them on 127.0.0.1."""
+    rng = random.Random(os.getpid() ^ time.time_ns())
+    return f"127.{rng.randint(1, 254)}.{rng.randint(1, 254)}.{rng.randint(1, 254)}"
+
+
+# UR_LOOPBACK_HOST chooses the address (e.g. 127.0.0.1 where only that one is the loopback)
+HOST = os.environ.get("UR_LOOPBACK_HOST") or private_loopback_host()
 # drop/reconnect cycles of the acceptance test: the issue's 100 in CI (about 3 min), 20 on a developer's run
 DROP_CYCLES = int(os.environ.get("UR_DROP_CYCLES", "100" if os.environ.get("CI") else "20"))
 UNLOCK_DELAY_S = 1.0  # the loopback's "5 s after the stop" rule, shortened
