@@ -4,7 +4,7 @@ produced, every motion runs on a program whose watchdog is armed, the tap's limi
 when the PC stalls, and every fault (protective, emergency and safeguard stops, local control, a dropped,
 frozen or silent link, a crashed or stalled link process) raises its typed error with a way out, without
 crashing or freezing this process and without motion after the error. The loopback listens on the
-controller's fixed ports, so these tests cannot run in parallel."""
+controller's fixed ports at a loopback address of this run's own, so parallel runs do not clash."""
 
 import contextlib
 import os
@@ -39,7 +39,6 @@ from fixwizard.robot.ur_script import (
 from fixwizard.robot.ur_state import ControllerState
 from ur_loopback import LoopbackProcess
 from ur_loopback.arm import SURFACE_STIFFNESS_N_M
-
 
 
 def private_loopback_host() -> str:
