@@ -179,7 +179,7 @@ def tap_count(screen: str) -> int:
 
 def live_settled(screen: str) -> bool:
     """The live check has answered for the current taps (and, when unique, with the full solve's bounds)."""
-    running = "Checking " in screen or "(checking " in screen or "tightening them" in screen
+    running = any(doing in screen for doing in ("Checking ", "(checking ", "(looking closer", "tightening them"))
     return "Live check" in screen and not running
 
 

@@ -76,7 +76,8 @@ async def test_twelve_taps_fill_the_table_and_the_journal_and_the_live_check_fin
         assert cell.status().mode == "freedrive"
         await until(pilot, lambda: screen.live is not None and screen.live.tap_count == 12)
         assert screen.live.verdict == "unique" and bounds_hold(screen.live.bounds, cell.truth.base_T_cad)
-        assert "Live check of 12 taps: unique so far. Guaranteed now: origin within" in text_of(screen, "#live")
+        assert text_of(screen, "#live").startswith("Live check of 12 taps")
+        assert "unique so far. Guaranteed now: origin within" in text_of(screen, "#live")
         quick_bounds = screen.live.bounds
         await until(pilot, lambda: screen.live.refined)
         assert screen.live.bounds.position_m <= quick_bounds.position_m
@@ -308,7 +309,7 @@ async def test_a_tap_says_at_once_what_the_robot_does_and_counts_its_seconds(con
         assert text_of(screen, "#note").startswith("Tap 1 recorded and saved.")
 
 
-async def test_the_live_line_says_what_the_running_check_does_for_newer_taps_and_while_tightening(context):
+async def test_the_live_line_says_what_the_running_check_does_for_newer_taps_and_while_looking_closer(context):
     record_spread_taps(context, 10)
     calibration = context.calibration
     check = quick_check(context.fixture, context.session.base_p_taps, calibration.ball_diameter_m,
@@ -316,10 +317,15 @@ async def test_the_live_line_says_what_the_running_check_does_for_newer_taps_and
     view = LiveView.of(check, context.fixture)
     assert view.verdict == "unique" and not view.refined
     tightening = live_text(view, 10, "computing the guaranteed bounds, round 2 (3 s)")
-    assert tightening.startswith("Live check of 10 taps: unique so far.")
-    assert tightening.endswith("; tightening them: computing the guaranteed bounds, round 2 (3 s)...")
+    assert tightening.startswith("Live check of 10 taps (looking closer: computing the guaranteed bounds, round 2 "
+                                 "(3 s)...): unique so far.")
+    assert tightening.endswith("; tightening them...")
     newer = live_text(view, 11, "narrowing the poses, pass 4: 1,234 groups of possible poses left (1 s)")
     assert newer.startswith("Live check of 10 taps (checking 11: narrowing the poses, pass 4: 1,234 groups of "
                             "possible poses left (1 s)...): unique so far.")
     assert newer.endswith("; tightening them...")
-    assert live_text(view, 10, None).endswith("; tightening them...")
+    assert live_text(view, 10, None).startswith("Live check of 10 taps: unique so far.")
+    undetermined = dataclasses.replace(view, verdict="undetermined")
+    assert live_text(undetermined, 10, "narrowing the poses, pass 9: 4,321 groups of possible poses left").startswith(
+        "Live check of 10 taps (looking closer: narrowing the poses, pass 9: 4,321 groups of possible poses left...): "
+        "the pose is not pinned down yet")

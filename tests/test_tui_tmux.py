@@ -70,6 +70,6 @@ def test_fixwizard_in_a_terminal_shows_the_start_screen_stops_and_quits(tmp_path
         assert exit_file.read_text().strip() == "0"
         after = terminal.screen()  # the terminal's own screen again, as it was while the wizard loaded
         assert "Traceback" not in after
-        assert "Starting the wizard: loading the fixtures and the solver..." in after  # no blank wait at launch
+        assert "Starting the wizard: loading the fixtures and the solver" in after  # with dots: no blank wait
     finally:
         terminal.close()

@@ -101,6 +101,7 @@ class SamplingScreen(Screen[bool]):
         self.live_running = False  # a live check of the current taps is on its way
         self._live_progress: str | None = None  # what it is doing, in words
         self._live_started = 0.0  # time.monotonic() of its start
+        self._live_shown = ""  # the live line as last shown
         self._distances_mm = np.zeros(0)  # of the first taps from the surface, under the shown check's estimate
         self._identify: SolverProcess | None = None
         self._spread_index = len(sampling.session.taps)
@@ -423,8 +424,13 @@ class SamplingScreen(Screen[bool]):
         tap_count = len(self.session.taps)
         progress = None
         if self.live_running:
-            progress = (self._live_progress or "starting") + seconds_text(time.monotonic() - self._live_started)
-        self.query_one("#live", Static).update(live_text(self.live, tap_count, progress))
+            shown_these = self.live is not None and self.live.tap_count == tap_count
+            words = self._live_progress or ("going on from what it found" if shown_these else "starting")
+            progress = words + seconds_text(time.monotonic() - self._live_started)
+        text = live_text(self.live, tap_count, progress)
+        if text != self._live_shown:  # the seconds' count looks often, the screen changes once a second
+            self._live_shown = text
+            self.query_one("#live", Static).update(text)
 
     def _show_live(self) -> None:
         self._show_live_text()

@@ -22,14 +22,18 @@ def bounds_text(check: LiveView) -> str:
 
 def live_text(check: LiveView | None, tap_count: int, progress: str | None) -> str:
     """What the latest quick solve says about the taps; ``progress``: what the running check is doing, in words
-    (None when none is on its way): of newer taps, or tightening the bounds of these."""
+    (None when none is on its way): of newer taps, or looking closer at these (going deeper, tightening)."""
     if tap_count < MIN_TAPS:
         return (f"Live check: starts at {MIN_TAPS} taps ({MIN_TAPS - tap_count} to go). 10-20 taps over several "
                 "faces give tight bounds.")
     if check is None:
         return f"Checking {tap_count} taps: {progress or 'starting'}..."
-    newer = progress if check.tap_count != tap_count else None
-    head = f"Live check of {check.tap_count} taps{f' (checking {tap_count}: {newer}...)' if newer else ''}: "
+    doing = ""
+    if progress and check.tap_count != tap_count:
+        doing = f" (checking {tap_count}: {progress}...)"
+    elif progress:
+        doing = f" (looking closer: {progress}...)"
+    head = f"Live check of {check.tap_count} taps{doing}: "
     if check.ball_mismatch is not None:
         return head + f"NO POSE FITS these taps with this ball. {check.ball_mismatch.sentence()}"
     if check.verdict == "inconsistent":
@@ -42,8 +46,7 @@ def live_text(check: LiveView | None, tap_count: int, progress: str | None) -> s
         top = check.modes[0]
         return (head + f"AMBIGUOUS so far, {len(check.modes)} candidate poses fit (most likely "
                 f"{top.probability:.0%}); tap features that tell them apart. Guaranteed now: {bounds_text(check)}.")
-    tightening = f"tightening them: {progress}..." if progress and not newer else "tightening them..."
-    tightness = "as tight as the full solve's" if check.refined else tightening
+    tightness = "as tight as the full solve's" if check.refined else "tightening them..."
     return head + f"unique so far. Guaranteed now: {bounds_text(check)}; {tightness}"
 
 

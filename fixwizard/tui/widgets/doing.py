@@ -7,7 +7,7 @@ import time
 from textual.timer import Timer
 from textual.widgets import Static
 
-TICK_S = 1.0  # the count of seconds advances this often
+TICK_S = 0.2  # how often the count is looked at: a new second shows within this of its start
 
 
 def seconds_text(elapsed_s: float) -> str:
@@ -29,6 +29,7 @@ class Doing:
         self.line = line
         self._what = ""
         self._started = 0.0
+        self._shown = ""
         self._timer: Timer | None = None
 
     @property
@@ -38,7 +39,7 @@ class Doing:
     def start(self, what: str) -> None:
         """Say ``what`` now (e.g. "Tapping: the robot moves the ball down until it touches") and count seconds."""
         self.done()
-        self._what, self._started = what, time.monotonic()
+        self._what, self._started, self._shown = what, time.monotonic(), ""
         self._show()
         self._timer = self.line.set_interval(TICK_S, self._show)
 
@@ -49,5 +50,8 @@ class Doing:
             self._timer = None
 
     def _show(self) -> None:
-        self.line.update(doing_text(self._what, time.monotonic() - self._started))
+        text = doing_text(self._what, time.monotonic() - self._started)
+        if text != self._shown:
+            self._shown = text
+            self.line.update(text)
         self.line.remove_class("-empty")
