@@ -197,7 +197,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--resume", nargs="?", const="", metavar="SESSION",
                         help="wizard: reopen SESSION, or the newest unfinished session, straight into sampling")
     parser.add_argument("--seed", type=int, default=0, help="wizard: seed of the simulated demo cell (default 0)")
-    parser.set_defaults(handler="fixwizard.commands:wizard_command")
+    parser.set_defaults(handler="fixwizard.wizard_command:wizard_command")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for add in (_add_solve, _add_import_poses, _add_calibrate_tip, _add_identify, _add_verify, _add_export, _add_serve):
         add(commands)
