@@ -277,6 +277,16 @@ def fixture_from_mesh(mesh_m: trimesh.Trimesh, path: Path, units: str, sha256: s
                    sha256=sha256, signed=clean.signed, warnings=clean.warnings)
 
 
+def warm_up_distance_queries() -> None:
+    """Load the distance queries' compiled code now (from numba's cache, or compiled), with a signed query and a ray
+    on a 1 cm box: otherwise a process's first query pays it, holding the interpreter for most of a second (in the
+    wizard, its first simulated tap, while its keys wait)."""
+    box = fixture_from_mesh(trimesh.creation.box((0.01, 0.01, 0.01)), Path("warm-up box"), "m", "generated")
+    points_m = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.02]])
+    box.oracle.signed_distance_m(points_m)
+    box.oracle.ray_hit_distance_m(points_m, np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]))
+
+
 def load_fixture(path: str | Path, units: str = "m") -> Fixture:
     """Load a fixture mesh (STL/PLY/OBJ) in ``units`` ('m' or 'mm'); refuses implausible sizes."""
     path = Path(path)

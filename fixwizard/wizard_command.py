@@ -37,8 +37,11 @@ def wizard_command(args: argparse.Namespace) -> int:
                          "fixwizard in a terminal or over SSH, or use a command such as `fixwizard solve` in scripts "
                          "(see fixwizard --help)")
     with _dots_while("Starting the wizard: loading the fixtures and the solver"):  # a second or two of imports
+        from fixwizard.fixture import warm_up_distance_queries
         from fixwizard.tui.app import FixwizardApp
         from fixwizard.tui.launch import simulated_cell, ur_cell
+
+        warm_up_distance_queries()  # not at the first simulated tap, while the keys wait
 
         app = FixwizardApp(ur_cell(args.robot) if args.robot else simulated_cell(args.seed), args.resume)
     app.run()

@@ -2,6 +2,8 @@
 repeated corners, far from the origin, points on the surface and a metre away; and the hierarchy finds the
 nearest triangle of a whole mesh, slivers included, where Open3D's float32 query errs by tenths of a millimetre."""
 
+import subprocess
+import sys
 from fractions import Fraction
 
 import numpy as np
@@ -195,3 +197,15 @@ def test_rays_find_the_first_hit_and_cross_a_closed_mesh_an_odd_number_of_times_
     import igl
     inside = igl.winding_number(np.asarray(mesh.vertices), np.asarray(mesh.faces, np.int64), origins) > 0.5
     assert np.mean((crossings % 2 == 1) == inside) > 0.999
+
+
+def test_the_warm_up_loads_the_compiled_queries_a_process_uses_first():
+    """In a fresh process (the wizard calls it while it says it is starting): afterwards building an oracle and the
+    serial point and ray queries run compiled code already loaded, not loaded at the first simulated tap."""
+    script = ("import fixwizard.geometry.mesh_distance as m\n"
+              "from fixwizard.fixture import warm_up_distance_queries\n"
+              "used = (m._build_hierarchy, m._triangle_rows, m._query_range, m._ray_range)\n"
+              "assert not any(f.signatures for f in used)\n"
+              "warm_up_distance_queries()\n"
+              "assert all(f.signatures for f in used)\n")
+    subprocess.run([sys.executable, "-c", script], check=True, timeout=300)
