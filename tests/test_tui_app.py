@@ -426,7 +426,7 @@ def test_a_calibration_step_says_at_once_what_the_robot_does_and_clears_it_after
             doing = app.screen.query_one("#doing", Static)
             assert str(doing.render()) == "SIMULATED: the hands bring the ball above A; then the robot taps it..."
             assert doing.display
-            await until(pilot, lambda: str(doing.render()).endswith("taps it... (1 s)"), timeout_s=10.0)
+            await until(pilot, lambda: str(doing.render()).endswith("taps it... (1.0 s)"), timeout_s=10.0)
             await until(pilot, lambda: not app.screen.busy, timeout_s=30.0)
             assert not doing.display and "A: tapped" in text_of(app, "#points-state")
 

@@ -17,6 +17,7 @@ from fixwizard.tui.sampling.screen import SamplingScreen
 from fixwizard.tui.sampling.text import live_text
 from fixwizard.tui.widgets.confirm import Confirm, ConfirmMove
 from fixwizard.tui.widgets.dialog import Dialog
+from fixwizard.tui.widgets.doing import seconds_text
 from fixwizard.workflow.live import LiveView, quick_check
 from fixwizard.workflow.solver_process import NextTap
 from pilot_wait import until
@@ -304,7 +305,7 @@ async def test_a_tap_says_at_once_what_the_robot_does_and_counts_its_seconds(con
         await pilot.pause()
         assert text_of(screen, "#note") == ("Tapping: the robot moves the ball along the tool axis until it "
                                             "touches...")
-        await until(pilot, lambda: text_of(screen, "#note").endswith("touches... (1 s)"), timeout_s=10.0)
+        await until(pilot, lambda: text_of(screen, "#note").endswith("touches... (1.0 s)"), timeout_s=10.0)
         await until(pilot, lambda: not screen.busy, timeout_s=30.0)
         assert text_of(screen, "#note").startswith("Tap 1 recorded and saved.")
 
@@ -329,3 +330,9 @@ async def test_the_live_line_says_what_the_running_check_does_for_newer_taps_and
     assert live_text(undetermined, 10, "narrowing the poses, pass 9: 4,321 groups of possible poses left").startswith(
         "Live check of 10 taps (looking closer: narrowing the poses, pass 9: 4,321 groups of possible poses left...): "
         "the pose is not pinned down yet")
+
+
+@pytest.mark.parametrize(("elapsed_s", "shown"), [(0.0, ""), (0.49, ""), (0.5, " (0.5 s)"), (0.99, " (0.5 s)"),
+                                                  (1.0, " (1.0 s)"), (1.5, " (1.5 s)"), (12.7, " (12.5 s)")])
+async def test_a_long_step_counts_in_half_seconds_from_its_first_half_second(elapsed_s, shown):
+    assert seconds_text(elapsed_s) == shown

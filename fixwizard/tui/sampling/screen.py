@@ -428,7 +428,7 @@ class SamplingScreen(Screen[bool]):
             words = self._live_progress or ("going on from what it found" if shown_these else "starting")
             progress = words + seconds_text(time.monotonic() - self._live_started)
         text = live_text(self.live, tap_count, progress)
-        if text != self._live_shown:  # the seconds' count looks often, the screen changes once a second
+        if text != self._live_shown:  # the count looks often, the screen changes twice a second
             self._live_shown = text
             self.query_one("#live", Static).update(text)
 

@@ -7,13 +7,17 @@ import time
 from textual.timer import Timer
 from textual.widgets import Static
 
-TICK_S = 0.2  # how often the count is looked at: a new second shows within this of its start
+TICK_S = 0.1  # how often the count is looked at: a new half second shows within this of its start
+
+
+COUNT_STEP_S = 0.5  # the count goes up in half seconds: a long step shows a change at least twice a second
 
 
 def seconds_text(elapsed_s: float) -> str:
-    """" (3 s)": the whole seconds a step has taken so far, once there is one."""
-    seconds = int(elapsed_s)
-    return f" ({seconds} s)" if seconds >= 1 else ""
+    """" (3.5 s)": the seconds a step has taken so far, in ``COUNT_STEP_S``, once there is one."""
+    if elapsed_s < COUNT_STEP_S:
+        return ""
+    return f" ({elapsed_s // COUNT_STEP_S * COUNT_STEP_S:.1f} s)"
 
 
 def doing_text(what: str, elapsed_s: float) -> str:
