@@ -10,9 +10,11 @@ import json
 import numpy as np
 import pytest
 from textual.widgets import DataTable, Static
+from textual.widgets._footer import FooterKey
 
 from fixwizard.demo import disc_fixture
 from fixwizard.geometry.se3 import rotation_angle_rad
+from fixwizard.tui import keys
 from fixwizard.tui.sampling.screen import SamplingScreen
 from fixwizard.tui.sampling.text import live_text
 from fixwizard.tui.widgets.confirm import Confirm, ConfirmMove
@@ -336,3 +338,20 @@ async def test_the_live_line_says_what_the_running_check_does_for_newer_taps_and
                                                   (1.0, " (1.0 s)"), (1.5, " (1.5 s)"), (12.7, " (12.5 s)")])
 async def test_a_long_step_counts_in_half_seconds_from_its_first_half_second(elapsed_s, shown):
     assert seconds_text(elapsed_s) == shown
+
+
+async def test_the_footer_dims_the_robot_keys_in_place_while_a_robot_call_runs(context):
+    """Its keys stay the same widgets (composing them anew held the event loop at every robot call)."""
+    app = ScreenHost(lambda: context.sampling_screen())
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        await until(pilot, lambda: not screen.busy and bool(screen.query(FooterKey)))
+        await pilot.pause()
+        shown = list(screen.query(FooterKey))
+        tap_key = next(key for key in shown if key.action == keys.TAP.action)
+        assert not tap_key.has_class("-disabled")
+        for busy in (True, False):
+            screen.busy = busy
+            screen.refresh_bindings()
+            await pilot.pause()
+            assert tap_key.has_class("-disabled") == busy and list(screen.query(FooterKey)) == shown

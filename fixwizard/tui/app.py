@@ -35,6 +35,7 @@ from fixwizard.tui.tip_calibration.steps import calibrate_tip_on_screens
 from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.errors import ErrorModal, Recovery, ResumeRefused
 from fixwizard.tui.widgets.help import HelpScreen, help_text
+from fixwizard.tui.widgets.key_footer import KeyFooter
 from fixwizard.tui.widgets.status import StatusBar
 from fixwizard.tui.workers import ShownError, in_thread
 from fixwizard.workflow.solver_process import SolverProcess
@@ -86,7 +87,7 @@ class FixwizardApp(App[None]):
         if not screen.query(StatusBar):
             screen.mount(StatusBar())
         if not screen.query(Footer):
-            screen.mount(Footer(compact=True))
+            screen.mount(KeyFooter(compact=True))
 
     def refresh_robot_status(self) -> None:
         """Ask the robot for its status in a worker thread (one request at a time); the bars follow."""

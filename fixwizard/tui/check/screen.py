@@ -18,7 +18,7 @@ from rich.text import Text
 from textual.app import ComposeResult
 from textual.binding import BindingType
 from textual.screen import Screen
-from textual.widgets import DataTable, Footer, Select, Static
+from textual.widgets import DataTable, Select, Static
 
 from fixwizard import report
 from fixwizard.errors import FixwizardError
@@ -28,6 +28,7 @@ from fixwizard.solver.search import SearchCancelled
 from fixwizard.tui import keys
 from fixwizard.tui.cell import Cell, SavedCalibration
 from fixwizard.tui.widgets.errors import error_message
+from fixwizard.tui.widgets.key_footer import KeyFooter
 from fixwizard.tui.workers import ShownError, in_thread
 from fixwizard.workflow.cell_reports import scan
 from fixwizard.workflow.live import tap_surface_distances_m
@@ -94,7 +95,7 @@ class CheckScreen(Screen[None]):
         yield DataTable(id="check-taps", cursor_type="row", zebra_stripes=True)
         yield Static("", id="check-note", markup=False)
         yield Static("", id="check-verdict", classes="-empty", markup=False)
-        yield Footer(compact=True)
+        yield KeyFooter(compact=True)
 
     def on_mount(self) -> None:
         table = self.query_one(DataTable)

@@ -13,7 +13,7 @@ from typing import Literal
 from textual.app import ComposeResult
 from textual.containers import Horizontal, VerticalScroll
 from textual.screen import Screen
-from textual.widgets import Footer, Input, Label, Static, TabbedContent, TabPane, Tabs
+from textual.widgets import Input, Label, Static, TabbedContent, TabPane, Tabs
 
 from fixwizard.errors import FixwizardError
 from fixwizard.plots import rotation_map_for_solution, taps_view_for_solution
@@ -28,6 +28,7 @@ from fixwizard.tui.results.text import (
     warning_lines,
 )
 from fixwizard.tui.widgets.errors import error_message
+from fixwizard.tui.widgets.key_footer import KeyFooter
 from fixwizard.tui.widgets.picture_view import PictureView
 from fixwizard.workflow.advice import distinguishing_tap
 from fixwizard.workflow.details import details_lines
@@ -94,7 +95,7 @@ class ResultsScreen(Screen[Outcome]):
             path = default_report_path(cell.reports_dir, sampling.fixture, self.now())
             yield Input(str(path), id="report-path", compact=True)
         yield Static("Press w to write the report there (e to edit the path first).", id="written", markup=False)
-        yield Footer(compact=True)
+        yield KeyFooter(compact=True)
 
     def on_mount(self) -> None:
         self.action_leave_path()

@@ -18,7 +18,7 @@ from textual import work
 from textual.app import ComposeResult
 from textual.containers import Horizontal
 from textual.screen import Screen
-from textual.widgets import DataTable, Footer, Static
+from textual.widgets import DataTable, Static
 
 from fixwizard.errors import FixwizardError
 from fixwizard.plots.taps_view import taps_view
@@ -41,6 +41,7 @@ from fixwizard.tui.widgets.confirm import Confirm, ConfirmMove
 from fixwizard.tui.widgets.dialog import Dialog
 from fixwizard.tui.widgets.doing import TICK_S, Doing, seconds_text
 from fixwizard.tui.widgets.errors import error_message
+from fixwizard.tui.widgets.key_footer import KeyFooter
 from fixwizard.tui.widgets.picture_view import PictureView
 from fixwizard.tui.workers import run_in_solver, services
 from fixwizard.workflow.advice import TapAdvice
@@ -119,7 +120,7 @@ class SamplingScreen(Screen[bool]):
         yield Static("", id="guide", classes="-empty", markup=False)
         yield Static("", id="note", classes="-empty", markup=False)
         yield Static("", id="problem", classes="-empty", markup=False)
-        yield Footer(compact=True)
+        yield KeyFooter(compact=True)
 
     def on_mount(self) -> None:
         self._doing = Doing(self.query_one("#note", Static))

@@ -9,13 +9,14 @@ from collections.abc import Callable
 import numpy as np
 from textual.app import ComposeResult
 from textual.screen import Screen
-from textual.widgets import Footer, ProgressBar, Static
+from textual.widgets import ProgressBar, Static
 
 from fixwizard.solver.search import SearchProgress, search_budget
 from fixwizard.solver.solve import Solution, SolveStage
 from fixwizard.tui import keys
 from fixwizard.tui.cell import Cell, Sampling
 from fixwizard.tui.solve.progress_text import stage_words
+from fixwizard.tui.widgets.key_footer import KeyFooter
 from fixwizard.tui.workers import run_in_solver
 from fixwizard.workflow.solver_process import Event, Failed, Progress, Solved, SolveRequest, SolverProcess
 
@@ -63,7 +64,7 @@ class SolveScreen(Screen[Solution | None]):
         yield ProgressBar(total=1.0, show_eta=False, id="budget")
         yield Static("", id="figures", markup=False)
         yield Static("", id="problem", classes="-empty", markup=False)
-        yield Footer(compact=True)
+        yield KeyFooter(compact=True)
 
     def on_mount(self) -> None:
         self._started = self.clock()

@@ -1,0 +1,34 @@
+"""The footer of every screen: Textual's, except that when only which keys are enabled has changed (a robot call
+starting or ending disables and enables the robot keys) it dims and undims its keys in place. Textual's footer
+composes all its keys anew on every change, and mounting them held the event loop for up to a few hundred
+milliseconds, twice per robot call, while keys waited."""
+
+from textual.screen import Screen
+from textual.widgets import Footer
+from textual.widgets._footer import FooterKey
+
+
+class KeyFooter(Footer):
+    """``Footer`` that updates the enabled state of the keys it shows in place when the keys themselves stay."""
+
+    def bindings_changed(self, screen: Screen) -> None:
+        if self.is_attached and screen is self.screen and self.app.app_focus and self._enable_in_place():
+            return
+        super().bindings_changed(screen)
+
+    def _enable_in_place(self) -> bool:
+        """Set each shown key's enabled state from the screen's bindings; False when other keys are to be shown
+        (then the footer composes them)."""
+        enabled_by_action: dict[str, tuple[str, bool]] = {}
+        for _, binding, enabled, _ in self.screen.active_bindings.values():
+            if binding.show:
+                enabled_by_action.setdefault(binding.action, (binding.key, enabled))
+        shown = list(self.query(FooterKey))
+        if [(key.action, key.key) for key in shown] != [(action, key) for action, (key, _) in
+                                                        enabled_by_action.items()]:
+            return False
+        for key, (_, enabled) in zip(shown, enabled_by_action.values(), strict=True):
+            if key._disabled == enabled:
+                key._disabled = not enabled
+                key.set_class(not enabled, "-disabled")
+        return True
