@@ -278,12 +278,11 @@ def _reap(process: BaseProcess) -> None:
 
 @dataclass
 class _Running:
-    """A started worker, the thread that reads its answers and the queue of what the sender thread writes to it
-    (the fixture first, then requests; ``_END_SENDER`` ends the sender). Only the sender writes to the pipe, so that
-    no caller waits while the worker is still starting and not yet reading."""
+    """A started worker and the queue of what its sender thread writes to it (the fixture first, then requests;
+    ``_END_SENDER`` ends the sender). Only the sender writes to the pipe, so that no caller waits while the worker
+    is still starting and not yet reading; its reader thread reads the answers and closes the pipe."""
 
     process: BaseProcess
-    reader: threading.Thread
     outbox: "queue.SimpleQueue[object]"
 
 
@@ -295,8 +294,7 @@ def _send_all(conn: Connection, outbox: "queue.SimpleQueue[object]") -> None:
     closes (the worker died or was ended; the reader says so)."""
     while (message := outbox.get()) is not _END_SENDER:
         try:
-            conn.send_bytes(message if isinstance(message, bytes) else
-                            pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL))
+            conn.send_bytes(pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL))
         except (OSError, ValueError):
             return
 
@@ -388,7 +386,7 @@ class SolverProcess:
         sender = threading.Thread(target=_send_all, args=(conn, outbox), name="fixwizard-solver-sender", daemon=True)
         reader = threading.Thread(target=self._read, args=(process, conn, outbox, sender),
                                   name="fixwizard-solver-reader", daemon=True)
-        self._running = _Running(process, reader, outbox)
+        self._running = _Running(process, outbox)
         sender.start()
         reader.start()
         return self._running

@@ -36,10 +36,6 @@ class Doing:
         self._shown = ""
         self._timer: Timer | None = None
 
-    @property
-    def running(self) -> bool:
-        return self._timer is not None
-
     def start(self, what: str) -> None:
         """Say ``what`` now (e.g. "Tapping: the robot moves the ball down until it touches") and count seconds."""
         self.done()
