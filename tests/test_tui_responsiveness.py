@@ -8,7 +8,7 @@ import pytest
 from loop_lag import measure_wizard
 
 pytestmark = pytest.mark.asyncio
-MAX_KEY_S = 1.0  # includes Pilot's own wait for the screen to settle
+MAX_KEY_S = 0.5  # includes Pilot's own wait for the screen to settle
 MAX_LAG_S = 1.0  # any one tick
 LATE_S = 0.1  # a tick this late is a stall a person would notice...
 MAX_LATE_SHARE = 0.02  # ...and at most this share of ticks may be
