@@ -39,11 +39,13 @@ def wizard_command(args: argparse.Namespace) -> int:
     with _dots_while("Starting the wizard: loading the fixtures and the solver"):  # a second or two of imports
         from fixwizard.fixture import warm_up_distance_queries
         from fixwizard.tui.app import FixwizardApp
+        from fixwizard.tui.heap import freeze_long_lived_objects
         from fixwizard.tui.launch import simulated_cell, ur_cell
 
         warm_up_distance_queries()  # not at the first simulated tap, while the keys wait
 
         app = FixwizardApp(ur_cell(args.robot) if args.robot else simulated_cell(args.seed), args.resume)
+        freeze_long_lived_objects()
     app.run()
     app.cell.robot.close()  # the robot chosen last (the start screen can switch it)
     return EXIT_OK

@@ -3,12 +3,14 @@ cell) records how late each of its ticks runs during a live check and a full sol
 to show its effect. Used by tests/test_tui_responsiveness.py (generous bounds) and benchmarks/responsiveness.py
 (the real numbers, with busy processes beside it)."""
 
+import gc
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from textual.widgets import Static
 
+from fixwizard.tui.heap import freeze_long_lived_objects
 from pilot_wait import until
 from tui_cell import ScreenHost, record_spread_taps, wizard_context
 
@@ -49,6 +51,7 @@ async def measure_wizard(folder: Path, taps: int, max_cells: float) -> Measured:
     record_spread_taps(context, taps)
     app = ScreenHost(lambda: context.sampling_screen())
     lag = LoopLag()
+    freeze_long_lived_objects()  # as the wizard process does (the test process's heap is larger still)
     try:
         async with app.run_test(size=SIZE) as pilot:
             app.set_interval(TICK_S, lag.tick)
@@ -71,5 +74,6 @@ async def measure_wizard(folder: Path, taps: int, max_cells: float) -> Measured:
             solve_s = time.monotonic() - started
             lag.start(None)
     finally:
+        gc.unfreeze()
         context.session.release()
     return Measured(lag.lags_s, key_s, live_s, solve_s)
