@@ -153,7 +153,7 @@ def test_a_new_tip_calibration_through_the_screens_is_saved_and_finds_the_hidden
     async def run():
         context = wizard(tmp_path)
         app = FixwizardApp(context)
-        async with app.run_test(size=SIZE) as pilot:
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
             await at_start(pilot)
             await calibrate_by_hand(pilot)
             await pilot.press("g")
@@ -162,7 +162,12 @@ def test_a_new_tip_calibration_through_the_screens_is_saved_and_finds_the_hidden
             assert figures.startswith("GOOD: use this calibration.") and "Each tap will be trusted to" in figures
             assert "condition number" not in figures and "scatter" not in figures  # those are on Details
             await pilot.press("shift+tab", "shift+tab", "end", "ctrl+u", *"sim-tip", "tab", "tab", "enter")
-            await until(pilot, lambda: sampling_of(app) is not None)
+            await until(pilot, lambda: sampling_of(app) is not None and sampling_of(app).is_mounted)
+            session_name = sampling_of(app).session.path.name
+            # said on the note line, which no toast covers at 80x24
+            assert text_of(app, "#note") == (f"Tip calibration saved to {tmp_path / 'calibrations' / 'sim-tip.yaml'}. "
+                                             f"New session {session_name}: every tap is saved there as you go.")
+            assert not app._notifications
             return context, sampling_of(app).sampling
 
     context, sampling = asyncio.run(run())
@@ -324,10 +329,12 @@ def test_the_start_screen_describes_stored_calibrations_and_resumes_an_unfinishe
             assert "each tap is trusted to 0.8 mm" in details
             await choose(pilot, "#session", str(path))
             await press_button(pilot, "#continue")
-            await until(pilot, lambda: type(app.screen).__name__ == "SamplingScreen")
+            await until(pilot, lambda: type(app.screen).__name__ == "SamplingScreen" and app.screen.is_mounted)
             sampling = app.screen.sampling
             assert sampling.session.path == path and len(sampling.session.taps) == 1
             assert sampling.calibration.name == "example_matlab_logo"
+            assert text_of(app, "#note") == (f"Resumed the session {path}: 1 tap recorded, fixture "
+                                             f"{DEMO_MESH.name}, tip calibration example_matlab_logo.yaml.")
     asyncio.run(run())
 
 
@@ -368,6 +375,7 @@ def test_resume_opens_the_session_with_its_fixture_and_calibration(tmp_path):
             assert sampling.session.path == path and len(sampling.session.taps) == 1
             assert sampling.fixture.path == DEMO_MESH and sampling.fixture.units == "mm"
             assert sampling.calibration.name == "example_matlab_logo"
+            assert text_of(app, "#note").startswith(f"Resumed the session {path}: 1 tap recorded")
     asyncio.run(run())
 
 

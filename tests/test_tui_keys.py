@@ -276,9 +276,9 @@ def test_leaving_sampling_asks_and_lands_on_the_start_screen_with_that_session_t
             await until(pilot, lambda: isinstance(app.screen, StartScreen) and bool(app.screen.query("#session")))
             assert app.screen.query_one("#session", Select).value == str(session_path)
             await press_button(pilot, "#continue")
-            await until(pilot, lambda: isinstance(app.screen, SamplingScreen))
-            assert any(note.title == "Session resumed" and session_path.name in str(note.message)
-                       for note in app._notifications)
+            await until(pilot, lambda: isinstance(app.screen, SamplingScreen) and app.screen.is_mounted)
+            note = str(app.screen.query_one("#note", Static).render())
+            assert note.startswith(f"Resumed the session {session_path}: 0 taps recorded")
     asyncio.run(run())
 
 
@@ -331,6 +331,27 @@ async def test_the_newest_tap_stays_in_view_after_25_taps(tmp_path):
         table = screen.query_one(DataTable)
         await until(pilot, lambda: table.max_scroll_y > 0 and table.scroll_y == table.max_scroll_y)
         assert table.cursor_row == 24 and table.size.height >= 4
+    context.session.release()
+
+
+@pytest.mark.asyncio
+async def test_a_resumed_session_opens_with_its_newest_tap_in_view_under_a_long_note(tmp_path):
+    context = wizard_context(tmp_path)
+    record_spread_taps(context, 14)
+    opened = "Resumed the session with a long name: " + "its fixture, its tip calibration and more; " * 4
+    app = ScreenHost(lambda: context.sampling_screen(opened))
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        table = screen.query_one(DataTable)
+        await until(pilot, lambda: table.row_count == 14 and screen.live is not None and not screen.live_running)
+        await pilot.pause()
+        await until(pilot, lambda: table.max_scroll_y > 0 and table.scroll_y == table.max_scroll_y)
+        assert table.cursor_row == 13
+        height = table.size.height
+        screen._say(opened * 2)  # the table shrinks
+        await until(pilot, lambda: table.size.height < height)
+        await pilot.pause()
+        await until(pilot, lambda: table.scroll_y == table.max_scroll_y)
     context.session.release()
 
 

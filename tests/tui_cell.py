@@ -93,8 +93,8 @@ class WizardParts:
             self._solver = SolverProcess(self.fixture)
         return self._solver
 
-    def sampling_screen(self) -> SamplingScreen:
-        return SamplingScreen(self.cell, self.sampling, self.solver())
+    def sampling_screen(self, opened: str = "") -> SamplingScreen:
+        return SamplingScreen(self.cell, self.sampling, self.solver(), opened)
 
     def solve_screen(self, solver: SolverProcess | None = None) -> SolveScreen:
         return SolveScreen(self.cell, self.sampling, solver or self.solver())

@@ -30,7 +30,7 @@ from fixwizard.tui.results.screen import Done, ResultsScreen
 from fixwizard.tui.sampling.screen import SamplingScreen
 from fixwizard.tui.solve.screen import SolveScreen
 from fixwizard.tui.start.screen import StartScreen
-from fixwizard.tui.start.sessions import resume_refusal, resume_session, start_session
+from fixwizard.tui.start.sessions import resume_refusal, resume_session, start_session, started_text
 from fixwizard.tui.tip_calibration.steps import calibrate_tip_on_screens
 from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.errors import ErrorModal, Recovery, ResumeRefused
@@ -42,7 +42,6 @@ from fixwizard.workflow.solver_process import SolverProcess
 
 T = TypeVar("T")
 STATUS_INTERVAL_S = 0.5
-RESUMED_NOTICE_S = 12.0  # how long "Session resumed: ..." stays up
 CSS_FILE = Path(__file__).with_name("wizard.tcss")  # package data: every screen's look
 
 
@@ -262,11 +261,6 @@ class FixwizardApp(App[None]):
     def _run_flow(self) -> None:
         self.run_worker(self._flow(), group="flow", exclusive=True)
 
-    def notify_resumed(self, resumed: Resumed) -> None:
-        """Say which session was resumed (and any record of it that was never finished)."""
-        self.notify(resumed.opened, title="Session resumed", timeout=RESUMED_NOTICE_S, markup=False,
-                    severity="warning" if resumed.sampling.session.recovered else "information")
-
     async def _resume(self, requested: str) -> Resumed | ResumeRefused:
         """Resume the session ``--resume`` asked for; the refusal to show on the start screen when it cannot."""
         cell = self.cell
@@ -274,7 +268,6 @@ class FixwizardApp(App[None]):
             resumed = await self._off_loop(lambda: resume_session(cell, session_to_resume(cell, requested)))
         except (FixwizardError, OSError) as error:
             return resume_refusal(requested, error)
-        self.notify_resumed(resumed)
         return resumed
 
     async def _flow(self) -> None:
@@ -284,19 +277,21 @@ class FixwizardApp(App[None]):
         elif self.resume is not None:
             resumed = await self._resume(self.resume)
             if isinstance(resumed, Resumed):
-                await self._sample_until_done(resumed.sampling)
+                await self._sample_until_done(resumed.sampling, resumed.opened)
             else:
                 refusal = resumed
         while True:
             choice = await self.push_screen_wait(StartScreen(self.cell, refusal, self._left_session))
             refusal = self._left_session = None
-            sampling = choice.sampling if isinstance(choice, Resumed) else await self._new_session(choice)
-            if sampling is not None:
-                await self._sample_until_done(sampling)
+            started = (choice.sampling, choice.opened) if isinstance(choice, Resumed) else \
+                await self._new_session(choice)
+            if started is not None:
+                await self._sample_until_done(*started)
 
-    async def _new_session(self, choice: NewSession) -> Sampling | None:
-        """A new session for the chosen fixture, after a new tip calibration if none was chosen; None when the
-        operator went back from the calibration or the session could not be created (the error shown)."""
+    async def _new_session(self, choice: NewSession) -> tuple[Sampling, str] | None:
+        """A new session for the chosen fixture, after a new tip calibration if none was chosen, and what was
+        started in words; None when the operator went back from the calibration or the session could not be
+        created (the error shown)."""
         tip: SavedCalibration | None = choice.tip
         if tip is None:
             cell = self.cell
@@ -306,7 +301,9 @@ class FixwizardApp(App[None]):
                 return None
         cell, fixture, saved = self.cell, choice.fixture, tip
         session = await self._step_or_error(lambda: start_session(cell, fixture, saved))
-        return None if session is None else Sampling(session, fixture, saved)
+        if session is None:
+            return None
+        return Sampling(session, fixture, saved), started_text(session, saved, calibrated_now=choice.tip is None)
 
     def _solver_for(self, sampling: Sampling) -> SolverProcess:
         """The solver process holding the session's fixture: started on first use, replaced when the fixture
@@ -318,12 +315,15 @@ class FixwizardApp(App[None]):
             self._solver = SolverProcess(sampling.fixture)
         return self._solver
 
-    async def _sample_until_done(self, sampling: Sampling) -> None:
-        """Sampling, solve and results until the operator is done or leaves sampling; then the session is
-        closed (with its report) or released for a later resume."""
+    async def _sample_until_done(self, sampling: Sampling, opened: str = "") -> None:
+        """Sampling (its first screen saying ``opened``: which session, with what), solve and results until the
+        operator is done or leaves sampling; then the session is closed (with its report) or released for a
+        later resume."""
         report_path: Path | None = None
         try:
-            while await self.push_screen_wait(SamplingScreen(self.cell, sampling, self._solver_for(sampling))) is True:
+            while await self.push_screen_wait(SamplingScreen(self.cell, sampling, self._solver_for(sampling),
+                                                             opened)) is True:
+                opened = ""
                 solution = await self.push_screen_wait(SolveScreen(self.cell, sampling, self._solver_for(sampling)))
                 if solution is None:
                     continue

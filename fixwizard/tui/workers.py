@@ -13,7 +13,7 @@ from textual.worker import get_current_worker
 
 from fixwizard.errors import FixwizardError
 from fixwizard.robot.base import RobotStatus
-from fixwizard.tui.cell import Cell, Resumed
+from fixwizard.tui.cell import Cell
 from fixwizard.workflow.solver_process import Event, Request, SolverProcess
 
 T = TypeVar("T")
@@ -36,8 +36,6 @@ class WizardServices(Protocol):
     def cancel_on_stop(self, cancel: threading.Event) -> None: ...
 
     def forget_cancel(self, cancel: threading.Event) -> None: ...
-
-    def notify_resumed(self, resumed: Resumed) -> None: ...
 
     def use_cell(self, cell: Cell) -> None: ...
 

@@ -18,7 +18,7 @@ from rich.text import Text
 from textual.app import ComposeResult
 from textual.binding import BindingType
 from textual.screen import Screen
-from textual.widgets import DataTable, Select, Static
+from textual.widgets import Select, Static
 
 from fixwizard import report
 from fixwizard.errors import FixwizardError
@@ -29,6 +29,7 @@ from fixwizard.tui import keys
 from fixwizard.tui.cell import Cell, SavedCalibration
 from fixwizard.tui.widgets.errors import error_message
 from fixwizard.tui.widgets.key_footer import KeyFooter
+from fixwizard.tui.widgets.taps_table import TapsTable
 from fixwizard.tui.workers import ShownError, in_thread
 from fixwizard.workflow.cell_reports import scan
 from fixwizard.workflow.live import tap_surface_distances_m
@@ -92,13 +93,13 @@ class CheckScreen(Screen[None]):
                      compact=True, **first)
         yield Static("", id="check-report", markup=False)
         yield Static("", id="check-suggest", markup=False)
-        yield DataTable(id="check-taps", cursor_type="row", zebra_stripes=True)
+        yield TapsTable(id="check-taps")
         yield Static("", id="check-note", markup=False)
         yield Static("", id="check-verdict", classes="-empty", markup=False)
         yield KeyFooter(compact=True)
 
     def on_mount(self) -> None:
-        table = self.query_one(DataTable)
+        table = self.query_one(TapsTable)
         for column in COLUMNS:
             table.add_column(column, key=column)
         if not self.reports:
@@ -314,7 +315,7 @@ class CheckScreen(Screen[None]):
 
     def _show_taps(self) -> None:
         taps = self._taps()
-        table = self.query_one(DataTable)
+        table = self.query_one(TapsTable)
         table.clear()
         pose = None if self.loaded is None else self.loaded.base_T_cad
         if self.fixture is not None and pose is not None and len(taps):

@@ -18,7 +18,7 @@ from textual import work
 from textual.app import ComposeResult
 from textual.containers import Horizontal
 from textual.screen import Screen
-from textual.widgets import DataTable, Static
+from textual.widgets import Static
 
 from fixwizard.errors import FixwizardError
 from fixwizard.plots.taps_view import taps_view
@@ -43,6 +43,7 @@ from fixwizard.tui.widgets.doing import TICK_S, Doing, seconds_text
 from fixwizard.tui.widgets.errors import error_message
 from fixwizard.tui.widgets.key_footer import KeyFooter
 from fixwizard.tui.widgets.picture_view import PictureView
+from fixwizard.tui.widgets.taps_table import TapsTable
 from fixwizard.tui.workers import run_in_solver, services
 from fixwizard.workflow.advice import TapAdvice
 from fixwizard.workflow.hover import HoverPlan, hover_path
@@ -68,8 +69,9 @@ ShownError = FixwizardError | OSError
 
 
 class SamplingScreen(Screen[bool]):
-    """Tap the fixture of ``sampling`` (the live check in ``solver``, the fixture's solver process); dismisses with
-    True to solve, False to leave (asks; the session stays resumable)."""
+    """Tap the fixture of ``sampling`` (the live check in ``solver``, the fixture's solver process); ``opened``:
+    which session this is, in words. Dismisses with True to solve, False to leave (asks; the session stays
+    resumable)."""
 
     BINDINGS = [
         keys.binding(keys.BACK),
@@ -89,8 +91,9 @@ class SamplingScreen(Screen[bool]):
                   "for you). Solve when the check says unique. Esc goes back to the start screen; the session "
                   "stays there to resume.")
 
-    def __init__(self, cell: Cell, sampling: Sampling, solver: SolverProcess) -> None:
+    def __init__(self, cell: Cell, sampling: Sampling, solver: SolverProcess, opened: str = "") -> None:
         super().__init__()
+        self.opened = opened  # which session this is, said on the note line at the start
         self.cell = cell
         self.sampling = sampling
         self.session, self.fixture, self.calibration = sampling.session, sampling.fixture, sampling.calibration
@@ -114,7 +117,7 @@ class SamplingScreen(Screen[bool]):
         yield Static("Freedrive is on: guide the ball 5-10 mm above the fixture, tool pointing at the surface, "
                      "then press t. Spread 10-20 taps over several faces.", id="help", markup=False)
         with Horizontal(id="middle"):
-            yield DataTable(id="taps", cursor_type="row", zebra_stripes=True)
+            yield TapsTable(id="taps")
             yield PictureView(self._draw_top_view, id="top-view")
         yield Static("", id="live", markup=False)
         yield Static("", id="guide", classes="-empty", markup=False)
@@ -125,10 +128,11 @@ class SamplingScreen(Screen[bool]):
     def on_mount(self) -> None:
         self._doing = Doing(self.query_one("#note", Static))
         self.query_one("#top-view").add_class("-empty")
-        table = self.query_one(DataTable)
+        table = self.query_one(TapsTable)
         for column in COLUMNS:
             table.add_column(column, key=column)
         self._show_taps()
+        self._say(self.opened)
         self.set_interval(TICK_S, self._count_live_seconds)
         self.run_worker(self.solver.start, thread=True, group="solver")  # warm (fixture loaded) by the third tap
         self._start_live_check()
@@ -408,7 +412,7 @@ class SamplingScreen(Screen[bool]):
         self._distances_mm = self._distances_mm[:len(taps)]  # an undone tap's slot may take a new tap
         distances_mm = np.full(len(taps), np.nan)
         distances_mm[:len(self._distances_mm)] = self._distances_mm
-        table = self.query_one(DataTable)
+        table = self.query_one(TapsTable)
         table.clear()
         for number, (base_p_mm, distance_mm) in enumerate(zip(taps * 1e3, distances_mm, strict=True), start=1):
             table.add_row(Text(str(number), justify="right"),
@@ -469,5 +473,5 @@ class SamplingScreen(Screen[bool]):
         note = self.query_one("#note", Static)
         note.update("")
         note.add_class("-empty")
-        table = self.query_one(DataTable)
+        table = self.query_one(TapsTable)
         table.call_after_refresh(table.scroll_end, animate=False)  # the latest taps stay in view

@@ -256,8 +256,7 @@ class StartScreen(Screen[StartChoice]):
             raise resume_refusal(path, error) from error
 
     def _resumed(self, resumed: Resumed) -> None:
-        services(self).notify_resumed(resumed)
-        self.dismiss(resumed)
+        self.dismiss(resumed)  # the sampling screen says what was opened
 
     def _check(self) -> None:
         """Check a calibrated fixture (``CheckScreen``) with the chosen stored tip calibration: its tip and ball."""

@@ -31,6 +31,12 @@ def start_session(cell: Cell, fixture: Fixture, tip: SavedCalibration) -> Sampli
     return SamplingSession.create(path, fixture_info, tip_info, robot=cell.robot_name)
 
 
+def started_text(session: SamplingSession, tip: SavedCalibration, calibrated_now: bool) -> str:
+    """Which session was started and with which tip calibration (saved just now, or chosen)."""
+    tip_words = f"Tip calibration saved to {tip.path}" if calibrated_now else f"Tip calibration {tip.path.name}"
+    return f"{tip_words}. New session {session.path.name}: every tap is saved there as you go."
+
+
 def resume_session(cell: Cell, path: Path) -> Resumed:
     """Open the session at ``path`` with the fixture and tip calibration it names, and say what was opened, in
     words. Refused when it was recorded on another robot or its mesh changed since."""

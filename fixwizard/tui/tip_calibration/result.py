@@ -121,6 +121,5 @@ class CalibrationResultScreen(CalibrationStepScreen):
         return SavedCalibration(calibration, save_calibration(calibration, path))
 
     def _saved(self, saved: SavedCalibration) -> None:
-        self.notify(f"Tip calibration saved to {saved.path}")
-        self.dismiss(saved)
+        self.dismiss(saved)  # the sampling screen says where it was saved
 
