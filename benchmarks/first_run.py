@@ -3,6 +3,7 @@
 Usage (from the repository root, tmux installed):
     .venv/bin/python benchmarks/first_run.py                 # 80x24, 10 taps at least
     .venv/bin/python benchmarks/first_run.py --min-taps 12 --keep
+    .venv/bin/python benchmarks/first_run.py --busy 2         # two busy processes beside the wizard
 
 ``fixwizard`` runs in an 80x24 tmux session on a private server, in a new empty folder (no stored tip
 calibration, no session). The script reads the screen with ``tmux capture-pane -p`` and presses the key an
@@ -222,11 +223,13 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--min-taps", type=int, default=10, help="taps before solving, at least (default 10)")
     parser.add_argument("--keep", action="store_true", help="keep the run's folder (calibration, session, report)")
+    parser.add_argument("--busy", type=int, default=0, help="busy processes (while True: pass) beside the wizard")
     args = parser.parse_args()
     if shutil.which("tmux") is None:
         print("first_run.py needs tmux (apt-get install tmux)", file=sys.stderr)
         return 1
     folder = Path(tempfile.mkdtemp(prefix="fixwizard-first-run-"))
+    busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.busy)]
     run = Run(folder)
     try:
         calibrate_tip(run)
@@ -238,11 +241,13 @@ def main() -> int:
         return 1
     finally:
         run.close()
+        for process in busy:
+            process.kill()
         if not args.keep:
             shutil.rmtree(folder, ignore_errors=True)
     key_text = " ".join(run.keys)
     unresponsive, stall = worst(run.responses), worst(run.stalls)
-    print(f"operator keys: {len(run.keys)} ({taps} taps): {key_text}")
+    print(f"operator keys: {len(run.keys)} ({taps} taps, {args.busy} busy processes beside): {key_text}")
     print(f"total time: {total_s:.1f} s (target under {TARGETS['total_s']:.0f} s)")
     print(f"longest unresponsive interval: {unresponsive[0].seconds * 1e3:.0f} ms "
           f"(target {TARGETS['unresponsive_s'] * 1e3:.0f}"
