@@ -18,6 +18,7 @@ from fixwizard.geometry.se3 import make_transform, points_in_frames, rotation_an
 from fixwizard.geometry.so3_grid import chord
 from fixwizard.solver.cells import CellSet
 from fixwizard.solver.distance_grid import distance_grid_for
+from fixwizard.solver.parallel import PARALLEL_KERNEL_LOCK
 
 CENTER_ITERATIONS = 200
 # Below this many effective samples, sample_cells draws a second, importance-weighted round, then a third.
@@ -101,35 +102,57 @@ def bound_centre(cells: CellSet, fix_p_origin: np.ndarray, rotation_centre: Rota
 HULL_SCREEN_FRACTION = 0.5
 
 
-@numba.njit(nogil=True, cache=True)
+HULL_BLOCK_CELLS = 2048  # cells per round of the parallel hull bounds, between updates of the largest one
+
+
+@numba.njit(nogil=True, cache=True, inline="always")
+def _hull_displacement_m(cell: int, base_R_fix: np.ndarray, rotation_index: np.ndarray, positions_m: np.ndarray,
+                         centre_R: np.ndarray, centre_p_m: np.ndarray, fix_p_hull: np.ndarray, norms: np.ndarray,
+                         chords: np.ndarray) -> float:
+    """``max_p |(R_c - C) p + t_c - t_C| + |p| chord`` over the hull vertices ``p`` for one cell (m)."""
+    rotation = base_R_fix[rotation_index[cell]]
+    lever = rotation - centre_R
+    offset = positions_m[cell] - centre_p_m
+    chord_cell = chords[rotation_index[cell]]
+    best = 0.0
+    for vertex in range(len(fix_p_hull)):
+        total = 0.0
+        for axis in range(3):
+            value = offset[axis]
+            for k in range(3):
+                value += lever[axis, k] * fix_p_hull[vertex, k]
+            total += value * value
+        best = max(best, math.sqrt(total) + norms[vertex] * chord_cell)
+    return best
+
+
+@numba.njit(nogil=True, cache=True, parallel=True)
 def _hull_displacements_m(base_R_fix: np.ndarray, rotation_index: np.ndarray, positions_m: np.ndarray,
                           centre_R: np.ndarray, centre_p_m: np.ndarray, fix_p_hull: np.ndarray,
-                          chords: np.ndarray, ball_m: np.ndarray) -> np.ndarray:
+                          chords: np.ndarray, ball_m: np.ndarray, order: np.ndarray) -> np.ndarray:
     """For each cell (centre rotation ``base_R_fix[rotation_index]``, position), an upper bound (m) on the largest
     displacement of a fixture point between the centre pose and any pose of the cell: the smaller of its ball
     bound ``ball_m`` and ``max_p |(R_c - C) p + t_c - t_C| + |p| chord`` over the hull vertices ``p`` (the
     displacement is convex in ``p``, so the hull's vertices hold its maximum over the fixture). The hull bound is
-    computed from the largest ball bound down, and no more once the ball bounds fall below
-    ``HULL_SCREEN_FRACTION`` of the largest bound found (those cells keep their ball bound)."""
+    computed in ``order`` (largest ball bound first), in rounds of ``HULL_BLOCK_CELLS`` spread over the cores,
+    for the cells whose ball bound reaches ``HULL_SCREEN_FRACTION`` of the largest bound of the rounds before,
+    and no more once a round starts below it (those cells keep their ball bound)."""
     out = ball_m.copy()
     norms = np.sqrt(np.sum(fix_p_hull**2, axis=1))
     largest = 0.0
-    for cell in np.argsort(-ball_m):
-        if ball_m[cell] < HULL_SCREEN_FRACTION * largest:
-            break
-        rotation = base_R_fix[rotation_index[cell]]
-        chord_cell = chords[rotation_index[cell]]
-        best = 0.0
-        for vertex in range(len(fix_p_hull)):
-            total = 0.0
-            for axis in range(3):
-                value = positions_m[cell, axis] - centre_p_m[axis]
-                for k in range(3):
-                    value += (rotation[axis, k] - centre_R[axis, k]) * fix_p_hull[vertex, k]
-                total += value * value
-            best = max(best, math.sqrt(total) + norms[vertex] * chord_cell)
-        out[cell] = min(ball_m[cell], best * (1.0 + 1e-12))
-        largest = max(largest, out[cell])
+    start = 0
+    while start < len(order) and ball_m[order[start]] >= HULL_SCREEN_FRACTION * largest:
+        stop = min(start + HULL_BLOCK_CELLS, len(order))
+        screen = HULL_SCREEN_FRACTION * largest
+        for position in numba.prange(start, stop):
+            cell = order[position]
+            if ball_m[cell] >= screen:
+                best = _hull_displacement_m(cell, base_R_fix, rotation_index, positions_m, centre_R, centre_p_m,
+                                            fix_p_hull, norms, chords)
+                out[cell] = min(ball_m[cell], best * (1.0 + 1e-12))
+        for position in range(start, stop):
+            largest = max(largest, out[order[position]])
+        start = stop
     return out
 
 
@@ -151,9 +174,11 @@ def cell_bound_figures(cells: CellSet, centre: BoundCentre, fix_p_origin: np.nda
     center_fix = centre.cad_origin_m - centre.rotation.apply(fix_p_origin)
     fixture_radius_m = float(np.max(np.linalg.norm(fix_p_hull, axis=1)))
     ball = (np.linalg.norm(positions - center_fix, axis=1) + fixture_radius_m * chord(angles[rotation_index]))
-    displacement = _hull_displacements_m(np.ascontiguousarray(base_R_fix), rotation_index,
-                                         np.ascontiguousarray(positions), centre.rotation.as_matrix(), center_fix,
-                                         np.ascontiguousarray(fix_p_hull, float), chord(gammas), ball)
+    with PARALLEL_KERNEL_LOCK:
+        displacement = _hull_displacements_m(np.ascontiguousarray(base_R_fix), rotation_index,
+                                             np.ascontiguousarray(positions), centre.rotation.as_matrix(), center_fix,
+                                             np.ascontiguousarray(fix_p_hull, float), chord(gammas), ball,
+                                             np.argsort(-ball))
     return np.vstack([position, angles[rotation_index], displacement + position_bound])
 
 

@@ -19,11 +19,7 @@ import numba
 import numpy as np
 
 from fixwizard.geometry.mesh_distance import triangle_row_high_m
-
-# OpenMP where the system has it, else Numba's own work queue, which never fails: TBB, whose version
-# check warns on the terminal the wizard draws on, is never tried. Callers run one parallel kernel at
-# a time (the work queue is not thread-safe).
-numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]  # type: ignore[attr-defined]  # set at import
+from fixwizard.solver.parallel import PARALLEL_KERNEL_LOCK
 
 Arrays = tuple[Any, ...]  # several arrays passed to a compiled kernel as one argument
 NOT_REJECTED = -1
@@ -150,7 +146,8 @@ def cheap_pass(cells: Arrays, taps: Arrays, band: Arrays, parent_index: np.ndarr
     if count <= 2 * BLOCK_CELLS:
         _cheap_pass_range(0, count, cells, taps, band, parent_index, parents, lattice, triangle_rows, out)
     else:
-        _parallel_cheap_pass(cells, taps, band, parent_index, parents, lattice, triangle_rows, out)
+        with PARALLEL_KERNEL_LOCK:
+            _parallel_cheap_pass(cells, taps, band, parent_index, parents, lattice, triangle_rows, out)
 
 
 @numba.njit(nogil=True, cache=True)

@@ -56,7 +56,6 @@ UNIFORM_SHARE = 1 / 12
 COARSE_FRACTION = 0.05
 PRUNING_RATIO = 0.25
 Descent = Literal["thorough", "quick", "exhaustive", "no_deeper"]
-_KERNEL_LOCK = threading.Lock()  # one parallel kernel at a time, whichever thread searches
 
 
 class SearchCancelled(Exception):
@@ -221,10 +220,9 @@ def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: in
     position_grid, position_level = frames.cells.position_grid, frames.cells.position_level
     cells = (frames.fix_R_base, rotation_index, frames.cells.position_cells[chunk], frames.chords,
              np.append(position_grid.corner_m, position_grid.cell_side_m(position_level)))
-    with _KERNEL_LOCK:
-        cheap_pass(cells, (problem.base_p_taps, np.asarray(tap_order, np.int64)), band_figures,
-                   parent_index[chunk], parent_arrays, grid.kernel_arguments, problem.oracle.triangle_rows,
-                   (rotated_positions, low, high, faces, straddling, rejected_by))
+    cheap_pass(cells, (problem.base_p_taps, np.asarray(tap_order, np.int64)), band_figures,
+               parent_index[chunk], parent_arrays, grid.kernel_arguments, problem.oracle.triangle_rows,
+               (rotated_positions, low, high, faces, straddling, rejected_by))
     for tap_index in tap_order:
         if cancel is not None and cancel.is_set():
             raise SearchCancelled
