@@ -24,7 +24,7 @@ need no inside test where the interval already proves the point outside.
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
@@ -399,13 +399,15 @@ def add_taps(problem: SearchProblem, previous: SearchTree, max_cells: float = 1e
     """The search tree for ``problem``, whose taps extend those ``previous`` was searched with.
 
     New taps can only remove poses: level by level from the root, the previous survivors whose parent
-    still survives are filtered against the new taps alone. With fewer survivors, the finest level may
-    then be split further within the cell budget: the same set a search from scratch reaches, for a
-    fraction of the work.
+    still survives are filtered against the new taps alone (intervals of those taps only, until the finest
+    level takes the previous intervals beside them). With fewer survivors, the finest level may then be
+    split further within the cell budget: the same set a search from scratch reaches, for a fraction of the
+    work.
     """
     started = time.perf_counter()
     known = previous.final.low_m.shape[1]
-    new_taps = np.arange(known, len(problem.base_p_taps))
+    new_problem = replace(problem, base_p_taps=problem.base_p_taps[known:])
+    new_taps = np.arange(len(new_problem.base_p_taps))
     levels: list[Survivors] = []
     level_alive = np.zeros(0, bool)
     for depth, level in enumerate(previous.levels):
@@ -413,7 +415,7 @@ def add_taps(problem: SearchProblem, previous: SearchTree, max_cells: float = 1e
         if not np.any(candidates):
             return SearchTree(levels + [previous.final.subset(np.zeros(len(previous.final), bool))], 0)
         parent_index = None if depth == 0 else (np.cumsum(level_alive) - 1)[level.parent_index[candidates]]
-        alive, survivors = _filter(problem, level.cells.subset(candidates), levels[-1] if levels else None,
+        alive, survivors = _filter(new_problem, level.cells.subset(candidates), levels[-1] if levels else None,
                                    new_taps, cancel, parent_index)
         level_alive = np.zeros(len(level), bool)
         level_alive[np.flatnonzero(candidates)[alive]] = True
@@ -422,11 +424,12 @@ def add_taps(problem: SearchProblem, previous: SearchTree, max_cells: float = 1e
         levels.append(survivors)
         if depth < len(previous.levels) - 1:
             _report(progress, int(np.count_nonzero(candidates)), survivors, started, final=False)
-    final = levels[-1]
-    final.low_m[:, :known] = previous.final.low_m[level_alive]
-    final.high_m[:, :known] = previous.final.high_m[level_alive]
-    final.faces[:, :known] = previous.final.faces[level_alive]
-    final.tap_order = np.concatenate([final.tap_order, previous.final.tap_order])
+    new = levels[-1]
+    levels[-1] = Survivors(new.frames, new.rotated_positions,
+                           np.hstack([previous.final.low_m[level_alive], new.low_m]),
+                           np.hstack([previous.final.high_m[level_alive], new.high_m]),
+                           np.hstack([previous.final.faces[level_alive], new.faces]),
+                           np.concatenate([known + new.tap_order, previous.final.tap_order]), new.parent_index)
     evaluated = 8 * len(levels[-2]) if len(levels) > 1 else len(levels[0])  # the children a search tests
     # what a search from scratch with every tap would have evaluated to reach these levels
     spent = len(previous.levels[0]) + 8 * sum(len(level) for level in levels[:-1])
