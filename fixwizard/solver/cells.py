@@ -5,6 +5,7 @@ Many cells share a rotation, so a set stores its distinct rotation cells once
 """
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -61,30 +62,38 @@ class CellSet:
         """Whether a pose of the internal fixture frame lies in one of the cells."""
         return bool(self.locate(Rotation.from_matrix(base_T_fix[:3, :3]), base_T_fix[:3, 3])[0] >= 0)
 
+    def _position_key(self, position_cells: np.ndarray) -> np.ndarray:
+        """One integer per octree cell (N, 3) of this set's level: at most 2^20 per axis, a key fits in 62 bits."""
+        side = 2**self.position_level
+        cells = position_cells.astype(np.int64)
+        return (cells[:, 0] * side + cells[:, 1]) * side + cells[:, 2]
+
+    @cached_property
+    def _lookup(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """For ``locate``: the set's distinct rotation cells and position keys (sorted), and the composite key
+        ``rotation rank * positions + position rank`` of every cell, sorted, with the cell of each (computed once
+        per set: its arrays are never changed)."""
+        rotations, rotation_rank = np.unique(self.rotation_cells, return_inverse=True)
+        positions, position_rank = np.unique(self._position_key(self.position_cells), return_inverse=True)
+        composite = rotation_rank.reshape(-1) * len(positions) + position_rank.reshape(-1)
+        order = np.argsort(composite, kind="stable")
+        return rotations, positions, composite[order], order
+
     def locate(self, base_R_fix: Rotation, base_p_fix: np.ndarray) -> np.ndarray:
         """The cell (row) holding each pose (rotations and positions (N, 3), m), -1 where no cell does."""
         rotation = self.rotation_grid.cell_of(self.rotation_level, base_R_fix)
         position = np.floor((np.asarray(base_p_fix).reshape(-1, 3) - self.position_grid.corner_m)
                             / self.position_grid.cell_side_m(self.position_level)).astype(np.int64)
-        side = 2**self.position_level  # at most 2^20: a key of three coordinates fits in 62 bits
-        inside = np.all((position >= 0) & (position < side), axis=1)
+        inside = np.all((position >= 0) & (position < 2**self.position_level), axis=1)
         position = np.where(inside[:, None], position, 0)
-
-        def position_key(cells: np.ndarray) -> np.ndarray:
-            return (cells[:, 0] * side + cells[:, 1]) * side + cells[:, 2]
-
-        # exact ranks of the set's rotation cells and position cells, then one composite key under N^2
-        rotations, rotation_rank = np.unique(self.rotation_cells, return_inverse=True)
-        positions, position_rank = np.unique(position_key(self.position_cells.astype(np.int64)), return_inverse=True)
-        composite = rotation_rank.reshape(-1) * len(positions) + position_rank.reshape(-1)
-        order = np.argsort(composite, kind="stable")
+        rotations, positions, sorted_composite, order = self._lookup
         wanted_rotation = np.minimum(np.searchsorted(rotations, rotation), len(rotations) - 1)
-        wanted_key = position_key(position)
+        wanted_key = self._position_key(position)
         wanted_position = np.minimum(np.searchsorted(positions, wanted_key), len(positions) - 1)
         known = inside & (rotations[wanted_rotation] == rotation) & (positions[wanted_position] == wanted_key)
         wanted = wanted_rotation * len(positions) + wanted_position
-        slots = np.minimum(np.searchsorted(composite[order], wanted), len(composite) - 1)
-        found = known & (composite[order][slots] == wanted)
+        slots = np.minimum(np.searchsorted(sorted_composite, wanted), len(sorted_composite) - 1)
+        found = known & (sorted_composite[slots] == wanted)
         return np.where(found, order[slots], -1)
 
     def subset(self, mask: np.ndarray) -> "CellSet":

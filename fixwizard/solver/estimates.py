@@ -69,13 +69,14 @@ class Samples:
 
 
 def rotation_center(rotations: Rotation) -> Rotation:
-    """Approximate minimax centre of a small set of rotations (signs aligned to their principal quaternion)."""
+    """Approximate minimax centre of a small set of rotations (signs aligned to their principal quaternion): steps
+    towards the farthest unit quaternion, the one least aligned with the centre."""
     quaternions = rotations.as_quat().reshape(-1, 4)
     principal = np.linalg.eigh(quaternions.T @ quaternions)[1][:, -1]
     aligned = quaternions * np.where(quaternions @ principal < 0, -1.0, 1.0)[:, None]
     center = principal.copy()
     for step in range(1, CENTER_ITERATIONS + 1):
-        farthest = aligned[np.argmax(np.sum((aligned - center) ** 2, axis=1))]
+        farthest = aligned[np.argmin(aligned @ center)]
         center += (farthest - center) / (step + 1)
     return Rotation.from_quat(center / np.linalg.norm(center))
 
