@@ -244,12 +244,12 @@ def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: in
     return alive, rotated_positions[alive], low[alive], high[alive], faces[alive], rejected_by
 
 
-def _filter(problem: SearchProblem, cells: CellSet, parents: Survivors | None, tap_order: np.ndarray,
+def _filter(problem: SearchProblem, frames: _Frames, parents: Survivors | None, tap_order: np.ndarray,
             cancel: threading.Event | None, parent_index: np.ndarray | None = None) -> tuple[np.ndarray, Survivors]:
-    """Which cells survive the taps of ``tap_order``, and the survivors (their intervals are set for those taps;
-    the next level tests the taps that rejected most first). ``parent_index``: each cell's row in ``parents``
-    (default: eight children per parent, in order)."""
-    frames = _Frames(cells)
+    """Which cells (of ``frames``) survive the taps of ``tap_order``, and the survivors (their intervals are set
+    for those taps; the next level tests the taps that rejected most first). ``parent_index``: each cell's row in
+    ``parents`` (default: eight children per parent, in order)."""
+    cells = frames.cells
     grid = distance_grid_for(problem.oracle)
     if parent_index is None:
         parent_index = np.arange(len(cells)) // 8 if parents is not None else np.full(len(cells), -1)
@@ -292,7 +292,7 @@ def filter_cells(problem: SearchProblem, cells: CellSet, parents: Survivors | No
     """The cells of a set that no tap rejects. ``parents``: the survivors the cells are children of
     (eight per parent, in order), whose intervals then decide most children without a query."""
     tap_order = np.arange(len(problem.base_p_taps)) if parents is None else parents.tap_order
-    return _filter(problem, cells, parents, tap_order, cancel)[1]
+    return _filter(problem, _Frames(cells), parents, tap_order, cancel)[1]
 
 
 @dataclass
@@ -415,7 +415,7 @@ def add_taps(problem: SearchProblem, previous: SearchTree, max_cells: float = 1e
         if not np.any(candidates):
             return SearchTree(levels + [previous.final.subset(np.zeros(len(previous.final), bool))], 0)
         parent_index = None if depth == 0 else (np.cumsum(level_alive) - 1)[level.parent_index[candidates]]
-        alive, survivors = _filter(new_problem, level.cells.subset(candidates), levels[-1] if levels else None,
+        alive, survivors = _filter(new_problem, level.frames.subset(candidates), levels[-1] if levels else None,
                                    new_taps, cancel, parent_index)
         level_alive = np.zeros(len(level), bool)
         level_alive[np.flatnonzero(candidates)[alive]] = True

@@ -227,7 +227,7 @@ def _modes(problem: SearchProblem, survivors: Survivors, likelihood: _Likelihood
     found = []
     for number, label in enumerate(mode_labels, start=1):
         stage(SolveStage("bounds", number, len(mode_labels)))
-        mode_survivors = survivors.subset(labels == label)
+        mode_survivors = survivors if len(mode_labels) == 1 else survivors.subset(labels == label)
         mode_cells = mode_survivors.cells
         centre = bound_centre(mode_cells, fix_p_origin, rotation_center(mode_cells.distinct_rotations()[0]))
         def refining(round_: int, mode: int = number) -> None:
