@@ -290,9 +290,14 @@ def split(survivors: Survivors, problem: SearchProblem) -> CellSet:
 def filter_cells(problem: SearchProblem, cells: CellSet, parents: Survivors | None = None,
                  cancel: threading.Event | None = None) -> Survivors:
     """The cells of a set that no tap rejects. ``parents``: the survivors the cells are children of
-    (eight per parent, in order), whose intervals then decide most children without a query."""
+    (eight per parent, in order), whose intervals then decide most children without a query, and whose centre
+    rotations children split in position share."""
     tap_order = np.arange(len(problem.base_p_taps)) if parents is None else parents.tap_order
-    return _filter(problem, _Frames(cells), parents, tap_order, cancel)[1]
+    if parents is not None and cells.rotation_ids is parents.cells.rotation_ids:  # split in position
+        frames = _Frames(cells, parents.frames.fix_R_base, parents.frames.chords)
+    else:
+        frames = _Frames(cells)
+    return _filter(problem, frames, parents, tap_order, cancel)[1]
 
 
 @dataclass
