@@ -41,8 +41,11 @@ def recorded_session(folder: Path, taps: int = 3) -> Path:
     return session.path
 
 
-def toasts(app: FixwizardApp) -> str:
-    return "\n".join(str(toast.render()) for toast in app.screen.query("Toast"))
+def sampling_note(app: FixwizardApp) -> str:
+    """The sampling screen's note line ("" on any other screen, or before it is mounted)."""
+    if type(app.screen).__name__ != "SamplingScreen" or not app.screen.is_mounted:
+        return ""
+    return str(app.screen.query_one("#note", Static).render())
 
 
 def damage_line(path: Path, number: int, replacement: bytes) -> None:
@@ -60,8 +63,8 @@ def test_a_resume_says_which_session_it_opened_and_shows_every_tap(tmp_path):
         context = simulated_cell(3, pace_s=0.0, folder=tmp_path)
         app = FixwizardApp(context, "")
         async with app.run_test(size=SIZE, notifications=True) as pilot:
-            await until(pilot, lambda: type(app.screen).__name__ == "SamplingScreen" and "Resumed" in toasts(app))
-            notice = toasts(app)
+            await until(pilot, lambda: "Resumed" in sampling_note(app))
+            notice = sampling_note(app)
             assert f"Resumed the session {path}: 12 taps recorded, fixture demo_bracket.stl" in notice
             assert "tip calibration example_matlab_logo.yaml" in notice
             assert "line 12 of the session journal holds a record that was never finished" in notice
@@ -157,8 +160,8 @@ def test_the_start_screen_resume_says_which_session_it_opened(tmp_path):
             await pilot.pause()
             app.screen.query_one("#continue").focus()
             await pilot.press("enter")
-            await until(pilot, lambda: type(app.screen).__name__ == "SamplingScreen" and "Resumed" in toasts(app))
-            assert f"Resumed the session {path}: 2 taps recorded" in toasts(app)
+            await until(pilot, lambda: "Resumed" in sampling_note(app))
+            assert f"Resumed the session {path}: 2 taps recorded" in sampling_note(app)
     asyncio.run(run())
 
 
