@@ -270,6 +270,8 @@ def test_leaving_sampling_asks_and_lands_on_the_start_screen_with_that_session_t
             await press_button(pilot, "#continue")
             await until(pilot, lambda: isinstance(app.screen, SamplingScreen) and not app.screen.busy)
             session_path = app.screen.session.path
+            assert str(app.screen.query_one("#note", Static).render()) == (
+                f"Tip calibration tip.yaml. New session {session_path.name}: every tap is saved there as you go.")
             await pilot.press("escape")
             await until(pilot, lambda: isinstance(app.screen, Confirm))
             await pilot.press("y")
