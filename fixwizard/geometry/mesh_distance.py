@@ -43,6 +43,8 @@ from typing import Any
 import numba
 import numpy as np
 
+from fixwizard.parallel import PARALLEL_KERNEL_LOCK
+
 UNIT_ROUNDOFF = 2.0**-53
 Vector3 = tuple[float, float, float]  # a point or an offset (m) as three floats, as the compiled kernels pass them
 Arrays = tuple[Any, ...]  # several arrays passed to a compiled kernel as one argument
@@ -497,7 +499,8 @@ class MeshDistance:
         if count < SERIAL_POINTS:  # waking the parallel workers costs milliseconds: more than a few queries
             _query_range(0, count, points, self.rows, self._hierarchy, hints, float(cap_m), out)
         else:
-            _query(points, self.rows, self._hierarchy, hints, float(cap_m), out)
+            with PARALLEL_KERNEL_LOCK:
+                _query(points, self.rows, self._hierarchy, hints, float(cap_m), out)
         return out
 
     def rays(self, origins_m: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -510,5 +513,6 @@ class MeshDistance:
         if len(origins) < SERIAL_POINTS:
             _ray_range(0, len(origins), origins, directions, self.rows, self._hierarchy, first, crossings)
         else:
-            _rays(origins, directions, self.rows, self._hierarchy, first, crossings)
+            with PARALLEL_KERNEL_LOCK:
+                _rays(origins, directions, self.rows, self._hierarchy, first, crossings)
         return first, crossings

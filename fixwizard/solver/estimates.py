@@ -16,9 +16,9 @@ from fixwizard.fixture import DistanceOracle
 from fixwizard.geometry.meb import minimum_enclosing_ball
 from fixwizard.geometry.se3 import make_transform, points_in_frames, rotation_angle_rad
 from fixwizard.geometry.so3_grid import chord
+from fixwizard.parallel import PARALLEL_KERNEL_LOCK
 from fixwizard.solver.cells import CellSet
 from fixwizard.solver.distance_grid import distance_grid_for
-from fixwizard.solver.parallel import PARALLEL_KERNEL_LOCK
 
 CENTER_ITERATIONS = 200
 # Below this many effective samples, sample_cells draws a second, importance-weighted round, then a third.

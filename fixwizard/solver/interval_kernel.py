@@ -19,7 +19,7 @@ import numba
 import numpy as np
 
 from fixwizard.geometry.mesh_distance import triangle_row_high_m
-from fixwizard.solver.parallel import PARALLEL_KERNEL_LOCK
+from fixwizard.parallel import PARALLEL_KERNEL_LOCK
 
 Arrays = tuple[Any, ...]  # several arrays passed to a compiled kernel as one argument
 NOT_REJECTED = -1
