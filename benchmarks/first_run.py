@@ -229,8 +229,8 @@ def main() -> int:
         print("first_run.py needs tmux (apt-get install tmux)", file=sys.stderr)
         return 1
     folder = Path(tempfile.mkdtemp(prefix="fixwizard-first-run-"))
-    busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.busy)]
     run = Run(folder)
+    busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.busy)]
     try:
         calibrate_tip(run)
         taps = sample(run, args.min_taps)

@@ -171,3 +171,18 @@ def test_locate_finds_the_cell_holding_each_pose_and_no_cell_outside_the_set():
     assert np.array_equal(np.flatnonzero(kept)[found[found >= 0]], rows[found >= 0])
     outside = subset.locate(rotations[:10], positions[:10] + 1.0)  # a metre beyond the root cube
     assert np.all(outside == -1)
+
+
+def test_a_located_set_pickles_as_before_and_locates_alike_after_the_trip():
+    import pickle
+
+    cells = root_cells(PositionGrid(np.array([-0.1, -0.1, -0.1]), 0.2)).split_rotations().split_positions()
+    rng = np.random.default_rng(1)
+    rows = rng.integers(0, len(cells), 500)
+    rotations = cells.rotation_grid.sample(cells.rotation_level, cells.rotation_cells[rows], rng)
+    positions = cells.positions_m(rows)
+    before = pickle.dumps(cells)
+    found = cells.locate(rotations, positions)  # builds the set's lookup
+    assert pickle.dumps(cells) == before  # the lookup stays behind, not sent to or from a solver process
+    assert np.array_equal(pickle.loads(before).locate(rotations, positions), found)
+    assert np.array_equal(found, rows)

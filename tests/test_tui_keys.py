@@ -354,6 +354,11 @@ async def test_a_resumed_session_opens_with_its_newest_tap_in_view_under_a_long_
         await until(pilot, lambda: table.size.height < height)
         await pilot.pause()
         await until(pilot, lambda: table.scroll_y == table.max_scroll_y)
+        height = table.size.height
+        screen._problem(opened * 3)  # a robot problem's box shrinks it further
+        await until(pilot, lambda: table.size.height < height)
+        await pilot.pause()
+        await until(pilot, lambda: table.scroll_y == table.max_scroll_y)
     context.session.release()
 
 

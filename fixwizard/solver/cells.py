@@ -68,6 +68,12 @@ class CellSet:
         cells = position_cells.astype(np.int64)
         return (cells[:, 0] * side + cells[:, 1]) * side + cells[:, 2]
 
+    def __getstate__(self) -> dict[str, object]:
+        """Pickled (to and from solver processes) without ``_lookup``, which is rebuilt where it is needed."""
+        state = dict(self.__dict__)
+        state.pop("_lookup", None)
+        return state
+
     @cached_property
     def _lookup(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """For ``locate``: the set's distinct rotation cells and position keys (sorted), and the composite key

@@ -472,6 +472,4 @@ class SamplingScreen(Screen[bool]):
         problem.remove_class("-empty")
         note = self.query_one("#note", Static)
         note.update("")
-        note.add_class("-empty")
-        table = self.query_one(TapsTable)
-        table.call_after_refresh(table.scroll_end, animate=False)  # the latest taps stay in view
+        note.add_class("-empty")  # the table shrinks under the problem and keeps its newest tap in view itself
