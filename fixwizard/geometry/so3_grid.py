@@ -25,9 +25,10 @@ against random rotations at several levels.
 
 from typing import overload
 
-import healpy
 import numpy as np
 from scipy.spatial.transform import Rotation
+
+from fixwizard.geometry.healpix import pixel_boundaries, pixel_centers, pixels_of
 
 BASE_TILTS = 6
 BASE_PIXELS = 12
@@ -98,7 +99,7 @@ class RotationGrid:
     """The hierarchical SO(3) grid. A cell at ``level`` is ``pixel * n_tilts(level) + tilt``."""
 
     def __init__(self) -> None:
-        self._base_centers = np.stack(healpy.pix2vec(1, np.arange(BASE_PIXELS), nest=True), axis=1)
+        self._base_centers = pixel_centers(1, np.arange(BASE_PIXELS))
         self._base_sections = _shortest_rotations(np.tile(_EZ, (BASE_PIXELS, 1)), self._base_centers)
         self._pixel_gamma: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
@@ -137,7 +138,7 @@ class RotationGrid:
     def center_matrices(self, level: int, cells: np.ndarray) -> np.ndarray:
         """Centre rotations (N, 3, 3) of cells (the rotation part of ``base_T_fix``)."""
         pixels, tilts = np.divmod(np.asarray(cells, np.int64), self.n_tilts(level))
-        directions = np.stack(healpy.pix2vec(2**level, pixels, nest=True), axis=1)
+        directions = pixel_centers(2**level, pixels)
         psi = (tilts + 0.5) * self.tilt_step_rad(level)
         return _tilted(self._sections(level, pixels, directions), psi)
 
@@ -150,7 +151,7 @@ class RotationGrid:
         pixels, tilts = np.divmod(np.asarray(cells, np.int64), self.n_tilts(level))
         depth = 10
         fine = (pixels << (2 * depth)) + rng.integers(0, 4**depth, size=len(pixels))
-        directions = np.stack(healpy.pix2vec(2 ** (level + depth), fine, nest=True), axis=1)
+        directions = pixel_centers(2 ** (level + depth), fine)
         psi = (tilts + rng.random(len(tilts))) * self.tilt_step_rad(level)
         return Rotation.from_matrix(_tilted(self._sections(level, pixels, directions), psi))
 
@@ -158,7 +159,7 @@ class RotationGrid:
         """Cells holding the given rotations."""
         matrices = rotations.as_matrix().reshape(-1, 3, 3)
         directions = matrices[:, :, 2]
-        pixels = healpy.vec2pix(2**level, directions[:, 0], directions[:, 1], directions[:, 2], nest=True)
+        pixels = pixels_of(2**level, directions)
         twist = np.swapaxes(self._sections(level, pixels, directions), 1, 2) @ matrices
         psi = np.mod(np.arctan2(twist[:, 1, 0], twist[:, 0, 0]), 2.0 * np.pi)
         tilts = np.minimum((psi / self.tilt_step_rad(level)).astype(np.int64), self.n_tilts(level) - 1)
@@ -182,9 +183,8 @@ class RotationGrid:
 
     def _compute_gamma(self, level: int, pixels: np.ndarray) -> np.ndarray:
         nside = 2**level
-        boundary = healpy.boundaries(nside, pixels, step=BOUNDARY_STEPS, nest=True)
-        boundary = np.moveaxis(boundary.reshape(len(pixels), 3, -1), 1, 2)
-        centers = np.stack(healpy.pix2vec(nside, pixels, nest=True), axis=1)[:, None, :]
+        boundary = pixel_boundaries(nside, pixels, BOUNDARY_STEPS)
+        centers = pixel_centers(nside, pixels)[:, None, :]
         base = self._base_centers[pixels >> (2 * level)][:, None, :]
         alpha = _angle_between(centers, boundary)
         twist = _triangle_area(base, centers, boundary) + 0.5 * self.tilt_step_rad(level)
