@@ -5,6 +5,7 @@ Frames: cells hold ``base_T_fix`` (internal frame); everything returned is of th
 """
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numba
@@ -23,6 +24,10 @@ from fixwizard.solver.distance_grid import distance_grid_for
 CENTER_ITERATIONS = 200
 # Below this many effective samples, sample_cells draws a second, importance-weighted round, then a third.
 MIN_EFFECTIVE_SAMPLES = 1000
+# The first two rounds only find where the likelihood lies (on the four real runs their effective sample sizes are
+# 16-528 of 40 000 draws, and the fitted round that follows reaches 10 000-14 000): they draw max_samples / SCOUTING
+# poses; a first round whose effective size would reach MIN_EFFECTIVE_SAMPLES at full size is drawn at full size.
+SCOUTING = 4
 # Then rounds of a share of draws from a Student-t fitted to the previous round's weighted samples (wider by
 # PROPOSAL_INFLATION in scale, and never narrower per coordinate than a cell's own spread scaled by the previous
 # effective sample size), the rest uniform over the cells so that no part of the set goes unsampled; up to
@@ -196,23 +201,31 @@ def sample_cells(cells: CellSet, oracle: DistanceOracle, base_p_taps: np.ndarray
     Likelihood: independent Gaussians on the signed point-to-surface residual ``d(x_i) - r_ball``; all cells
     have equal volume, so the prior over cells is uniform. First one uniform pose in each of (at most
     ``max_samples`` randomly chosen) cells. When a few cells carry almost all the weight (effective sample
-    size under ``MIN_EFFECTIVE_SAMPLES``, usual for coarse cells), a second round draws ``max_samples``
-    poses from cells picked in proportion to a half-and-half mix of the first weights and uniform, weighted
-    by likelihood over the picking probability (importance sampling), and replaces the first. When the
-    likelihood is still narrower than the cells, rounds drawn from a Student-t fitted to the round before
+    size under ``MIN_EFFECTIVE_SAMPLES``, usual for coarse cells), a second round draws poses from cells picked
+    in proportion to a half-and-half mix of the first weights and uniform, weighted by likelihood over the
+    picking probability (importance sampling), and replaces the first. Both rounds draw a ``SCOUTING`` share of
+    ``max_samples`` unless that share already shows a full round would do (``_scouted``). When the
+    likelihood is still narrower than the cells, rounds of ``max_samples`` drawn from a Student-t fitted to the
+    round before
     (``_fitted_round``, each fitted to the one before; ``radius_m`` the fixture radius that scales rotations to
     lengths): the round with the largest effective sample size is kept.
     """
-    count = len(cells)
-    chosen = np.arange(count) if count <= max_samples else np.sort(rng.choice(count, max_samples, replace=False))
-    samples = _weighted_draws(cells, oracle, base_p_taps, ball_radius_m, sigma_m, chosen, np.zeros(len(chosen)),
-                              rng)
+    def uniform_round(draws: int) -> tuple[Samples, np.ndarray]:
+        chosen = np.arange(len(cells)) if len(cells) <= draws else np.sort(rng.choice(len(cells), draws, replace=False))
+        return _weighted_draws(cells, oracle, base_p_taps, ball_radius_m, sigma_m, chosen, np.zeros(len(chosen)),
+                               rng), chosen
+
+    samples, chosen = _scouted(uniform_round, max_samples)
     if effective_sample_size(samples.weights) >= MIN_EFFECTIVE_SAMPLES:
         return samples
     pick_probability = 0.5 * samples.weights + 0.5 / len(chosen)
-    picks = rng.choice(len(chosen), max_samples, p=pick_probability / pick_probability.sum())
-    samples = _weighted_draws(cells, oracle, base_p_taps, ball_radius_m, sigma_m, chosen[picks],
-                              -np.log(pick_probability[picks]), rng)
+
+    def importance_round(draws: int) -> tuple[Samples, np.ndarray]:
+        picks = rng.choice(len(chosen), draws, p=pick_probability / pick_probability.sum())
+        return _weighted_draws(cells, oracle, base_p_taps, ball_radius_m, sigma_m, chosen[picks],
+                               -np.log(pick_probability[picks]), rng), picks
+
+    samples, _ = _scouted(importance_round, max_samples)
     fitted = samples
     for _ in range(FITTED_ROUNDS):
         if effective_sample_size(samples.weights) >= MIN_EFFECTIVE_SAMPLES:
@@ -221,6 +234,17 @@ def sample_cells(cells: CellSet, oracle: DistanceOracle, base_p_taps: np.ndarray
         if effective_sample_size(fitted.weights) > effective_sample_size(samples.weights):
             samples = fitted
     return samples
+
+
+def _scouted(draw: Callable[[int], tuple[Samples, np.ndarray]], max_samples: int) -> tuple[Samples, np.ndarray]:
+    """A round of ``max_samples / SCOUTING`` draws, drawn again with ``max_samples`` when the effective sample size
+    that many would give (it grows with the draws) reaches ``MIN_EFFECTIVE_SAMPLES``; ``draw(n)`` returns the
+    samples of ``n`` draws (fewer when fewer cells exist) and what was drawn from."""
+    scouts = max(1, max_samples // SCOUTING)
+    samples, drawn = draw(scouts)
+    if len(drawn) < scouts or effective_sample_size(samples.weights) * SCOUTING < MIN_EFFECTIVE_SAMPLES:
+        return samples, drawn
+    return draw(max_samples)
 
 
 def _uniform_poses(cells: CellSet, cell_index: np.ndarray, rng: np.random.Generator) -> tuple[Rotation, np.ndarray]:
