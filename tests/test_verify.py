@@ -223,6 +223,22 @@ def test_on_the_simulated_cell_four_suggested_taps_tell_a_moved_fixture(tmp_path
     assert dt.datetime.now(dt.UTC) - loaded.created < dt.timedelta(minutes=10)
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_no_suggested_tap_puts_the_ball_where_the_fixture_rests(seed):
+    """At any pose on the table (a random turn and offset; resting on any of its faces), every suggested ball clears
+    the fixture's lowest point: the foot of a side face is where the table is, a ball there cannot be tapped."""
+    fixture = demo_fixture()
+    rng = np.random.default_rng(seed)
+    cad_R = Rotation.random(random_state=seed).as_matrix()
+    lowest_m = np.min(fixture.mesh.vertices @ cad_R.T, axis=0)[2]
+    base_T_cad = make_transform(cad_R, np.array([*rng.uniform(-0.5, 0.5, 2), -lowest_m]))
+    ball_m = rng.uniform(0.002, 0.01)
+    points = suggest_check_points(fixture, base_T_cad, ball_m, count=5)
+    assert len(points) == 5
+    for point in points:
+        assert point.base_p_ball_m[2] - ball_m / 2 >= 0.002 - 1e-12, point.where
+
+
 def test_a_mistaken_argument_to_verify_is_an_input_error(expert):
     path = expert[1]
     loaded = report.load(path)

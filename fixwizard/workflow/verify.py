@@ -52,6 +52,7 @@ REPORT_TAPS_ROUNDING_M = 1e-7  # the report writes its taps to 0.1 um: their err
 SAME_BALL_M = 1e-9
 REACHABLE_NORMAL_Z = -0.2  # a face the tool reaches from above or the side points at least this much up (base frame)
 SUGGESTION_CANDIDATES = 400
+SUPPORT_CLEARANCE_M = 0.002  # a suggested ball stays this far above the fixture's lowest point, where it rests
 
 
 def fixture_of(loaded: report.Report, mesh: str | Path | None = None) -> Fixture:
@@ -226,14 +227,20 @@ def suggest_check_points(fixture: Fixture, base_T_cad: np.ndarray, ball_diameter
     """``count`` points to tap for a check at the report's pose, on faces the tool reaches (not facing down), spread
     over the fixture and over the directions its faces point in, so that a move in any direction shows: farthest
     points in position and normal (scaled by the fixture's radius) among random surface points (the same points
-    for the same inputs)."""
+    for the same inputs). The ball of each stays ``SUPPORT_CLEARANCE_M`` above the fixture's lowest point (base z):
+    the foot of a side face is where the table or the clamp is."""
     base_R_cad = base_T_cad[:3, :3]
+    radius_m = ball_diameter_m / 2.0
     reachable = (fixture.mesh.face_normals @ base_R_cad.T)[:, 2] >= REACHABLE_NORMAL_Z
     mask = reachable if np.any(reachable) else None
-    cad_p_balls, cad_n = touching_ball_contacts(fixture.mesh, SUGGESTION_CANDIDATES, ball_diameter_m / 2.0,
+    cad_p_balls, cad_n = touching_ball_contacts(fixture.mesh, SUGGESTION_CANDIDATES, radius_m,
                                                 np.random.default_rng(0), mask)
     base_p = transform_points(base_T_cad, cad_p_balls)
     base_n = cad_n @ base_R_cad.T
+    support_z_m = float(np.min(transform_points(base_T_cad, fixture.mesh.vertices)[:, 2]))
+    clear = base_p[:, 2] - radius_m >= support_z_m + SUPPORT_CLEARANCE_M
+    if np.any(clear):
+        base_p, base_n = base_p[clear], base_n[clear]
     features = np.hstack([base_p, fixture.radius_m * base_n])
     chosen = [int(np.argmax(base_n[:, 2]))]
     while len(chosen) < min(count, len(base_p)):
