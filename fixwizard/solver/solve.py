@@ -7,6 +7,7 @@ the sample error bound in metres; it returns a ``Solution`` with the pose of the
 import threading
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -217,7 +218,9 @@ def _modes(problem: SearchProblem, survivors: Survivors, likelihood: _Likelihood
     bounds; which cells belong to them; and likelihood samples of them all.
 
     Each mode is sampled on its own (an equal share of the budget), and the modes' probabilities come from
-    Laplace's approximation (``mode_mass``), not from the samples.
+    Laplace's approximation (``mode_mass``), not from the samples. A mode's samples are drawn (from its cells as the
+    search left them) in a second thread while its bounds are refined, mostly serial work that leaves a core free;
+    one sampling thread, the modes in turn, keeps the random draws the same from run to run.
     """
     cells = survivors.cells
     labels = rotation_modes(cells)
@@ -225,24 +228,29 @@ def _modes(problem: SearchProblem, survivors: Survivors, likelihood: _Likelihood
     per_mode_samples = max(1, likelihood.max_samples // len(mode_labels))
     oracle = likelihood.fixture.oracle
     found = []
-    for number, label in enumerate(mode_labels, start=1):
-        stage(SolveStage("bounds", number, len(mode_labels)))
-        mode_survivors = survivors if len(mode_labels) == 1 else survivors.subset(labels == label)
-        mode_cells = mode_survivors.cells
-        centre = bound_centre(mode_cells, fix_p_origin, rotation_center(mode_cells.distinct_rotations()[0]))
-        def refining(round_: int, mode: int = number) -> None:
-            stage(SolveStage("bounds", mode, len(mode_labels), round_))
+    sampler = ThreadPoolExecutor(max_workers=1, thread_name_prefix="fixwizard-samples")
+    try:
+        for number, label in enumerate(mode_labels, start=1):
+            stage(SolveStage("bounds", number, len(mode_labels)))
+            mode_survivors = survivors if len(mode_labels) == 1 else survivors.subset(labels == label)
+            mode_cells = mode_survivors.cells
+            sampling = sampler.submit(sample_cells, mode_cells, oracle, problem.base_p_taps, problem.ball_radius_m,
+                                      likelihood.sigma_m, per_mode_samples, likelihood.rng, problem.fixture_radius_m)
+            centre = bound_centre(mode_cells, fix_p_origin, rotation_center(mode_cells.distinct_rotations()[0]))
+            def refining(round_: int, mode: int = number) -> None:
+                stage(SolveStage("bounds", mode, len(mode_labels), round_))
 
-        largest = refined_largest_figures(problem, mode_survivors, centre, fix_p_origin,
-                                          refine_budget / len(mode_labels), cancel, refining)
-        if largest is None:
-            continue
-        stage(SolveStage("samples", number, len(mode_labels)))
-        samples = sample_cells(mode_cells, oracle, problem.base_p_taps, problem.ball_radius_m, likelihood.sigma_m,
-                               per_mode_samples, likelihood.rng, problem.fixture_radius_m)
-        bounds = bounds_from_figures(centre, largest)
-        found.append((bounds, samples, np.flatnonzero(labels == label),
-                      ModeLikelihood(mode_cells, samples, bounds.max_point_displacement_m)))
+            largest = refined_largest_figures(problem, mode_survivors, centre, fix_p_origin,
+                                              refine_budget / len(mode_labels), cancel, refining)
+            stage(SolveStage("samples", number, len(mode_labels)))
+            samples = sampling.result()
+            if largest is None:
+                continue
+            bounds = bounds_from_figures(centre, largest)
+            found.append((bounds, samples, np.flatnonzero(labels == label),
+                          ModeLikelihood(mode_cells, samples, bounds.max_point_displacement_m)))
+    finally:  # a cancelled or failed refinement does not wait for its samples
+        sampler.shutdown(wait=False, cancel_futures=True)
     if not found:
         return [], np.zeros(len(cells), bool), None
     stage(SolveStage("masses"))
