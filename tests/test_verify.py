@@ -25,7 +25,7 @@ from fixwizard.robot.sim_hands import SimulatedHands
 from fixwizard.solver.solve import solve
 from fixwizard.solver.verify_search import AllowedRegion, search_region, start_cells
 from fixwizard.synthetic import bounded_noise, touching_ball_centres
-from fixwizard.workflow.verify import fixture_of, suggest_check_points, verify
+from fixwizard.workflow.verify import SUPPORT_CLEARANCE_M, fixture_of, suggest_check_points, verify
 from shapes import as_fixture
 from test_report import V1_REPORT
 from tui_cell import spread_taps
@@ -229,14 +229,14 @@ def test_no_suggested_tap_puts_the_ball_where_the_fixture_rests(seed):
     the fixture's lowest point: the foot of a side face is where the table is, a ball there cannot be tapped."""
     fixture = demo_fixture()
     rng = np.random.default_rng(seed)
-    cad_R = Rotation.random(random_state=seed).as_matrix()
-    lowest_m = np.min(fixture.mesh.vertices @ cad_R.T, axis=0)[2]
-    base_T_cad = make_transform(cad_R, np.array([*rng.uniform(-0.5, 0.5, 2), -lowest_m]))
+    base_R_cad = Rotation.random(random_state=seed).as_matrix()
+    lowest_m = np.min(fixture.mesh.vertices @ base_R_cad.T, axis=0)[2]
+    base_T_cad = make_transform(base_R_cad, np.array([*rng.uniform(-0.5, 0.5, 2), -lowest_m]))
     ball_m = rng.uniform(0.002, 0.01)
     points = suggest_check_points(fixture, base_T_cad, ball_m, count=5)
     assert len(points) == 5
     for point in points:
-        assert point.base_p_ball_m[2] - ball_m / 2 >= 0.002 - 1e-12, point.where
+        assert point.base_p_ball_m[2] - ball_m / 2 >= SUPPORT_CLEARANCE_M - 1e-12, point.where
 
 
 def test_a_mistaken_argument_to_verify_is_an_input_error(expert):
