@@ -8,6 +8,7 @@ import shutil
 
 import numpy as np
 import pytest
+import trimesh
 import yaml
 from scipy.spatial.transform import Rotation
 
@@ -25,7 +26,13 @@ from fixwizard.robot.sim_hands import SimulatedHands
 from fixwizard.solver.solve import solve
 from fixwizard.solver.verify_search import AllowedRegion, search_region, start_cells
 from fixwizard.synthetic import bounded_noise, touching_ball_centres
-from fixwizard.workflow.verify import SUPPORT_CLEARANCE_M, fixture_of, suggest_check_points, verify
+from fixwizard.workflow.verify import (
+    SUPPORT_CLEARANCE_M,
+    UP_FACING_NORMAL_Z,
+    fixture_of,
+    suggest_check_points,
+    verify,
+)
 from shapes import as_fixture
 from test_report import V1_REPORT
 from tui_cell import spread_taps
@@ -237,6 +244,24 @@ def test_no_suggested_tap_puts_the_ball_where_the_fixture_rests(seed):
     assert len(points) == 5
     for point in points:
         assert point.base_p_ball_m[2] - ball_m / 2 >= SUPPORT_CLEARANCE_M - 1e-12, point.where
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_on_a_sheet_too_thin_to_clear_the_table_every_suggestion_is_on_its_upper_face(seed):
+    """A sheet 0.5-1.9 mm thick lying flat, at a random turn and offset: no ball clears its lowest point by
+    SUPPORT_CLEARANCE_M, and none is suggested at its edge, where the ball would meet the table; every suggestion
+    is on the upper face."""
+    rng = np.random.default_rng(seed)
+    thickness_m = rng.uniform(0.0005, 0.0019)
+    sheet = trimesh.creation.box((rng.uniform(0.05, 0.15), rng.uniform(0.03, 0.1), thickness_m))
+    base_T_cad = make_transform(Rotation.from_euler("z", rng.uniform(0, 360), degrees=True),
+                                np.array([*rng.uniform(-0.5, 0.5, 2), thickness_m / 2]))
+    ball_m = rng.uniform(0.002, 0.01)
+    points = suggest_check_points(as_fixture("sheet", sheet), base_T_cad, ball_m, count=4)
+    assert len(points) == 4
+    for point in points:
+        assert point.base_n[2] >= UP_FACING_NORMAL_Z and "pointing up" in point.where, point.where
+        assert point.base_p_ball_m[2] == pytest.approx(thickness_m + ball_m / 2, abs=1e-9)
 
 
 def test_a_mistaken_argument_to_verify_is_an_input_error(expert):

@@ -53,6 +53,7 @@ SAME_BALL_M = 1e-9
 REACHABLE_NORMAL_Z = -0.2  # a face the tool reaches from above or the side points at least this much up (base frame)
 SUGGESTION_CANDIDATES = 400
 SUPPORT_CLEARANCE_M = 0.002  # a suggested ball stays this far above the fixture's lowest point, where it rests
+UP_FACING_NORMAL_Z = 0.7  # on a fixture too thin for that clearance, suggestions are on faces within 45 deg of up
 
 
 def fixture_of(loaded: report.Report, mesh: str | Path | None = None) -> Fixture:
@@ -228,7 +229,8 @@ def suggest_check_points(fixture: Fixture, base_T_cad: np.ndarray, ball_diameter
     over the fixture and over the directions its faces point in, so that a move in any direction shows: farthest
     points in position and normal (scaled by the fixture's radius) among random surface points (the same points
     for the same inputs). The ball of each stays ``SUPPORT_CLEARANCE_M`` above the fixture's lowest point (base z):
-    the foot of a side face is where the table or the clamp is."""
+    the foot of a side face is where the table or the clamp is. On a fixture too thin for that (a sheet), the balls
+    are on faces pointing up (``UP_FACING_NORMAL_Z``), never at its edge."""
     base_R_cad = base_T_cad[:3, :3]
     radius_m = ball_diameter_m / 2.0
     reachable = (fixture.mesh.face_normals @ base_R_cad.T)[:, 2] >= REACHABLE_NORMAL_Z
@@ -239,6 +241,8 @@ def suggest_check_points(fixture: Fixture, base_T_cad: np.ndarray, ball_diameter
     base_n = cad_n @ base_R_cad.T
     support_z_m = float(np.min(transform_points(base_T_cad, fixture.mesh.vertices)[:, 2]))
     clear = base_p[:, 2] - radius_m >= support_z_m + SUPPORT_CLEARANCE_M
+    if not np.any(clear):
+        clear = base_n[:, 2] >= UP_FACING_NORMAL_Z
     if np.any(clear):
         base_p, base_n = base_p[clear], base_n[clear]
     features = np.hstack([base_p, fixture.radius_m * base_n])
