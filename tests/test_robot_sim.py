@@ -106,6 +106,15 @@ def test_paced_motion_is_cut_short_by_stop_and_the_next_tap_works(fixture):
     assert cell.tap().travel_m > 0
 
 
+def test_stop_ends_freedrive_as_a_controllers_stop_ends_its_program(cell):
+    cell.freedrive(True)
+    assert cell.status().mode == "freedrive"
+    cell.stop()
+    assert cell.status().mode == "idle"
+    cell.freedrive(True)  # turned on again as on the real arm
+    assert cell.status().mode == "freedrive"
+
+
 def test_tap_pointing_away_finds_no_contact(cell):
     cell.move_linear(make_transform(np.eye(3), [0.3, 0.0, 0.3]))  # tool z points up, into free space
     with pytest.raises(NoContact, match="no surface within 20 mm: move the tool closer"):

@@ -178,8 +178,10 @@ class SimulatedCell:
             return RobotStatus(self._connected, self._protective_stop, False, False, mode)
 
     def stop(self) -> None:
-        """Cut short a tap or move that is waiting out its pace; it raises ``MotionStopped``."""
+        """Cut short a tap or move that is waiting out its pace (it raises ``MotionStopped``) and end freedrive, as
+        a UR controller's stop ends the program that holds it; never waits for the lock a move holds."""
         self._stop_requested.set()
+        self._freedrive = False
 
     # --- stand-ins for the operator and the teach pendant ---
 
