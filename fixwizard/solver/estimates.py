@@ -5,6 +5,7 @@ Frames: cells hold ``base_T_fix`` (internal frame); everything returned is of th
 """
 
 import math
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -20,6 +21,7 @@ from fixwizard.geometry.so3_grid import chord
 from fixwizard.parallel import PARALLEL_KERNEL_LOCK
 from fixwizard.solver.cells import CellSet
 from fixwizard.solver.distance_grid import distance_grid_for
+from fixwizard.solver.search import SearchCancelled
 
 CENTER_ITERATIONS = 200
 # Below this many effective samples, sample_cells draws a second, importance-weighted round, then a third.
@@ -195,7 +197,8 @@ def bounds_from_figures(centre: BoundCentre, largest: np.ndarray) -> Bounds:
 
 
 def sample_cells(cells: CellSet, oracle: DistanceOracle, base_p_taps: np.ndarray, ball_radius_m: float,
-                 sigma_m: float, max_samples: int, rng: np.random.Generator, radius_m: float = 0.1) -> Samples:
+                 sigma_m: float, max_samples: int, rng: np.random.Generator, radius_m: float = 0.1,
+                 cancel: threading.Event | None = None) -> Samples:
     """Poses inside the cells, weighted so that weighted sums estimate the likelihood-weighted posterior.
 
     Likelihood: independent Gaussians on the signed point-to-surface residual ``d(x_i) - r_ball``; all cells
@@ -208,9 +211,15 @@ def sample_cells(cells: CellSet, oracle: DistanceOracle, base_p_taps: np.ndarray
     likelihood is still narrower than the cells, rounds of ``max_samples`` drawn from a Student-t fitted to the
     round before
     (``_fitted_round``, each fitted to the one before; ``radius_m`` the fixture radius that scales rotations to
-    lengths): the round with the largest effective sample size is kept.
+    lengths): the round with the largest effective sample size is kept. Raises ``SearchCancelled`` before a
+    round once ``cancel`` is set.
     """
+    def go_on() -> None:
+        if cancel is not None and cancel.is_set():
+            raise SearchCancelled
+
     def uniform_round(draws: int) -> tuple[Samples, np.ndarray]:
+        go_on()
         chosen = np.arange(len(cells)) if len(cells) <= draws else np.sort(rng.choice(len(cells), draws, replace=False))
         return _weighted_draws(cells, oracle, base_p_taps, ball_radius_m, sigma_m, chosen, np.zeros(len(chosen)),
                                rng), chosen
@@ -221,6 +230,7 @@ def sample_cells(cells: CellSet, oracle: DistanceOracle, base_p_taps: np.ndarray
     pick_probability = 0.5 * samples.weights + 0.5 / len(chosen)
 
     def importance_round(draws: int) -> tuple[Samples, np.ndarray]:
+        go_on()
         picks = rng.choice(len(chosen), draws, p=pick_probability / pick_probability.sum())
         return _weighted_draws(cells, oracle, base_p_taps, ball_radius_m, sigma_m, chosen[picks],
                                -np.log(pick_probability[picks]), rng), picks
@@ -230,6 +240,7 @@ def sample_cells(cells: CellSet, oracle: DistanceOracle, base_p_taps: np.ndarray
     for _ in range(FITTED_ROUNDS):
         if effective_sample_size(samples.weights) >= MIN_EFFECTIVE_SAMPLES:
             break
+        go_on()
         fitted = _fitted_round(cells, oracle, base_p_taps, ball_radius_m, sigma_m, fitted, max_samples, rng, radius_m)
         if effective_sample_size(fitted.weights) > effective_sample_size(samples.weights):
             samples = fitted

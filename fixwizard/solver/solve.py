@@ -220,7 +220,8 @@ def _modes(problem: SearchProblem, survivors: Survivors, likelihood: _Likelihood
     Each mode is sampled on its own (an equal share of the budget), and the modes' probabilities come from
     Laplace's approximation (``mode_mass``), not from the samples. A mode's samples are drawn (from its cells as the
     search left them) in a second thread while its bounds are refined, mostly serial work that leaves a core free;
-    one sampling thread, the modes in turn, keeps the random draws the same from run to run.
+    one sampling thread, the modes in turn, keeps the random draws the same from run to run. A cancel ends the
+    sampling before its next round.
     """
     cells = survivors.cells
     labels = rotation_modes(cells)
@@ -235,7 +236,8 @@ def _modes(problem: SearchProblem, survivors: Survivors, likelihood: _Likelihood
             mode_survivors = survivors if len(mode_labels) == 1 else survivors.subset(labels == label)
             mode_cells = mode_survivors.cells
             sampling = sampler.submit(sample_cells, mode_cells, oracle, problem.base_p_taps, problem.ball_radius_m,
-                                      likelihood.sigma_m, per_mode_samples, likelihood.rng, problem.fixture_radius_m)
+                                      likelihood.sigma_m, per_mode_samples, likelihood.rng, problem.fixture_radius_m,
+                                      cancel)
             centre = bound_centre(mode_cells, fix_p_origin, rotation_center(mode_cells.distinct_rotations()[0]))
             def refining(round_: int, mode: int = number) -> None:
                 stage(SolveStage("bounds", mode, len(mode_labels), round_))
