@@ -15,7 +15,7 @@ import yaml
 
 from fixwizard.atomic import write_text_atomic
 from fixwizard.errors import InputError, file_problem, quoted
-from fixwizard.yamlfile import yaml_problem
+from fixwizard.yamlfile import parse_yaml, yaml_problem
 
 POINTS_FRAME = "base"
 _NUMBER_START = re.compile(r"\s*[-+]?(?:\d|\.\d|nan|inf)", re.IGNORECASE)
@@ -54,7 +54,7 @@ def _read_csv(text: str, path: Path) -> np.ndarray:
 
 def _read_yaml(text: str, path: Path) -> np.ndarray:
     try:
-        data = yaml.safe_load(text)
+        data = parse_yaml(text)
     except yaml.YAMLError as error:
         raise InputError(f"{path} is not valid YAML: {yaml_problem(error)}") from error
     if not isinstance(data, dict) or "points_m" not in data:

@@ -1,6 +1,9 @@
 """Reading fixwizard's own YAML documents: parse, check the schema, and say what is wrong."""
 
+import math
+import sys
 from pathlib import Path
+from typing import Any
 
 import yaml
 
@@ -15,12 +18,31 @@ def yaml_problem(error: yaml.YAMLError) -> str:
     return str(error).splitlines()[0]
 
 
+class _Loader(yaml.SafeLoader):
+    """``yaml.safe_load``'s loader, except that an integer too large for a float reads as +-inf: where a number is
+    read, it is then refused as not finite, with that place's message (``float()`` of it would raise)."""
+
+
+def _int_or_infinity(loader: yaml.SafeLoader, node: yaml.ScalarNode) -> int | float:
+    value: int = loader.construct_yaml_int(node)
+    return value if abs(value) <= sys.float_info.max else (math.inf if value > 0 else -math.inf)
+
+
+_Loader.add_constructor("tag:yaml.org,2002:int", _int_or_infinity)
+
+
+def parse_yaml(text: str) -> Any:
+    """The YAML document in ``text``, as ``yaml.safe_load`` (raises ``yaml.YAMLError``) reads it but for integers
+    beyond any float (+-inf)."""
+    return yaml.load(text, Loader=_Loader)  # noqa: S506  # a SafeLoader subclass
+
+
 def load_document(path: Path, schema: str | tuple[str, ...], what: str, error: type[InputError] = InputError,
                   hint: str = "") -> dict:
     """The YAML mapping in ``path`` if its ``schema`` key matches (one of several, the first the current one);
     ``error`` names the ``what`` otherwise."""
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8-sig"))
+        data = parse_yaml(path.read_text(encoding="utf-8-sig"))
     except OSError as problem:
         raise error(f"cannot read the {what}: {file_problem(problem, path)}") from problem
     except UnicodeDecodeError as problem:

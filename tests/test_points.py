@@ -81,6 +81,15 @@ def test_a_foreign_report_with_an_alias_bomb_as_schema_gives_a_short_message(tmp
     assert len(str(caught.value)) < MESSAGE_LIMIT
 
 
+@pytest.mark.parametrize("sign", ["", "-"])
+def test_an_integer_beyond_any_float_is_a_coordinate_that_is_not_finite(tmp_path, sign):
+    path = tmp_path / "taps.yaml"
+    path.write_text(f"frame: base\npoints_m:\n- [{sign}1{'0' * 400}, 0, 0]\n- [0, 0, 0]\n- [0, 0.01, 0]\n")
+    with pytest.raises(InputError, match="tap 1 in .* has a coordinate that is not a finite number") as caught:
+        load_points(path)
+    assert len(str(caught.value)) < MESSAGE_LIMIT
+
+
 def test_a_huge_row_is_quoted_in_part(tmp_path):
     path = tmp_path / "taps.csv"
     path.write_text(csv_text(["1," + "9" * 100_000 + "x,3", *tap_rows()]))

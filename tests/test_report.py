@@ -186,6 +186,10 @@ V2_START = ("schema: fixwizard.report/2\nsimulated: false\nstatus: unique\ncreat
     (V2_START + "pose: {position_m: [0, 0, 0], rotvec_rad: [0, 0, 0], guaranteed: {position_m: 0.001, rotation_deg: 1,"
      " max_point_displacement_m: 0.002}}\nbounds: {center: {position_m: [0, 0, 0], rotvec_rad: [0, 0, 0]},"
      " position_m: -0.001, rotation_deg: 1, max_point_displacement_m: 0.002}\n", "not negative"),
+    (V2_START.replace("sample_bound_m: 0.001", f"sample_bound_m: 1{'0' * 400}"), "positive length .* not inf"),
+    (V2_START + "pose: {position_m: [0, 0, 0], rotvec_rad: [0, 0, 0], guaranteed: {position_m: 0.001, rotation_deg: 1,"
+     " max_point_displacement_m: 0.002}}\nbounds: {center: {position_m: [0, 0, 0], rotvec_rad: [0, 0, 0]},"
+     f" position_m: -1{'0' * 400}, rotation_deg: 1, max_point_displacement_m: 0.002}}\n", "finite numbers"),
     ("{{{", "is not valid YAML: .* at line 1")])
 def test_damaged_reports_are_refused_with_a_reason(tmp_path, text, match):
     path = tmp_path / "bad.yaml"
