@@ -6,7 +6,7 @@ so the signed distance is used only where the mesh is closed and consistently or
 
 - vertices that are not finite numbers: refused (nothing sensible can be made of them);
 - faces with a repeated vertex or zero area: dropped, unless that opens the mesh (they cover no surface, and a
-  closed mesh keeps its sign);
+  closed mesh keeps its sign); a mesh of such faces only: refused (it has no surface to tap);
 - open (not watertight): unsigned distance;
 - faces wound against their neighbours: re-wound to agree with their neighbours, face by face outward from one
   face of each body (what ``trimesh.repair.fix_winding`` does, without its networkx walk), which is unambiguous on
@@ -123,13 +123,18 @@ def _nesting_depths(mesh: trimesh.Trimesh, bodies: list[np.ndarray]) -> np.ndarr
 
 
 def _drop_degenerate(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, list[tuple[str, str]]]:
-    """The mesh without faces that have a repeated vertex or zero area, unless dropping them opens a closed mesh."""
+    """The mesh without faces that have a repeated vertex or zero area, unless dropping them opens a closed mesh;
+    ``MeshError`` when every face is such."""
     faces = np.asarray(mesh.faces)
     corners = np.asarray(mesh.vertices)[faces]
     zero_area = ~np.any(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
     repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
     degenerate = zero_area | repeated
-    if not np.any(degenerate) or np.all(degenerate):
+    if np.all(degenerate):
+        raise MeshError(f"{name}: all {len(faces)} of its faces have zero area (their corners coincide or lie on "
+                        "one line), so it holds no surface to tap; export the fixture's surface as a triangle mesh "
+                        "again")
+    if not np.any(degenerate):
         return mesh, []
     kept = trimesh.Trimesh(mesh.vertices, faces[~degenerate], process=False)
     kept.remove_unreferenced_vertices()

@@ -95,6 +95,21 @@ def test_faces_of_zero_area_are_dropped_and_said():
     assert len(fixture.mesh.faces) == len(box.faces) and fixture.mesh.extents == pytest.approx([0.05, 0.04, 0.03])
 
 
+@pytest.mark.parametrize("suffix", [".stl", ".obj", ".ply"])
+@pytest.mark.parametrize("corners", ["on one line", "repeated"])
+def test_a_mesh_whose_every_face_has_zero_area_is_refused(tmp_path, suffix, corners):
+    """No surface to tap: refused with a message (before, a line of points crashed the convex hull and a flat set
+    of slivers was solved as an empty fixture)."""
+    vertices = np.array([[0.0, 0.0, 0.0], [0.05, 0.05, 0.05], [0.1, 0.1, 0.1], [0.0, 0.1, 0.0]])
+    faces = [[0, 1, 2], [0, 2, 1]] if corners == "on one line" else [[0, 1, 2], [0, 0, 3]]
+    if corners == "repeated":
+        vertices[:, 2] = 0.0  # all in one plane, as a flat export
+    path = tmp_path / f"slivers{suffix}"
+    trimesh.Trimesh(vertices, faces, process=False).export(path)
+    with pytest.raises(MeshError, match="faces have zero area .* no surface to tap"):
+        load_fixture(path)
+
+
 def test_a_non_manifold_closed_mesh_falls_back_to_the_unsigned_distance():
     box = trimesh.creation.box((0.05, 0.04, 0.03))
     fin = trimesh.Trimesh(box.vertices, np.vstack([box.faces, box.faces[:2], box.faces[:2][:, ::-1]]), process=False)
