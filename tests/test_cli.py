@@ -167,6 +167,15 @@ def test_a_length_without_unit_that_means_metres_is_caught(bracket, capsys):
     assert "--sample-bound 1mm" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("sigma", ["1", "0.6mm", "5"])
+def test_a_sigma_beyond_the_sample_bound_is_refused_with_the_fix(bracket, capsys, sigma):
+    """A bare number is metres: '--sigma 1' would widen the intervals a thousandfold without a word."""
+    folder, _, _ = bracket
+    assert main(solve_args(folder, "taps.yaml", "--sigma", sigma)) == 1
+    err = capsys.readouterr().err
+    assert "larger than the sample bound of 0.5 mm" in err and "--sigma 0.17mm" in err and "Traceback" not in err
+
+
 def test_a_negative_length_is_refused_by_its_check_not_taken_for_a_flag(bracket, capsys):
     folder, _, _ = bracket
     assert main(replaced(solve_args(folder), "0.5mm", "-1mm")) == 1

@@ -180,6 +180,11 @@ def validate_inputs(base_p_taps: np.ndarray, ball_diameter_m: float, sample_boun
                          "e.g. --ball-diameter 3mm")
     if not np.isfinite(sigma_m) or sigma_m <= 0:
         raise InputError(f"sigma must be a positive length, not {sigma_m} m")
+    if sigma_m > sample_bound_m:
+        raise InputError(f"a sigma of {sigma_m * 1e3:g} mm is larger than the sample bound of "
+                         f"{sample_bound_m * 1e3:g} mm: the taps' errors lie within their bound, so their standard "
+                         "deviation does too (by default it is a third of the bound); give it with its unit, e.g. "
+                         f"--sigma {sample_bound_m * 1e3 / 3:.2g}mm")
     if not max_cells >= MIN_MAX_CELLS or not np.isfinite(max_cells):
         raise InputError(f"the cell budget must be a number of at least {MIN_MAX_CELLS}, not {max_cells}")
 
