@@ -168,7 +168,9 @@ def _add_export(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("-o", "--output", help="file to write (default: standard output)")
     parser.add_argument("--frame-id", default=ROS_BASE_FRAME_ID,
                         help=f"ros2: the parent frame (default {ROS_BASE_FRAME_ID})")
-    parser.add_argument("--child-frame-id", help="ros2: the fixture's frame (default: its name)")
+    parser.add_argument("--child-frame-id", help="ros2: the fixture's frame (default: its name with every character "
+                        "but letters, digits and '_' made '_', and fixture_ before a leading digit: 1-a.b gives "
+                        "fixture_1_a_b)")
     parser.add_argument("--allow-simulated", action="store_true",
                         help="export a report of the simulated cell to urscript or ros2 (for tests; marked SIMULATED)")
     parser.set_defaults(handler="fixwizard.export:export_command")

@@ -4,12 +4,14 @@
   with comment lines saying what it is, to load in a program (a Script node in BeforeStart);
 - ``ros2``: a ``geometry_msgs/msg/TransformStamped`` (YAML) from the UR base frame (``base``, as the UR ROS 2
   driver names the controller's base; not ``base_link``, which is turned by 180 deg about z) to the fixture, and
-  the ``tf2_ros static_transform_publisher`` arguments that publish it;
+  the ``tf2_ros static_transform_publisher`` arguments that publish it; the fixture's frame is
+  ``--child-frame-id``, by default its name (``default_child_frame_id``: ``cell2-bracket`` gives ``cell2_bracket``,
+  ``1-a.b`` gives ``fixture_1_a_b``, as a ROS name starts with a letter);
 - ``json``: the whole report as JSON, for anything else.
 
 The pose is the one to use (``Report.pose_to_use``). URScript and ROS 2 are for robots: only a ``unique`` report
 is exported in them, and a simulated one only with ``--allow-simulated`` (marked SIMULATED). JSON carries the
-status and ``simulated`` itself and exports any report.
+status and ``simulated`` itself and exports any report. ``-o`` never writes over the report or its mesh.
 """
 
 import argparse
@@ -29,6 +31,30 @@ from fixwizard.errors import InputError
 def _identifier(name: str) -> str:
     """A URScript or ROS name part from a fixture name: letters, digits and ``_``."""
     return re.sub(r"[^A-Za-z0-9_]", "_", name)
+
+
+def default_child_frame_id(name: str) -> str:
+    """The fixture's ROS frame when none is given: ``_identifier`` of its name, with ``fixture_`` before it when
+    that would start with a digit (so ``1-a.b`` gives ``fixture_1_a_b``, the URScript variable's name)."""
+    identifier = _identifier(name)
+    return identifier if re.match(r"[A-Za-z_]", identifier) else f"fixture_{identifier}"
+
+
+def _frame_problem(frame: str) -> str | None:
+    """The rule of ROS frame names that ``frame`` breaks, None when it keeps them."""
+    if not frame:
+        return "it is empty"
+    if re.search(r"[^A-Za-z0-9_/]", frame):
+        return "it may hold only letters, digits, '_' and '/'"
+    if frame[0].isdigit():
+        return "it must start with a letter, '_' or '/', not a digit"
+    return None
+
+
+def _check_frame(option: str, frame: str) -> None:
+    problem = _frame_problem(frame)
+    if problem is not None:
+        raise InputError(f"{option} {frame!r} is no ROS frame name: {problem}")
 
 
 def _usable(loaded: report.Report, allow_simulated: bool, format_name: str) -> report.Guarantee:
@@ -76,12 +102,13 @@ def urscript_text(loaded: report.Report, allow_simulated: bool = False) -> str:
 
 def ros2_document(loaded: report.Report, frame_id: str = BASE_FRAME_ID, child_frame_id: str | None = None,
                   allow_simulated: bool = False) -> dict:
-    """The ``TransformStamped`` from ``frame_id`` to the fixture and the ``static_transform_publisher`` arguments."""
+    """The ``TransformStamped`` from ``frame_id`` to the fixture (``child_frame_id``, by default
+    ``default_child_frame_id`` of its name) and the ``static_transform_publisher`` arguments."""
     _usable(loaded, allow_simulated, "ROS 2")
-    child = child_frame_id or _identifier(loaded.name)
-    for what, frame in (("--frame-id", frame_id), ("--child-frame-id", child)):
-        if not re.match(r"^[A-Za-z_/][A-Za-z0-9_/]*$", frame):
-            raise InputError(f"{what} {frame!r} is no ROS frame name: use letters, digits, '_' and '/'")
+    _check_frame("--frame-id", frame_id)
+    if child_frame_id is not None:
+        _check_frame("--child-frame-id", child_frame_id)
+    child = default_child_frame_id(loaded.name) if child_frame_id is None else child_frame_id
     values = _ur_values(loaded)
     quaternion = Rotation.from_rotvec(values[3:]).as_quat()
     quaternion = [float(value) for value in (quaternion if quaternion[3] >= 0 else -quaternion)]
@@ -109,8 +136,13 @@ def ros2_text(loaded: report.Report, frame_id: str = BASE_FRAME_ID, child_frame_
 
 
 def json_text(loaded: report.Report) -> str:
-    """The whole report as JSON (times as ISO 8601 text)."""
-    return json.dumps(loaded.data, indent=2, default=str, allow_nan=False) + "\n"
+    """The whole report as JSON (times as ISO 8601 text); InputError for a number JSON cannot hold (a hand-edited
+    report's inf or nan)."""
+    try:
+        return json.dumps(loaded.data, indent=2, default=str, allow_nan=False) + "\n"
+    except ValueError as error:
+        raise InputError(f"{loaded.path} holds a number that is not finite ({error}), which JSON cannot hold: "
+                         "solve again for a fresh report") from error
 
 
 def export_text(loaded: report.Report, format_name: str, frame_id: str = BASE_FRAME_ID,
@@ -123,9 +155,10 @@ def export_text(loaded: report.Report, format_name: str, frame_id: str = BASE_FR
 
 
 def export_command(args: argparse.Namespace) -> int:
-    if args.output:
-        check_output(args.output, [("report", args.report)], "give another output path with -o")
     loaded = report.load(args.report)
+    if args.output:  # the mesh as ``verify.fixture_of`` finds it
+        check_output(args.output, [("report", args.report), ("report's mesh", loaded.mesh)],
+                     "give another output path with -o")
     text = export_text(loaded, args.format, args.frame_id, args.child_frame_id, args.allow_simulated)
     if args.output:
         write_text_atomic(args.output, text)

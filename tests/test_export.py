@@ -28,6 +28,18 @@ def real_report(tmp_path) -> Path:
     return report.write(tmp_path / "bracket.yaml", data)
 
 
+@pytest.fixture
+def mesh_report(tmp_path) -> tuple[Path, Path]:
+    """A real report and its mesh: a copy of the example's in tmp_path, named by its full path as `solve` does."""
+    mesh = tmp_path / "mesh" / "bracket.stl"
+    mesh.parent.mkdir()
+    data = yaml.safe_load(EXAMPLE.read_text())
+    data["simulated"] = False
+    mesh.write_bytes((EXAMPLE.parents[1] / data["fixture"]["mesh"]).read_bytes())
+    data["fixture"]["mesh"] = str(mesh)
+    return report.write(tmp_path / "bracket.yaml", data), mesh
+
+
 def exported(capsys, path: Path, *args) -> str:
     assert main(["export", str(path), *args]) == 0
     return capsys.readouterr().out
@@ -105,6 +117,15 @@ def test_json_is_the_whole_report(real_report, capsys):
     assert data == yaml.safe_load(real_report.read_text())
 
 
+@pytest.mark.parametrize("value", [".inf", ".nan", f"1{'0' * 400}"])
+def test_json_of_a_hand_edited_report_with_a_number_json_cannot_hold_is_a_message(real_report, capsys, value):
+    text = real_report.read_text()
+    real_report.write_text(re.sub(r"(\n\s*cells: )\d+", rf"\g<1>{value}", text, count=1))
+    assert main(["export", str(real_report), "--format", "json"]) == 1
+    err = capsys.readouterr().err
+    assert "holds a number that is not finite" in err and "Traceback" not in err
+
+
 def test_a_report_a_robot_must_not_use_is_refused_but_json_exports_it(real_report, tmp_path, capsys):
     for change, message in ((lambda data: data.update(simulated=True), "--allow-simulated"),
                             (lambda data: data.update(status="ambiguous"), "is ambiguous")):
@@ -136,3 +157,52 @@ def test_the_output_file_is_written_and_never_the_report(real_report, tmp_path, 
     before = real_report.read_text()
     assert main(["export", str(real_report), "--format", "json", "-o", str(real_report)]) == 1
     assert "is the report" in capsys.readouterr().err and real_report.read_text() == before
+
+
+@pytest.mark.parametrize("format_name", ["urscript", "ros2", "json"])
+def test_the_output_file_is_never_the_reports_mesh_nor_a_link_to_it(mesh_report, tmp_path, capsys, format_name):
+    path, mesh = mesh_report
+    before = mesh.read_bytes()
+    symlink, hard_link = tmp_path / "symlink.stl", tmp_path / "hard_link.stl"
+    symlink.symlink_to(mesh)
+    hard_link.hardlink_to(mesh)
+    for output in (mesh, symlink, hard_link):
+        assert main(["export", str(path), "--format", format_name, "-o", str(output)]) == 1
+        err = capsys.readouterr().err
+        assert f"is the report's mesh ({mesh})" in err and "another output path with -o" in err
+        assert "Traceback" not in err and mesh.read_bytes() == before
+    assert symlink.is_symlink()
+
+
+def test_a_mesh_the_report_names_relative_to_the_current_folder_is_not_written_either(mesh_report, monkeypatch,
+                                                                                      capsys):
+    path, mesh = mesh_report
+    data = yaml.safe_load(path.read_text())
+    data["fixture"]["mesh"] = "mesh/bracket.stl"  # as examples/report.yaml and /1 reports name it
+    report.write(path, data)
+    before = mesh.read_bytes()
+    monkeypatch.chdir(mesh.parents[1])
+    assert main(["export", str(path), "--format", "urscript", "-o", str(mesh)]) == 1
+    assert "is the report's mesh" in capsys.readouterr().err and mesh.read_bytes() == before
+
+
+def test_a_fixture_name_starting_with_a_digit_gives_a_ros_frame_name_with_fixture_before_it(real_report, capsys):
+    data = yaml.safe_load(real_report.read_text())
+    data["fixture"]["name"] = "1-a.b"
+    report.write(real_report, data)
+    document = yaml.safe_load(exported(capsys, real_report, "--format", "ros2"))
+    assert document["transform_stamped"]["child_frame_id"] == "fixture_1_a_b"
+    assert document["static_transform_publisher"]["arguments"][-2:] == ["--child-frame-id", "fixture_1_a_b"]
+    assert list(parse_urscript(exported(capsys, real_report, "--format", "urscript"))) == ["fixture_1_a_b"]
+
+
+@pytest.mark.parametrize(("option", "frame", "rule"), [
+    ("--child-frame-id", "1jig", "it must start with a letter, '_' or '/', not a digit"),
+    ("--frame-id", "2base", "it must start with a letter, '_' or '/', not a digit"),
+    ("--child-frame-id", "jig\n", "it may hold only letters, digits, '_' and '/'"),
+    ("--child-frame-id", "", "it is empty"),
+])
+def test_a_frame_name_that_is_given_is_refused_with_the_rule_it_breaks(real_report, capsys, option, frame, rule):
+    assert main(["export", str(real_report), "--format", "ros2", option, frame]) == 1
+    err = capsys.readouterr().err
+    assert f"{option} {frame!r} is no ROS frame name: {rule}" in err and "Traceback" not in err
