@@ -41,6 +41,17 @@ def test_the_command_warns_when_two_meshes_fit(tmp_path, capsys):
     assert "warning: 2 meshes fit these taps (demo_bracket.stl, twin.stl)" in capsys.readouterr().out
 
 
+@pytest.mark.parametrize("second", ["the same path", "a symlink"])
+def test_a_mesh_given_twice_is_refused_not_called_ambiguous(tmp_path, capsys, second):
+    again = DEMO_MESH
+    if second == "a symlink":
+        again = tmp_path / "link.stl"
+        again.symlink_to(DEMO_MESH)
+    assert main(["identify", str(DEMO_TAPS), str(DEMO_MESH), str(again), *FLAGS]) == 1
+    err = capsys.readouterr().err
+    assert f"the mesh {DEMO_MESH}" in err and "is given twice: give each mesh once" in err
+
+
 def test_no_fitting_mesh_exits_2_and_an_unreadable_one_is_reported(tmp_path, other_mesh, capsys):
     text_file = tmp_path / "notes.stl"
     text_file.write_text("not a mesh")

@@ -11,6 +11,7 @@ mean together; the sampling screen's "Which fixture?" runs the same against ever
 """
 
 import argparse
+import os
 import sys
 import threading
 import time
@@ -21,7 +22,7 @@ from typing import Literal
 
 import numpy as np
 
-from fixwizard.errors import FixwizardError
+from fixwizard.errors import FixwizardError, InputError
 from fixwizard.fixture import Fixture, load_fixture
 from fixwizard.interrupt import run_interruptibly
 from fixwizard.points import load_points
@@ -181,9 +182,24 @@ def _print_step(step: IdentifyStep) -> None:
     print(f"  {step.mesh.name}: {step.max_cells:.0e} cells: {step.status} ({step.elapsed_s:.1f} s)", file=sys.stderr)
 
 
+def _check_each_mesh_once(paths: list[Path]) -> None:
+    """InputError when a mesh file is given twice (by the same path, a link or another path to it): it would fit
+    twice and the taps be called ambiguous."""
+    for later, path in enumerate(paths):
+        for earlier in paths[:later]:
+            try:
+                same = os.path.samefile(earlier, path)
+            except OSError:  # a missing mesh is reported with the others
+                same = False
+            if same:
+                twice = f"{path}" if str(earlier) == str(path) else f"{earlier} (also given as {path})"
+                raise InputError(f"the mesh {twice} is given twice: give each mesh once")
+
+
 def identify_command(args: argparse.Namespace) -> int:
     """Run ``fixwizard identify``: exit 0 when exactly one mesh fits, 2 when none fits or may fit, 3 when several
     fit, 4 when none fits but some are not decided."""
+    _check_each_mesh_once([Path(mesh) for mesh in args.meshes])
     base_p_taps = load_points(args.points)
     meshes = [(Path(mesh), args.mesh_units) for mesh in args.meshes]
     verdicts = run_interruptibly(lambda cancel: identify(
