@@ -231,8 +231,11 @@ class DistanceOracle:
 def _load_trimesh(path: Path) -> trimesh.Trimesh:
     if path.is_dir():
         raise MeshError(f"{path} is a folder, not a mesh file; give the path of an STL, PLY or OBJ file in it")
-    if not path.is_file():
+    if not path.exists():
         raise MeshError(f"the mesh file {path} does not exist; give the path of an STL, PLY or OBJ file")
+    if not path.is_file():
+        raise MeshError(f"{path} is not a regular file (a pipe or a device such as /dev/null), so it holds no "
+                        "mesh to read; give the path of an STL, PLY or OBJ file")
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise MeshError(f"{path} is not a mesh file fixwizard reads; export the fixture's CAD model as STL, "
                         "PLY or OBJ")

@@ -1,6 +1,8 @@
 """Mesh hygiene: what CAD exports get wrong is repaired where that is unambiguous, said in a warning, and the
 sign of the distance is used only where it can be trusted."""
 
+import os
+
 import igl
 import numpy as np
 import pytest
@@ -132,3 +134,14 @@ def test_a_vertex_that_is_not_a_number_is_refused_not_dropped(tmp_path, suffix):
 def test_a_folder_given_as_the_mesh_is_called_a_folder(tmp_path):
     with pytest.raises(MeshError, match="is a folder"):
         load_fixture(tmp_path)
+
+
+@pytest.mark.parametrize("kind", ["a pipe", "a device"])
+def test_a_mesh_path_that_is_no_regular_file_is_called_so_not_missing(tmp_path, kind):
+    path = tmp_path / "fixture.stl"
+    if kind == "a pipe":
+        os.mkfifo(path)
+    else:
+        path.symlink_to("/dev/null")
+    with pytest.raises(MeshError, match="is not a regular file .* holds no mesh to read"):
+        load_fixture(path)
