@@ -3,6 +3,7 @@ once a command has been chosen (the heavy libraries load here, not for ``--help`
 
 import argparse
 import sys
+import time
 from pathlib import Path
 
 from fixwizard import report
@@ -12,14 +13,26 @@ from fixwizard.exit_codes import EXIT_CODES, EXIT_OK
 from fixwizard.interrupt import run_interruptibly
 from fixwizard.points import write_points
 from fixwizard.solver.search import SearchProgress
+from fixwizard.solver.solve import SolveStage, Stage
 from fixwizard.units import parse_length_m
 from fixwizard.workflow.import_poses import import_pose_dir, load_tip
 from fixwizard.workflow.solve_run import SolveRequest, run_solve, summary_lines
+from fixwizard.workflow.stage_words import stage_words
 
 
 def _print_progress(step: SearchProgress) -> None:
     print(f"  level rotation {step.rotation_level} / position {step.position_level}: {step.survivors} of "
           f"{step.evaluated} cells survive ({step.elapsed_s:.1f} s)", file=sys.stderr)
+
+
+def _stage_printer() -> Stage:
+    """Prints each phase after the search with the seconds since the printer was made (about the search's start)."""
+    started = time.perf_counter()
+
+    def print_stage(stage: SolveStage) -> None:
+        print(f"  {stage_words(stage)} ({time.perf_counter() - started:.1f} s)", file=sys.stderr)
+
+    return print_stage
 
 
 def _lengths_from(args: argparse.Namespace) -> tuple[float, float]:
@@ -52,7 +65,9 @@ def solve_command(args: argparse.Namespace) -> int:
     output = _report_path(args)
     check_output(output, [("mesh", args.mesh), ("POINTS file", args.points), ("tip calibration", args.calibration)],
                  "give another report path with -o, e.g. -o report.yaml")
-    outcome = run_interruptibly(lambda cancel: run_solve(request, None if args.quiet else _print_progress, cancel))
+    stage = None if args.quiet else _stage_printer()
+    outcome = run_interruptibly(lambda cancel: run_solve(request, None if args.quiet else _print_progress, cancel,
+                                                         stage))
     print("\n".join(summary_lines(outcome)))
     report.write(output, outcome.report)
     print(f"report written to {output}")

@@ -56,6 +56,18 @@ def test_solve_prints_a_summary_and_writes_a_loadable_report(bracket, capsys):
 
 
 @pytest.mark.slow
+def test_without_quiet_the_phases_after_the_search_are_shown_as_they_come(bracket, capsys):
+    """With many taps the refinement can take minutes after the last search level: each round is a line."""
+    folder, _, _ = bracket
+    args = [arg for arg in solve_args(folder) if arg != "-q"]
+    assert main(args) == 0
+    err = capsys.readouterr().err.splitlines()
+    phases = [line.split(" (")[0].strip() for line in err if not line.strip().startswith("level")]
+    assert phases[:2] == ["grouping the possible poses", "computing the guaranteed bounds"]
+    assert "computing the guaranteed bounds, round 1" in phases
+    assert phases[-1] == "computing the 95 % and 99 % intervals"
+
+
 def test_a_csv_points_file_works_like_yaml(bracket, capsys):
     folder, taps, _ = bracket
     np.savetxt(folder / "taps.csv", taps, delimiter=",", header="x,y,z", comments="")

@@ -11,7 +11,7 @@ from fixwizard import report
 from fixwizard.fixture import Fixture, load_fixture
 from fixwizard.points import load_points
 from fixwizard.solver.search import SearchProgress
-from fixwizard.solver.solve import DEFAULT_MAX_CELLS, Solution, solve
+from fixwizard.solver.solve import DEFAULT_MAX_CELLS, Solution, Stage, solve
 
 
 @dataclass(frozen=True)
@@ -37,13 +37,14 @@ class SolveOutcome:
 
 
 def run_solve(request: SolveRequest, progress: Callable[[SearchProgress], None] | None = None,
-              cancel: threading.Event | None = None) -> SolveOutcome:
-    """Load mesh and taps, solve, and build the report dict (not yet written)."""
+              cancel: threading.Event | None = None, stage: Stage | None = None) -> SolveOutcome:
+    """Load mesh and taps, solve, and build the report dict (not yet written). ``progress`` and ``stage``: called
+    with the search's levels and the phases after it."""
     fixture = load_fixture(request.mesh_path, request.mesh_units)
     base_p_taps = load_points(request.points_path)
     sigma_m = request.sigma_m if request.sigma_m is not None else request.sample_bound_m / 3.0
     solution = solve(fixture, base_p_taps, request.ball_diameter_m, request.sample_bound_m, sigma_m,
-                     request.max_cells, progress, cancel)
+                     request.max_cells, progress, cancel, stage=stage)
     data = report.report_dict(solution, fixture, base_p_taps, request.ball_diameter_m, request.sample_bound_m,
                               sigma_m, name=request.fixture_name)
     return SolveOutcome(fixture, base_p_taps, solution, data)

@@ -15,10 +15,10 @@ from fixwizard.solver.search import SearchProgress, search_budget
 from fixwizard.solver.solve import Solution, SolveStage
 from fixwizard.tui import keys
 from fixwizard.tui.cell import Cell, Sampling
-from fixwizard.tui.solve.progress_text import stage_words
 from fixwizard.tui.widgets.key_footer import KeyFooter
 from fixwizard.tui.workers import run_in_solver
 from fixwizard.workflow.solver_process import Event, Failed, Progress, Solved, SolveRequest, SolverProcess
+from fixwizard.workflow.stage_words import stage_words
 
 TICK_S = 0.25
 
