@@ -46,17 +46,19 @@ def check_output(path: str | Path, inputs: Iterable[tuple[str, str | Path | None
     that can take the file (made when missing); InputError saying ``fix`` otherwise. Call it before the work."""
     target = output_target(path)
     for what, input_path in inputs:
-        if input_path is not None and _same_file(target, Path(input_path)):
+        if input_path is not None and same_file(target, Path(input_path)):
             raise InputError(f"{path} is the {what} ({input_path}); writing there would replace it: {fix}")
     _check_folder(target.parent, fix)
     return target
 
 
-def _same_file(target: Path, other: Path) -> bool:
+def same_file(path: Path, other: Path) -> bool:
+    """Whether two paths name one file (through symlinks and hard links); for a missing one, whether they
+    resolve to the same path."""
     try:
-        return os.path.samefile(target, other)
+        return os.path.samefile(path, other)
     except OSError:  # one of them does not exist (yet)
-        return target == Path(os.path.realpath(other))
+        return os.path.realpath(path) == os.path.realpath(other)
 
 
 def _check_folder(folder: Path, fix: str) -> None:

@@ -17,11 +17,16 @@ without a report, a report that is not ``unique``, one from the simulated cell, 
 dated in the future (a wrong clock): a URScript program stops on a fault, so a bad pose is never used as if good.
 Before every call the folder is looked at (names, sizes, times): a new, replaced or removed report is served from
 the next call on. Every call is logged with the caller's address, what it asked and what it got.
+
+The log goes to stderr and, with ``--log FILE``, is appended to FILE. FILE must not be an input (``check_log``),
+and a FILE that cannot be written while serving (a full disk) is said once on stderr and then left alone: serving
+and the log on stderr go on (``LogFile``).
 """
 
 import argparse
 import logging
 import math
+import os
 import re
 import socketserver
 import sys
@@ -35,8 +40,9 @@ from typing import Any
 from xmlrpc.server import SimpleXMLRPCRequestHandler, SimpleXMLRPCServer
 
 from fixwizard import report
-from fixwizard.errors import InputError
-from fixwizard.workflow.cell_reports import CellReports, folder_state, scan
+from fixwizard.atomic import same_file
+from fixwizard.errors import InputError, file_problem
+from fixwizard.workflow.cell_reports import SUFFIXES, CellReports, folder_state, report_files, scan
 from fixwizard.workflow.verify import age_text
 
 FUTURE_TOLERANCE_S = 300.0  # clocks of the PC that wrote a report and this one may differ by this much
@@ -231,39 +237,110 @@ def make_server(service: FixtureService, host: str, port: int) -> FixtureServer:
     return server
 
 
+def check_log(log: Path, folder: Path) -> None:
+    """InputError when the log file ``log``, appended to while serving, is an input of the service: a report file
+    of ``folder`` (``report_files``: its ``*.yaml`` and ``*.yml`` that are not hidden, readable or not), the mesh
+    file a readable report there names (``fixture.mesh``; a relative path from the current folder, as
+    ``report.load`` and ``fixwizard verify`` read it), or a new file that would be a report file of ``folder``. The
+    same file is meant as ``os.path.samefile`` does, so through symlinks and hard links. Checked once, at startup:
+    reports added to the folder later, and the meshes they name, are not checked."""
+    fix = "give another log path with --log, e.g. serve.log"
+    for path in report_files(folder):
+        if same_file(log, path):
+            raise InputError(f"the log {log} is the report {path}; appending the log to it would damage it: {fix}")
+        try:
+            mesh = report.load(path).mesh
+        except (InputError, OSError):  # not served, so its mesh is no input
+            continue
+        if same_file(log, mesh):
+            raise InputError(f"the log {log} is the mesh file {mesh} of the report {path}; appending the log to it "
+                             f"would change it (its sha256 would no longer match the report's): {fix}")
+    target = Path(os.path.realpath(log))
+    if same_file(target.parent, folder) and target.suffix.lower() in SUFFIXES and not target.name.startswith("."):
+        raise InputError(f"the log {log} would be a report file of the reports folder {folder} (a .yaml or .yml "
+                         f"file in it), which serve reads as a report: {fix}")
+
+
+class LogFile(logging.FileHandler):
+    """The ``--log`` file, appended to (UTF-8). When a line cannot be written (a full disk, a lost drive) one line
+    on stderr says so, without a traceback, and the file is closed and written no more, so it holds the log up to
+    the failure without gaps: serving and the log on stderr go on. Restarting serve logs to it again."""
+
+    def __init__(self, path: str | Path) -> None:
+        super().__init__(path, encoding="utf-8")
+        self.failed = False
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if not self.failed:
+            super().emit(record)
+
+    def handleError(self, record: logging.LogRecord) -> None:
+        error = sys.exc_info()[1]
+        if not isinstance(error, OSError):  # a bug in a log call, not the file: as logging reports it
+            super().handleError(record)
+            return
+        self.failed = True
+        stream, self.stream = self.stream, None
+        try:
+            if stream is not None:
+                stream.close()  # flushes what is left, which fails again; the file is closed all the same
+        except OSError:
+            pass
+        try:
+            print(f"fixwizard serve: cannot write the log {self.baseFilename}: {file_problem(error, self.baseFilename)}"
+                  "; serving goes on, logging to stderr only (restart serve to log to the file again)",
+                  file=sys.stderr, flush=True)
+        except OSError:  # stderr cannot be written either
+            pass
+
+
+def _log_handlers(log: str | None) -> list[logging.Handler]:
+    """The handlers of the log: stderr, and the ``--log`` file when given; added to ``LOG``."""
+    handlers: list[logging.Handler] = [logging.StreamHandler(sys.stderr)]
+    if log:
+        handlers.append(LogFile(log))
+    for each in handlers:
+        each.setFormatter(logging.Formatter("%(asctime)s %(message)s"))
+        LOG.addHandler(each)
+    LOG.setLevel(logging.INFO)
+    return handlers
+
+
 def serve_command(args: argparse.Namespace) -> int:
     folder = Path(args.reports)
     if not folder.is_dir():
         raise InputError(f"there is no reports folder {folder}: give the folder the wizard writes reports to with "
                          "--reports DIR")
-    handler = logging.StreamHandler(sys.stderr)
-    handlers: list[logging.Handler] = [handler]
     if args.log:
-        handlers.append(logging.FileHandler(args.log, encoding="utf-8"))
-    for each in handlers:
-        each.setFormatter(logging.Formatter("%(asctime)s %(message)s"))
-        LOG.addHandler(each)
-    LOG.setLevel(logging.INFO)
+        check_log(Path(args.log), folder)
     service = FixtureService(folder, parse_duration_s(args.max_age))
+    handlers = _log_handlers(args.log)
     try:
-        server = make_server(service, args.host, args.port)
+        _serve(service, args.host, args.port)
+    finally:
+        for each in handlers:
+            LOG.removeHandler(each)
+            each.close()
+    print("fixwizard serve: stopped", flush=True)
+    return 0
+
+
+def _serve(service: FixtureService, host: str, port: int) -> None:
+    """Serve on ``host:port`` until Ctrl+C; InputError when the address cannot be had."""
+    try:
+        server = make_server(service, host, port)
     except (OSError, OverflowError) as error:
         problem = getattr(error, "strerror", None) or error
-        raise InputError(f"cannot serve on {args.host}:{args.port}: {problem} (another fixwizard "
+        raise InputError(f"cannot serve on {host}:{port}: {problem} (another fixwizard "
                          "serve? give another --port, or --host an address of this PC)") from None
-    host, port = str(server.server_address[0]), int(server.server_address[1])
+    bound_host, bound_port = str(server.server_address[0]), int(server.server_address[1])
     names = service.list_fixtures()
     print(f"fixwizard serve: {len(names)} fixture{'s' if len(names) != 1 else ''} ({', '.join(names) or 'none yet'}) "
-          f"from {folder} on http://{host}:{port} (reports older than {age_text(service.max_age_s)} refused); "
-          "Ctrl+C stops", flush=True)
+          f"from {service.folder} on http://{bound_host}:{bound_port} (reports older than "
+          f"{age_text(service.max_age_s)} refused); Ctrl+C stops", flush=True)
     try:
         server.serve_forever()
     except KeyboardInterrupt:
         pass
     finally:
         server.server_close()
-        for each in handlers:
-            LOG.removeHandler(each)
-    print("fixwizard serve: stopped", flush=True)
-    return 0
-

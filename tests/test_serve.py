@@ -1,10 +1,12 @@
 """`fixwizard serve`: a real XML-RPC server on a loopback address and xmlrpc.client as the robot program. The pose
 struct a URScript program receives, refusals as faults it sees, several fixtures, reload on a new report, a log
-line per call, a stalled client that holds nothing up, and the command itself."""
+line per call, a stalled client that holds nothing up, and the command itself: a --log that is one of its inputs
+is refused, and a log file that cannot be written (a full disk) stops neither serving nor the log on stderr."""
 
 import datetime as dt
 import logging
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -20,18 +22,24 @@ import yaml
 from fixwizard import report
 from fixwizard.cli import main
 from fixwizard.errors import InputError
-from fixwizard.serve import FixtureService, make_server, parse_duration_s
+from fixwizard.serve import LOG, FixtureServer, FixtureService, LogFile, make_server, parse_duration_s
 from fixwizard.workflow.cell_reports import scan
 from test_report import V1_REPORT
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "report.yaml"
 REPO = Path(__file__).resolve().parents[1]
+FULL_DISK = Path("/dev/full")  # Linux: every write to it fails with ENOSPC, as on a full disk
+needs_full_disk = pytest.mark.skipif(not FULL_DISK.exists(), reason="needs /dev/full (Linux)")
 
 
-def write_report(folder: Path, file_name: str, name: str, created: dt.datetime | None = None, **changes) -> Path:
-    """The example report as fixture ``name``: from a real cell, created ``created`` (default now), with changes."""
+def write_report(folder: Path, file_name: str, name: str, created: dt.datetime | None = None, mesh: str | None = None,
+                 **changes) -> Path:
+    """The example report as fixture ``name``: from a real cell, created ``created`` (default now), of the mesh
+    file ``mesh`` (default the example's), with changes."""
     data = yaml.safe_load(EXAMPLE.read_text())
     data["fixture"]["name"] = name
+    if mesh is not None:
+        data["fixture"]["mesh"] = mesh
     data["simulated"] = False
     data["created"] = (created or dt.datetime.now(dt.UTC)).isoformat(timespec="seconds")
     data.update(changes)
@@ -213,19 +221,33 @@ def test_the_newest_report_of_each_name_wins_by_its_creation_time(tmp_path):
     assert scan(tmp_path).newest["bracket"].path.name == "a.yaml"
 
 
+def serve_process(cell: Path, *options: str) -> tuple[subprocess.Popen, xmlrpc.client.ServerProxy, str]:
+    """``fixwizard serve`` of ``cell`` on a free loopback port, a client of it and the first line it printed."""
+    process = subprocess.Popen([sys.executable, "-m", "fixwizard.cli", "serve", "--reports", str(cell), "--host",
+                                "127.0.0.1", "--port", "0", *options], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True, cwd=REPO, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    first = process.stdout.readline()
+    if "http://127.0.0.1:" not in first:
+        process.kill()
+        pytest.fail(f"serve did not start: {first}{process.communicate(timeout=30)[1]}")
+    port = int(first.split("http://127.0.0.1:")[1].split()[0])
+    return process, xmlrpc.client.ServerProxy(f"http://127.0.0.1:{port}"), first
+
+
+def interrupt(process: subprocess.Popen) -> tuple[str, str]:
+    """Ctrl+C to the serve process; what it printed on stdout and stderr."""
+    process.send_signal(signal.SIGINT)
+    return process.communicate(timeout=30)
+
+
 @pytest.mark.slow
 def test_the_serve_command_serves_until_interrupted(cell):
-    process = subprocess.Popen([sys.executable, "-m", "fixwizard.cli", "serve", "--reports", str(cell), "--host",
-                                "127.0.0.1", "--port", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                               text=True, cwd=REPO, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    process, fw, first = serve_process(cell)
     try:
-        first = process.stdout.readline()
         assert "5 fixtures (bracket, jig, lid, plate, tray)" in first and "30.0 days" in first
-        port = int(first.split("http://127.0.0.1:")[1].split()[0])
-        assert xmlrpc.client.ServerProxy(f"http://127.0.0.1:{port}").get_status("bracket")["usable"] is True
+        assert fw.get_status("bracket")["usable"] is True
     finally:
-        process.send_signal(signal.SIGINT)
-        out, err = process.communicate(timeout=30)
+        out, err = interrupt(process)
     assert process.returncode == 0 and "stopped" in out
     assert "get_status('bracket') -> {'status': 'unique'" in err and "Traceback" not in err
 
@@ -246,3 +268,79 @@ def test_the_serve_command_refuses_what_cannot_work(cell, tmp_path, capsys):
     assert main(["serve", "--reports", str(cell), "--max-age", "forever"]) == 1
     err = capsys.readouterr().err
     assert "cannot read the age" in err and "Traceback" not in err
+
+
+@pytest.fixture
+def stops_at_once(monkeypatch):
+    """The serve command stops, as on Ctrl+C, as soon as it would serve: it runs in the test and returns."""
+    def interrupted(self, poll_interval=0.5):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(FixtureServer, "serve_forever", interrupted)
+
+
+def test_the_serve_command_refuses_a_log_that_is_one_of_its_inputs(cell, tmp_path, monkeypatch, capsys,
+                                                                    stops_at_once):
+    monkeypatch.chdir(tmp_path)  # a relative mesh path in a report is read from the current folder
+    (tmp_path / "meshes").mkdir()
+    mesh = tmp_path / "meshes" / "bracket.stl"
+    shutil.copy(REPO / "fixwizard" / "data" / "demo_bracket.stl", mesh)  # the example's mesh, so its sha256
+    shutil.copy(mesh, tmp_path / "meshes" / "tray.stl")
+    write_report(cell, "gripper.yaml", "gripper", mesh=str(mesh))
+    write_report(cell, "tray-2.yaml", "tray", mesh="meshes/tray.stl")
+    (tmp_path / "report-link.log").symlink_to(cell / "bracket-1.yaml")
+    os.link(cell / "jig.yaml", tmp_path / "report-hard-link.log")
+    (tmp_path / "mesh-link.log").symlink_to(mesh)
+    os.link(mesh, tmp_path / "mesh-hard-link.log")
+    inputs = {cell / "bracket-1.yaml": "the report", cell / "notes.yaml": "the report",  # readable or not
+              tmp_path / "report-link.log": "the report", tmp_path / "report-hard-link.log": "the report",
+              mesh: "the mesh file", tmp_path / "meshes" / "tray.stl": "the mesh file",
+              tmp_path / "mesh-link.log": "the mesh file", tmp_path / "mesh-hard-link.log": "the mesh file"}
+    contents = {path: path.read_bytes() for path in inputs}
+    serve = ["serve", "--reports", str(cell), "--host", "127.0.0.1", "--port", "0", "--log"]
+    for log, what in inputs.items():
+        assert main([*serve, str(log)]) == 1, log
+        err = capsys.readouterr().err
+        assert err.startswith(f"fixwizard: the log {log} is {what} ") and "give another log path with --log" in err
+        assert "Traceback" not in err and err.count("\n") == 1
+    assert {path: path.read_bytes() for path in inputs} == contents
+    assert main([*serve, str(cell / "serve.yaml")]) == 1  # it would be read as a report
+    assert "would be a report file" in capsys.readouterr().err and not (cell / "serve.yaml").exists()
+    assert main([*serve, str(cell / "serve.log")]) == 0 and main([*serve, "serve.log"]) == 0  # not inputs
+    assert "read reports in" in (cell / "serve.log").read_text() and (tmp_path / "serve.log").is_file()
+
+
+@needs_full_disk
+def test_a_log_file_that_cannot_be_written_is_said_once_and_serving_goes_on(running, caplog, capsys):
+    log = LogFile(FULL_DISK)
+    LOG.addHandler(log)
+    try:
+        with caplog.at_level(logging.INFO, logger="fixwizard.serve"):
+            fw = running.client()
+            poses = [fw.get_pose("bracket") for _ in range(3)]
+            assert fault_of(lambda: fw.get_pose("plate")).faultCode == 3 and fw.list_fixtures()
+    finally:
+        LOG.removeHandler(log)
+        log.close()
+    assert poses[0]["x"] and poses[0] == poses[2]
+    err = capsys.readouterr().err
+    warnings = [line for line in err.splitlines() if "cannot write the log /dev/full" in line]
+    assert len(warnings) == 1 and warnings[0].startswith("fixwizard serve: ") and "is full" in warnings[0]
+    assert "serving goes on" in warnings[0] and "Traceback" not in err and "Logging error" not in err
+    assert sum("get_pose('bracket') ->" in record.getMessage() for record in caplog.records) == 3  # still logged
+
+
+@pytest.mark.slow
+@needs_full_disk
+def test_the_serve_command_serves_on_when_its_log_cannot_be_written(cell):
+    process, fw, _ = serve_process(cell, "--log", str(FULL_DISK))
+    try:
+        assert [fw.is_usable("bracket") for _ in range(3)] == [True, True, True]
+        assert fw.get_pose("bracket")["x"]
+    finally:
+        out, err = interrupt(process)
+    assert process.returncode == 0 and "stopped" in out
+    warnings = [line for line in err.splitlines() if "cannot write the log /dev/full" in line]
+    assert len(warnings) == 1 and warnings[0].startswith("fixwizard serve: ") and "serving goes on" in warnings[0]
+    assert "Traceback" not in err and "Logging error" not in err
+    assert err.count("is_usable('bracket') -> True") == 3  # the log on stderr goes on
