@@ -68,6 +68,18 @@ def test_without_quiet_the_phases_after_the_search_are_shown_as_they_come(bracke
     assert phases[-1] == "computing the 95 % and 99 % intervals"
 
 
+@pytest.mark.parametrize("repeated", [1, 20])
+def test_taps_that_repeat_an_earlier_one_exactly_are_named_in_a_warning(bracket, capsys, repeated):
+    """A points file with rows pasted twice would narrow the intervals without a word."""
+    folder, taps, _ = bracket
+    write_points(folder / "twice.yaml", np.vstack([taps, taps[:repeated]]))
+    assert main(solve_args(folder, "twice.yaml")) == 0
+    out = capsys.readouterr().out
+    count = "A tap repeats an earlier one" if repeated == 1 else f"{repeated} taps repeat an earlier one"
+    assert f"warning: {count} exactly (tap 21 is tap 1" in out and ("..." in out) == (repeated > 3)
+    assert "repeated_taps" in (folder / "report.yaml").read_text()
+
+
 def test_a_csv_points_file_works_like_yaml(bracket, capsys):
     folder, taps, _ = bracket
     np.savetxt(folder / "taps.csv", taps, delimiter=",", header="x,y,z", comments="")

@@ -200,6 +200,21 @@ def _mode_separation(modes: list[Mode]) -> tuple[float, float]:
     return distance, angle
 
 
+def _repeat_warnings(base_p_taps: np.ndarray) -> list[SolveWarning]:
+    """A warning naming the taps (N, 3) that repeat an earlier tap exactly (a row pasted twice), if any."""
+    _, first, inverse = np.unique(base_p_taps, axis=0, return_index=True, return_inverse=True)
+    earlier = first[inverse.ravel()]
+    repeats = np.flatnonzero(earlier != np.arange(len(base_p_taps)))
+    if not len(repeats):
+        return []
+    named = ", ".join(f"tap {index + 1} is tap {earlier[index] + 1}" for index in repeats[:3])
+    more = ", ..." if len(repeats) > 3 else ""
+    count = f"{len(repeats)} taps repeat an earlier one" if len(repeats) > 1 else "A tap repeats an earlier one"
+    return [SolveWarning("repeated_taps", f"{count} exactly ({named}{more}): the 95/99 % intervals count each repeat "
+                         "as new evidence, so they come out narrower than the taps justify (the guaranteed bounds "
+                         "hold). Remove the repeated rows from the points file.")]
+
+
 def _inconsistent_warnings(diagnosis: Diagnosis) -> list[SolveWarning]:
     """The inconsistent verdict, then each cause the diagnosis found, most likely first."""
     return [SolveWarning("inconsistent", "No pose of the fixture explains all taps. Most likely cause first:"),
@@ -331,7 +346,8 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
     tree = _search_tree(problem, known, same_taps, max_cells, progress, cancel, descent)
     survivors = None if tree is None else tree.final
     cells = None if survivors is None else survivors.cells
-    warnings = [SolveWarning(code, message) for code, message in fixture.warnings] + budget_warnings
+    warnings = ([SolveWarning(code, message) for code, message in fixture.warnings] + budget_warnings
+                + _repeat_warnings(base_p_taps))
     fix_T_cad = fixture.fix_T_cad
     def inconsistent() -> Solution:
         if diagnose_inconsistent:
