@@ -24,7 +24,11 @@ PROBE_BYTES = 4096  # written (and removed) to check that the output's folder ta
 
 def output_target(path: str | Path) -> Path:
     """The file a write to ``path`` replaces: ``path`` with symlinks followed. InputError when it is a folder
-    or not a regular file (a device such as /dev/null, a pipe)."""
+    (also one still to be made: a path ending in '/') or not a regular file (a device such as /dev/null, a
+    pipe)."""
+    if str(path).endswith(("/", os.sep)):
+        raise InputError(f"{path} ends with '/', so it names a folder; give the path of a file in it, e.g. "
+                         f"{Path(path) / 'report.yaml'}")
     target = Path(os.path.realpath(path))
     try:
         mode = target.stat().st_mode

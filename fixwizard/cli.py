@@ -165,7 +165,7 @@ def _add_export(commands: argparse._SubParsersAction) -> None:
                                  "ROS 2) or anything else (JSON).")
     parser.add_argument("report", metavar="REPORT", help="a fixwizard report")
     parser.add_argument("--format", required=True, choices=EXPORT_FORMATS, help="urscript, ros2 or json")
-    parser.add_argument("-o", "--output", help="file to write (default: standard output)")
+    parser.add_argument("-o", "--output", help="file to write (default, or '-': standard output)")
     parser.add_argument("--frame-id", default=ROS_BASE_FRAME_ID,
                         help=f"ros2: the parent frame (default {ROS_BASE_FRAME_ID})")
     parser.add_argument("--child-frame-id", help="ros2: the fixture's frame (default: its name with every character "

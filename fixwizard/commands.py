@@ -46,10 +46,11 @@ def _lengths_from(args: argparse.Namespace) -> tuple[float, float]:
     return ball, bound
 
 
-def _report_path(args: argparse.Namespace) -> Path:
-    """``-o``, or POINTS with ``.report.yaml`` (refused for a POINTS that is no file, e.g. /dev/stdin)."""
+def _report_path(args: argparse.Namespace) -> str | Path:
+    """``-o`` as given (a final '/' kept for ``check_output`` to refuse), or POINTS with ``.report.yaml`` (refused
+    for a POINTS that is no file, e.g. /dev/stdin)."""
     if args.output:
-        return Path(args.output)
+        return str(args.output)
     points = Path(args.points)
     if points.exists() and not points.is_file():
         raise InputError(f"POINTS {points} is not a regular file, so there is no folder beside it for the report: "

@@ -155,14 +155,16 @@ def export_text(loaded: report.Report, format_name: str, frame_id: str = BASE_FR
 
 
 def export_command(args: argparse.Namespace) -> int:
+    """``fixwizard export``: the text to ``-o`` (``-`` or none: standard output)."""
     loaded = report.load(args.report)
-    if args.output:  # the mesh as ``verify.fixture_of`` finds it
-        check_output(args.output, [("report", args.report), ("report's mesh", loaded.mesh)],
+    output = None if args.output in (None, "", "-") else args.output
+    if output:  # the mesh as ``verify.fixture_of`` finds it
+        check_output(output, [("report", args.report), ("report's mesh", loaded.mesh)],
                      "give another output path with -o")
     text = export_text(loaded, args.format, args.frame_id, args.child_frame_id, args.allow_simulated)
-    if args.output:
-        write_text_atomic(args.output, text)
-        print(f"{args.format} of '{loaded.name}' written to {args.output}", file=sys.stderr)
+    if output:
+        write_text_atomic(output, text)
+        print(f"{args.format} of '{loaded.name}' written to {output}", file=sys.stderr)
     else:
         sys.stdout.write(text)
     return 0

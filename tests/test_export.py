@@ -117,6 +117,13 @@ def test_json_is_the_whole_report(real_report, capsys):
     assert data == yaml.safe_load(real_report.read_text())
 
 
+def test_an_output_of_dash_is_standard_output_not_a_file_named_dash(real_report, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert json.loads(exported(capsys, real_report, "--format", "json", "-o", "-")) == yaml.safe_load(
+        real_report.read_text())
+    assert not (tmp_path / "-").exists()
+
+
 @pytest.mark.parametrize("value", [".inf", ".nan", f"1{'0' * 400}"])
 def test_json_of_a_hand_edited_report_with_a_number_json_cannot_hold_is_a_message(real_report, capsys, value):
     text = real_report.read_text()

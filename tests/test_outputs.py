@@ -81,6 +81,13 @@ def test_a_folder_as_output_is_refused_with_a_file_name_to_use(demo, capsys):
     refused(capsys, solve(demo, "-o", str(demo / "reports")), "is a folder", str(demo / "reports" / "report.yaml"))
 
 
+def test_a_folder_still_to_be_made_as_output_is_refused_not_written_as_a_file(demo, capsys):
+    """'-o reports/' for a folder that does not exist yet: a file named 'reports' would surprise."""
+    refused(capsys, solve(demo, "-o", f"{demo / 'reports'}/"), "ends with '/', so it names a folder",
+            str(demo / "reports" / "report.yaml"))
+    assert not (demo / "reports").exists()
+
+
 @pytest.mark.slow
 def test_a_symlink_output_is_written_through_to_its_target_atomically(demo, capsys):
     target = demo / "archive" / "report.yaml"
