@@ -105,3 +105,35 @@ def test_the_cli_exit_code_says_the_status(plate, tmp_path):
                             "--max-cells", "2e6", "-q"])
     assert codes == {"unique": EXIT_CODES["unique"], "undetermined": EXIT_CODES["undetermined"]}
     assert len(set(EXIT_CODES.values())) == len(EXIT_CODES)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("bound_mm, unexplained", [(1.0, False), (0.1, True)])
+def test_a_sample_bound_the_taps_do_not_keep_is_said_when_coarse_cells_cannot_prove_it(real_data, bound_mm,
+                                                                                      unexplained):
+    """The expert's taps at 0.1 mm: at 1e5 cells the set is not yet empty and looks unique, but no pose explains
+    every tap within 0.1 mm (at 1e7 cells the set is empty even at 0.5 mm); at their real 1 mm bound one does."""
+    from conftest import real_taps
+    from fixwizard.fixture import load_fixture
+
+    fixture = load_fixture(real_data / "meshes" / "matlab_logo.ply")
+    solution = solve(fixture, real_taps(real_data, "expert"), BALL_M, bound_mm * 1e-3, max_cells=1e5)
+    assert solution.status == "unique"
+    assert ("unexplained" in [warning.code for warning in solution.warnings]) is unexplained
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(4))
+def test_taps_that_keep_their_bound_are_never_called_unexplained(seed):
+    """Random shapes, poses and tap errors up to the whole bound: some pose (the true one) explains the taps, and
+    the check finds one."""
+    from fixwizard.synthetic import bounded_noise
+
+    rng = np.random.default_rng(seed)
+    fixture = as_fixture(["l_prism", "polytope", "brick", "cone"][seed])
+    base_T_cad = make_transform(Rotation.random(random_state=seed), rng.uniform(-0.3, 0.3, 3))
+    taps = transform_points(base_T_cad, touching_ball_centres(fixture.mesh, 16, BALL_M / 2, rng))
+    taps += bounded_noise(len(taps), BOUND_M, rng)
+    solution = solve(fixture, taps, BALL_M, BOUND_M, max_cells=rng.choice([1e5, 1e6]))
+    assert solution.status != "inconsistent" and solution.contains(base_T_cad)
+    assert "unexplained" not in [warning.code for warning in solution.warnings]

@@ -144,11 +144,10 @@ def _objectives(centre: BoundCentre, fix_p_origin: np.ndarray, fix_p_hull: np.nd
     return objectives
 
 
-def reach(problem: SearchProblem, starts: list[np.ndarray], centre: BoundCentre, fix_p_origin: np.ndarray,
-          fix_p_hull: np.ndarray, extent_m: float, seed: int = 0) -> Reach | None:
-    """The certified reach from the first certified pose of ``starts`` (poses ``base_T_fix``; a start that does not
-    certify is first moved to its nearest least-squares fit), pushed outward within ``extent_m`` (a bound on how
-    far any pose of the set lies); None when no start certifies."""
+def certified_start(problem: SearchProblem, starts: list[np.ndarray], extent_m: float) -> np.ndarray | None:
+    """The first certified pose of ``starts`` (poses ``base_T_fix``), else of their nearest least-squares fits and
+    the feasible poses pushed from them (within ``extent_m``, a bound on how far any pose of the set lies); None
+    when none certifies."""
     start = next((pose for pose in starts if certified(problem, pose)), None)
     for pose in starts if start is None else ():
         fitted = laplace_peak(problem.oracle, problem.base_p_taps, problem.ball_radius_m, problem.sample_bound_m / 3.0,
@@ -157,10 +156,15 @@ def reach(problem: SearchProblem, starts: list[np.ndarray], centre: BoundCentre,
         feasible = _push(problem, fitted, lambda _: 0.0, extent_m, FEASIBLE_SHARE * problem.sample_bound_m)
         for candidate in (fitted, feasible):
             if certified(problem, candidate):
-                start = candidate
-                break
-        if start is not None:
-            break
+                return candidate
+    return start
+
+
+def reach(problem: SearchProblem, starts: list[np.ndarray], centre: BoundCentre, fix_p_origin: np.ndarray,
+          fix_p_hull: np.ndarray, extent_m: float, seed: int = 0) -> Reach | None:
+    """The certified reach from ``certified_start`` of ``starts`` (poses ``base_T_fix``), pushed outward within
+    ``extent_m`` (a bound on how far any pose of the set lies); None when no start certifies."""
+    start = certified_start(problem, starts, extent_m)
     if start is None:
         return None
     poses = [start]

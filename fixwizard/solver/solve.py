@@ -35,6 +35,7 @@ from fixwizard.solver.estimates import (
 )
 from fixwizard.solver.mode_mass import ModeLikelihood, mode_shares
 from fixwizard.solver.modes import rotation_modes
+from fixwizard.solver.reach import certified_start
 from fixwizard.solver.refine import refined_largest_figures
 from fixwizard.solver.resources import available_memory_bytes, largest_cell_budget, search_peak_bytes
 from fixwizard.solver.search import (
@@ -215,6 +216,20 @@ def _repeat_warnings(base_p_taps: np.ndarray) -> list[SolveWarning]:
                          "hold). Remove the repeated rows from the points file.")]
 
 
+def _unexplained_warnings(problem: SearchProblem, modes: list[Mode], fix_T_cad: np.ndarray) -> list[SolveWarning]:
+    """A warning when no pose could be found that explains every tap within the sample bound (from each mode's
+    expected pose: itself, its least-squares fit, a feasible pose near that): the set the cells hold may then be
+    empty, which only finer cells could prove, and its bounds rest on a sample bound the taps do not keep."""
+    for mode in modes:
+        start = [mode.base_T_cad @ invert(fix_T_cad)]
+        if certified_start(problem, start, mode.bounds.max_point_displacement_m) is not None:
+            return []
+    return [SolveWarning("unexplained", f"No pose was found that explains every tap within the "
+                         f"{problem.sample_bound_m * 1e3:.3g} mm sample bound: the taps may fit no pose at this "
+                         "bound (a search with a larger cell budget would then say inconsistent). Check the sample "
+                         "bound (the tip calibration's) and the ball diameter before using this pose.")]
+
+
 def _inconsistent_warnings(diagnosis: Diagnosis) -> list[SolveWarning]:
     """The inconsistent verdict, then each cause the diagnosis found, most likely first."""
     return [SolveWarning("inconsistent", "No pose of the fixture explains all taps. Most likely cause first:"),
@@ -380,6 +395,8 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
         bounds = bounds_from_figures(centre, cell_bound_figures(mode_cells, centre, fix_p_origin,
                                                                 fixture.oracle.hull_vertices_m).max(1))
     status = status_of([mode.bounds for mode in modes], fixture.radius_m)
+    if status != "undetermined":
+        warnings += _unexplained_warnings(problem, modes, fix_T_cad)
     if status == "ambiguous":
         distance, angle = _mode_separation(modes)
         warnings.append(SolveWarning(
