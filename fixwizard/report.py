@@ -199,12 +199,14 @@ def report_dict(solution: Solution, fixture: Fixture, base_p_taps: np.ndarray, b
                          "distance_from_surface_m": round(float(suspect.distance_m), POSITION_DECIMALS)}
                         if suspect is not None else None),
         "diagnosis": _diagnosis_dict(solution),
-        "search": {"cells": solution.stats.cells, "rotation_level": solution.stats.rotation_level,
-                   "position_level": solution.stats.position_level, "elapsed_s": round(solution.stats.elapsed_s, 3),
-                   "max_cells": float(solution.stats.max_cells)},
         "inputs": {"ball_diameter_m": float(ball_diameter_m), "sample_bound_m": float(sample_bound_m),
                    "sigma_m": round(float(sigma_m), 10),
                    "points_m": [_rounded(point, POSITION_DECIMALS) for point in base_p_taps]},
+        # last, every key required (``_check_complete``): a file cut short at any line is refused, not read with
+        # fewer taps
+        "search": {"cells": solution.stats.cells, "rotation_level": solution.stats.rotation_level,
+                   "position_level": solution.stats.position_level, "elapsed_s": round(solution.stats.elapsed_s, 3),
+                   "max_cells": float(solution.stats.max_cells)},
     }
 
 
@@ -369,6 +371,20 @@ def _fixture_section(data: dict, path: Path) -> tuple[str, Path, str, str]:
         raise InputError(f"{path}: {error}") from None
 
 
+SEARCH_KEYS = ("cells", "rotation_level", "position_level", "elapsed_s", "max_cells")
+
+
+def _check_complete(data: dict, path: Path) -> None:
+    """InputError unless a ``/2`` report's ``search`` section, which ``report_dict`` writes last, holds all its
+    numbers: a report cut short (a copy that did not finish) lacks its last line at least."""
+    search = data.get("search")
+    if data["schema"] != SCHEMA:
+        return
+    if not (isinstance(search, dict) and all(isinstance(search.get(key), int | float) for key in SEARCH_KEYS)):
+        raise InputError(f"{path}: 'search' ({', '.join(SEARCH_KEYS)}) is missing or incomplete: the report may "
+                         "be cut short (a copy that did not finish?); copy it again or solve again")
+
+
 def load(path: str | Path) -> Report:
     """Read and check a report written by ``write`` (or a ``fixwizard.report/1`` file); InputError says what is
     wrong with a damaged or foreign file."""
@@ -394,11 +410,14 @@ def load(path: str | Path) -> Report:
                       ball_diameter_m=ball_diameter_m, sample_bound_m=sample_bound_m, pose_guarantee=guarantee)
 
     if status == "inconsistent":
+        _check_complete(data, path)
         return loaded(None, None, [None, None, None], None)
     pose, bounds = data.get("pose"), data.get("bounds")
     if not isinstance(pose, dict) or not isinstance(bounds, dict):
         raise InputError(f"{path}: a {status} report needs 'pose' and 'bounds'")
     guarantee = (Guarantee(*_figures_from(pose.get("guaranteed"), path, "pose.guaranteed"))
                  if data["schema"] == SCHEMA else None)
-    return loaded(_pose_from(pose, path, "pose"), _pose_from(bounds.get("center"), path, "bounds.center"),
-                  _figures_from(bounds, path, "bounds"), guarantee)
+    found = loaded(_pose_from(pose, path, "pose"), _pose_from(bounds.get("center"), path, "bounds.center"),
+                   _figures_from(bounds, path, "bounds"), guarantee)
+    _check_complete(data, path)
+    return found

@@ -49,6 +49,18 @@ def written(solved, tmp_path, **options) -> Path:
                                                                  **options))
 
 
+def test_a_report_cut_short_at_any_line_is_refused_never_read_with_fewer_taps(solved, tmp_path):
+    """A copy that did not finish (a full disk, a pulled stick) ends at a line: whatever line, it is refused."""
+    lines = written(solved, tmp_path).read_text().splitlines(keepends=True)
+    cut = tmp_path / "cut.yaml"
+    for end in range(1, len(lines)):
+        cut.write_text("".join(lines[:end]))
+        with pytest.raises(InputError):
+            report.load(cut)
+    cut.write_text("".join(lines))
+    assert len(report.load(cut).data["inputs"]["points_m"]) == 20
+
+
 def test_the_file_says_at_the_top_whether_it_is_simulated_its_status_frame_and_units(solved, tmp_path):
     text = written(solved, tmp_path, simulated=True).read_text()
     comments = [line for line in text.splitlines() if line.startswith("#")]

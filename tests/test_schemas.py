@@ -92,6 +92,7 @@ def test_the_wizard_report_matches_the_schema(tmp_path):
         data = session_report(solution, fixture, session, calibration, simulated=True)
     validate(data, "fixwizard.report/2")
     assert data["simulated"] is True and data["session"]["journal"] == str(session.path)
+    assert list(data)[-1] == "search"  # last, so that a copy cut short is refused (report.load)
 
 
 def test_the_schema_catches_broken_reports(demo_reports):

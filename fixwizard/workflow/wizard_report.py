@@ -26,8 +26,10 @@ def session_report(solution: Solution, fixture: Fixture, session: SamplingSessio
     """The report of a solve of the session's active taps, with the calibration's ball and sample bound."""
     data = report.report_dict(solution, fixture, session.base_p_taps, calibration.ball_diameter_m,
                               calibration.sample_bound_m, calibration.sample_bound_m / 3.0, simulated=simulated)
+    search = data.pop("search")  # put back last, where a report cut short is told by its missing lines
     data["session"] = {"journal": str(session.path), "tap_ids": [tap.id for tap in session.taps],
                        "tip_calibration": calibration.name}
+    data["search"] = search
     return data
 
 
