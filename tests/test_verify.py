@@ -128,7 +128,10 @@ def test_mistakes_get_a_message_not_a_traceback(expert, tmp_path, capsys):
     assert main(["verify", str(path), str(tmp_path / "nan.csv")]) == 1
     assert main(["verify", str(tmp_path / "nan.csv"), str(tmp_path / "nan.csv")]) == 1
     assert run_verify(folder, path, taps[:3], "--sample-bound", "1") == 1
-    assert "implausible" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "a sample bound of 1000 mm is implausible" in err and "ball" not in err
+    assert run_verify(folder, path, taps[:3], "--ball-diameter", "60mm") == 1
+    assert "a 60 mm tip ball is implausible" in capsys.readouterr().err
     data = yaml.safe_load(path.read_text())
     data.update(status="inconsistent", pose=None, bounds=None, intervals=None)
     inconsistent = report.write(tmp_path / "bad.yaml", data)
