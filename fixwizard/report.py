@@ -54,8 +54,8 @@ NAME_PATTERN = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
 def fixture_name(text: str) -> str:
     """A fixture name as given (ASCII letters, digits, ``_``, ``.``, ``-``; at most 64); InputError otherwise."""
     if not isinstance(text, str) or not NAME_PATTERN.match(text):
-        raise InputError(f"the fixture name {quoted(text)} must be 1-64 ASCII letters (a-z, A-Z), digits, '_', "
-                         "'.' or '-', e.g. bracket or cell2-plate")
+        raise InputError(f"the fixture name {quoted(text)} must be 1-64 letters, digits, '_', '.' or '-', in ASCII "
+                         "(a-z, A-Z, 0-9), e.g. bracket or cell2-plate")
     return text
 
 

@@ -99,7 +99,7 @@ def test_the_fixture_is_named_after_the_mesh_file_unless_named(solved, tmp_path)
     assert report.load(written(solved, tmp_path, name="bracket-2")).name == "bracket-2"
     with pytest.raises(InputError, match="letters, digits"):
         written(solved, tmp_path, name="two words")
-    with pytest.raises(InputError, match=r"ASCII letters \(a-z, A-Z\)"):  # 'ö' is a letter, but not one of those
+    with pytest.raises(InputError, match=r"in ASCII \(a-z, A-Z, 0-9\)"):  # 'ö' is a letter, but not one of those
         written(solved, tmp_path, name="Förderband")
 
 
