@@ -15,6 +15,7 @@ import yaml
 
 from fixwizard.atomic import write_text_atomic
 from fixwizard.errors import InputError, file_problem, quoted
+from fixwizard.fixture import MESH_SUFFIXES
 from fixwizard.yamlfile import parse_yaml, yaml_problem
 
 POINTS_FRAME = "base"
@@ -72,6 +73,9 @@ def load_points(path: str | Path) -> np.ndarray:
     path = Path(path)
     if path.is_dir():
         raise InputError(f"{path} is a folder, not a points file; give the YAML or CSV file of the taps")
+    if path.suffix.lower() in MESH_SUFFIXES:
+        raise InputError(f"{path} is a mesh, not a points file (YAML or CSV of the taps): are the arguments in the "
+                         "wrong order? (solve MESH POINTS, identify POINTS MESH...)")
     try:
         text = path.read_text(encoding="utf-8-sig")
     except OSError as error:

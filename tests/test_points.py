@@ -114,6 +114,14 @@ def test_random_garbage_is_a_short_message_or_taps(tmp_path):
                 assert taps.ndim == 2 and taps.shape[1] == 3 and np.all(np.isfinite(taps))
 
 
+@pytest.mark.parametrize("suffix", [".stl", ".PLY", ".obj"])
+def test_a_mesh_given_as_the_points_file_says_the_arguments_may_be_swapped(tmp_path, suffix):
+    path = tmp_path / f"fixture{suffix}"
+    path.write_bytes(b"solid x\x00\xff")
+    with pytest.raises(InputError, match="is a mesh, not a points file .* wrong order"):
+        load_points(path)
+
+
 def test_a_folder_as_points_file_is_called_a_folder(tmp_path):
     with pytest.raises(InputError, match="is a folder, not a points file"):
         load_points(tmp_path)
