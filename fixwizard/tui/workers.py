@@ -8,6 +8,7 @@ from collections.abc import Callable
 from typing import Protocol, TypeVar, cast
 
 from textual import work
+from textual.css.query import NoMatches
 from textual.dom import DOMNode
 from textual.worker import get_current_worker
 
@@ -88,8 +89,14 @@ def run_in_solver(node: DOMNode, solver: SolverProcess, request: Request,
         return solver.latest_request == request_id
 
     def on_loop(event: Event) -> None:
-        if node.is_attached and current():
+        if not (node.is_attached and node.app.is_running and current()):
+            return  # the screen or the app is gone, or a newer request answers
+        try:
             on_event(event)
+        except NoMatches:
+            if node.screen in node.app.screen_stack:
+                raise  # a widget missing from a screen the app holds is a bug
+            # the screen is being taken down (off the stack, its widgets go before it is detached): nothing to show
 
     def arrived(event: Event) -> None:
         try:
