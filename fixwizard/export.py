@@ -40,21 +40,17 @@ def default_child_frame_id(name: str) -> str:
     return identifier if re.match(r"[A-Za-z_]", identifier) else f"fixture_{identifier}"
 
 
-def _frame_problem(frame: str) -> str | None:
-    """The rule of ROS frame names that ``frame`` breaks, None when it keeps them."""
-    if not frame:
-        return "it is empty"
-    if re.search(r"[^A-Za-z0-9_/]", frame):
-        return "it may hold only letters, digits, '_' and '/'"
-    if frame[0].isdigit():
-        return "it must start with a letter, '_' or '/', not a digit"
-    return None
-
-
 def _check_frame(option: str, frame: str) -> None:
-    problem = _frame_problem(frame)
-    if problem is not None:
-        raise InputError(f"{option} {frame!r} is no ROS frame name: {problem}")
+    """InputError naming the rule of ROS frame names that ``frame`` (given as ``option``) breaks."""
+    if not frame:
+        problem = "it is empty"
+    elif re.search(r"[^A-Za-z0-9_/]", frame):
+        problem = "it may hold only letters, digits, '_' and '/'"
+    elif frame[0].isdigit():
+        problem = "it must start with a letter, '_' or '/', not a digit"
+    else:
+        return
+    raise InputError(f"{option} {frame!r} is no ROS frame name: {problem}")
 
 
 def _usable(loaded: report.Report, allow_simulated: bool, format_name: str) -> report.Guarantee:

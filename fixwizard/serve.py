@@ -24,6 +24,7 @@ and the log on stderr go on (``LogFile``).
 """
 
 import argparse
+import contextlib
 import logging
 import math
 import os
@@ -281,17 +282,13 @@ class LogFile(logging.FileHandler):
             return
         self.failed = True
         stream, self.stream = self.stream, None
-        try:
+        with contextlib.suppress(OSError):  # the close flushes what is left, which fails again; closed all the same
             if stream is not None:
-                stream.close()  # flushes what is left, which fails again; the file is closed all the same
-        except OSError:
-            pass
-        try:
+                stream.close()
+        with contextlib.suppress(OSError):  # stderr cannot be written either
             print(f"fixwizard serve: cannot write the log {self.baseFilename}: {file_problem(error, self.baseFilename)}"
                   "; serving goes on, logging to stderr only (restart serve to log to the file again)",
                   file=sys.stderr, flush=True)
-        except OSError:  # stderr cannot be written either
-            pass
 
 
 def _log_handlers(log: str | None) -> list[logging.Handler]:
