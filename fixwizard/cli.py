@@ -6,7 +6,8 @@ This module holds only the argument parser and imports nothing heavy: ``--help``
 once. A chosen command's module (``COMMAND_MODULE:function``) is imported when it runs.
 
 Exit codes (``exit_codes``): 0 unique (one pose, pinned down), 1 bad input, 2 inconsistent (no pose explains the
-taps), 3 ambiguous (several distinct poses), 4 undetermined (the taps do not pin the pose down), 130 cancelled.
+taps), 3 ambiguous (several distinct poses), 4 undetermined (the taps do not pin the pose down, or no pose was
+found that explains them), 130 cancelled.
 Only 0 means a pose a robot program can use.
 """
 

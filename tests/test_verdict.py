@@ -109,17 +109,38 @@ def test_the_cli_exit_code_says_the_status(plate, tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("bound_mm, unexplained", [(1.0, False), (0.1, True)])
-def test_a_sample_bound_the_taps_do_not_keep_is_said_when_coarse_cells_cannot_prove_it(real_data, bound_mm,
-                                                                                      unexplained):
-    """The expert's taps at 0.1 mm: at 1e5 cells the set is not yet empty and looks unique, but no pose explains
-    every tap within 0.1 mm (at 1e7 cells the set is empty even at 0.5 mm); at their real 1 mm bound one does."""
+def test_a_set_no_found_pose_explains_is_undetermined_not_unique(real_data, bound_mm, unexplained):
+    """The expert's taps at 0.1 mm: at 1e5 cells the set is not yet empty and looks pinned down, but no pose
+    explains every tap within 0.1 mm (at 1e7 cells the set is empty even at 0.5 mm), so its pose is not one a
+    robot may use: undetermined, saying why. At their real 1 mm bound one does: unique."""
     from conftest import real_taps
     from fixwizard.fixture import load_fixture
+    from fixwizard.tui.results.text import headline
 
     fixture = load_fixture(real_data / "meshes" / "matlab_logo.ply")
     solution = solve(fixture, real_taps(real_data, "expert"), BALL_M, bound_mm * 1e-3, max_cells=1e5)
-    assert solution.status == "unique"
-    assert ("unexplained" in [warning.code for warning in solution.warnings]) is unexplained
+    codes = [warning.code for warning in solution.warnings]
+    assert solution.status == ("undetermined" if unexplained else "unique")
+    assert ("unexplained" in codes) is unexplained
+    assert "undetermined" not in codes  # that warning is about taps that do not pin the pose down: not the case
+    assert ("no pose was found" in headline(solution, 20)) is unexplained
+
+
+@pytest.mark.slow
+def test_no_robot_output_takes_the_pose_of_an_unexplained_set(real_data, tmp_path, capsys):
+    """The same unexplained set through the command line: solve exits undetermined, and export refuses its report."""
+    from conftest import real_taps
+
+    points, report = tmp_path / "expert.yaml", tmp_path / "report.yaml"
+    write_points(points, real_taps(real_data, "expert"))
+    code = main(["solve", str(real_data / "meshes" / "matlab_logo.ply"), str(points), "--ball-diameter", "3mm",
+                 "--sample-bound", "0.1mm", "--max-cells", "1e5", "-q", "-o", str(report)])
+    assert code == EXIT_CODES["undetermined"]
+    assert "status: undetermined" in report.read_text()
+    capsys.readouterr()
+    assert main(["export", str(report), "--format", "urscript", "-o", str(tmp_path / "pose.script")]) == 1
+    assert "undetermined, so a robot must not use its pose" in capsys.readouterr().err
+    assert not (tmp_path / "pose.script").exists()
 
 
 @pytest.mark.slow

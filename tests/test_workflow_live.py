@@ -129,3 +129,19 @@ def test_the_first_look_filters_the_previous_set_without_going_deeper_and_the_qu
     assert quick.solution.contains(cell.truth.base_T_cad)
     scratch = quick_check(cell.fixture, base_p_taps[:10], BALL_DIAMETER_M, SAMPLE_BOUND_M)
     assert quick.solution.cells.rotation_level == scratch.solution.cells.rotation_level
+
+
+@pytest.mark.slow
+def test_a_live_check_whose_set_no_found_pose_explains_says_so_and_offers_no_estimate(real_data):
+    """The expert's taps at a 0.1 mm bound they do not keep, at a budget too small to prove the set empty: the live
+    line says no pose was found (not "unique so far", nor "keep tapping"), and there is no estimate to show."""
+    from conftest import real_taps
+    from fixwizard.fixture import load_fixture
+    from fixwizard.tui.sampling.text import live_text
+    from fixwizard.workflow.live import LiveView
+
+    fixture = load_fixture(real_data / "meshes" / "matlab_logo.ply")
+    check = quick_check(fixture, real_taps(real_data, "expert"), BALL_DIAMETER_M, 1e-4, max_cells=3e5)
+    view = LiveView.of(check, fixture)
+    assert view.verdict == "undetermined" and view.estimate_base_T_cad is None
+    assert live_text(view, 20, None).startswith("Live check of 20 taps: NO POSE FOUND that explains every tap")

@@ -225,9 +225,9 @@ def _unexplained_warnings(problem: SearchProblem, modes: list[Mode], fix_T_cad: 
         if certified_start(problem, start, mode.bounds.max_point_displacement_m) is not None:
             return []
     return [SolveWarning("unexplained", f"No pose was found that explains every tap within the "
-                         f"{problem.sample_bound_m * 1e3:.3g} mm sample bound: the taps may fit no pose at this "
-                         "bound (a search with a larger cell budget would then say inconsistent). Check the sample "
-                         "bound (the tip calibration's) and the ball diameter before using this pose.")]
+                         f"{problem.sample_bound_m * 1e3:.3g} mm sample bound, so the pose found is not one to use: "
+                         "the taps may fit no pose at this bound (a search with a larger cell budget would then say "
+                         "inconsistent). Check the sample bound (the tip calibration's) and the ball diameter.")]
 
 
 def _inconsistent_warnings(diagnosis: Diagnosis) -> list[SolveWarning]:
@@ -395,8 +395,10 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
         bounds = bounds_from_figures(centre, cell_bound_figures(mode_cells, centre, fix_p_origin,
                                                                 fixture.oracle.hull_vertices_m).max(1))
     status = status_of([mode.bounds for mode in modes], fixture.radius_m)
-    if status != "undetermined":
-        warnings += _unexplained_warnings(problem, modes, fix_T_cad)
+    unexplained = _unexplained_warnings(problem, modes, fix_T_cad) if status != "undetermined" else []
+    if unexplained:  # the set may be empty: its pose is not one a robot may use (see verdict)
+        status = "undetermined"
+        warnings += unexplained
     if status == "ambiguous":
         distance, angle = _mode_separation(modes)
         warnings.append(SolveWarning(
@@ -404,7 +406,7 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
             f"{len(modes)} distinct poses explain the taps (a symmetric fixture or taps on too few features); they "
             f"lie up to {distance * 1e3:.1f} mm and {np.degrees(angle):.1f} deg apart. The pose shown is the most "
             f"probable ({top.probability:.0%}); tap features that tell the poses apart."))
-    if status == "undetermined":
+    if status == "undetermined" and not unexplained:
         widest = max(modes, key=lambda mode: mode.bounds.max_point_displacement_m)
         why = openness(fixture, base_p_taps, sample_bound_m, cells, widest.bounds, top.base_T_cad)
         warnings.append(SolveWarning("undetermined", undetermined_message(why, widest.bounds, fixture.radius_m,

@@ -11,7 +11,9 @@ The rule (``status_of``), for a set that is not empty:
 - ``unique``: one mode, pinned down;
 - ``ambiguous``: several modes, each pinned down (distinct poses that each explain the taps);
 - ``undetermined``: some mode is not pinned down: more taps (on other faces), or a larger cell budget where
-  the search stopped at cells too coarse to tell.
+  the search stopped at cells too coarse to tell. Also a set that looks pinned down but holds no pose found to
+  explain every tap within the sample bound (``solve``'s ``unexplained`` check): the cells may hold no pose at
+  all, which only finer cells could prove, so its pose is not one a robot may use.
 
 Intervals need enough effective likelihood samples (Kish's ``1 / sum w^2``): below
 ``MIN_INTERVAL_SAMPLES`` a quantile is decided by a handful of samples, so no interval is given.

@@ -61,7 +61,8 @@ class LiveCheck:
 @dataclass(frozen=True)
 class LiveView:
     """What the sampling screen shows of a ``LiveCheck``, small enough to pass between processes: the verdict, the
-    guaranteed bounds (None when inconsistent), the modes, the most likely cause when inconsistent, the estimate
+    guaranteed bounds (None when inconsistent), the modes, the most likely cause when inconsistent (or, when
+    undetermined, that no pose was found to explain every tap, if so), the estimate
     (as ``LiveCheck.estimate_base_T_cad``), each tap's distance (m, ``tap_surface_distances_m``) under it, a wrong
     ball diameter the taps point to, and the solver's own figures (``workflow.details``)."""
 
@@ -80,8 +81,10 @@ class LiveView:
     def of(check: LiveCheck, fixture: Fixture) -> "LiveView":
         solution, estimate = check.solution, check.estimate_base_T_cad
         diagnosis = solution.diagnosis
+        unexplained = [warning.message for warning in solution.warnings if warning.code == "unexplained"]
+        cause = diagnosis.causes[0].message if diagnosis is not None and diagnosis.causes else None
         return LiveView(check.tap_count, check.verdict, check.refined, solution.bounds, tuple(solution.modes),
-                        diagnosis.causes[0].message if diagnosis is not None and diagnosis.causes else None,
+                        unexplained[0] if unexplained else cause,
                         estimate, None if estimate is None else tap_surface_distances_m(
                             fixture, solution.problem.base_p_taps, 2.0 * solution.problem.ball_radius_m, estimate),
                         ball_mismatch(solution), tuple(details_lines(solution)))

@@ -19,8 +19,13 @@ HEADLINES = {"unique": "UNIQUE: one pose of the fixture explains the {taps} taps
 SAID_BY_SUSPECT_LINES = ("inconsistent", "suspect_tap", "ball_diameter", "sample_bound", "mesh_or_units")
 
 
+UNEXPLAINED_HEADLINE = "UNDETERMINED: no pose was found that explains all {taps} taps within the sample bound."
+
+
 def headline(solution: Solution, tap_count: int) -> str:
-    return HEADLINES[solution.status].format(taps=tap_count, modes=len(solution.modes))
+    unexplained = "unexplained" in [warning.code for warning in solution.warnings]
+    return (UNEXPLAINED_HEADLINE if unexplained else HEADLINES[solution.status]).format(taps=tap_count,
+                                                                                       modes=len(solution.modes))
 
 
 def pose_lines(base_T_cad: np.ndarray) -> list[str]:

@@ -39,6 +39,9 @@ def live_text(check: LiveView | None, tap_count: int, progress: str | None) -> s
     if check.verdict == "inconsistent":
         cause = check.cause or "check the mesh, its units and the tip calibration."
         return head + f"INCONSISTENT, no pose explains the taps. Most likely: {cause}"
+    if check.verdict == "undetermined" and check.cause is not None:
+        return (head + "NO POSE FOUND that explains every tap within the sample bound; check the tip calibration's "
+                f"bound and the ball diameter. Guaranteed so far: {bounds_text(check)}.")
     if check.verdict == "undetermined":
         return (head + "the pose is not pinned down yet; keep tapping, on other faces too. Guaranteed so far: "
                 f"{bounds_text(check)}.")
