@@ -120,6 +120,18 @@ class DistanceOracle:
         return self._distance.rows
 
     @cached_property
+    def kernel_arguments(self) -> tuple[object, ...]:
+        """The mesh as the search's compiled exact stage takes it (``interval_kernel``): triangle rows, the
+        hierarchy's five arrays, whether distances are signed, each face's unit normal and whether it is
+        trustworthy (none for an unsigned mesh), ``FEATURE_MARGIN`` and ``SIGN_FREE_M``. That stage signs a
+        distance only where the closest point lies inside a face with a trustworthy normal; it leaves the others
+        to ``distance_interval_m``."""
+        normals = self._face_normals if self.signed else np.zeros((0, 3))
+        reliable = self._reliable_normal if self.signed else np.zeros(0, bool)
+        return (self._distance.rows, *self._distance.hierarchy, self.signed, normals, reliable, self.FEATURE_MARGIN,
+                self.SIGN_FREE_M)
+
+    @cached_property
     def hull_vertices_m(self) -> np.ndarray:
         """Vertices (H, 3) of the mesh's convex hull (m, the mesh's frame): where a rigid motion moves a point of
         the fixture farthest."""

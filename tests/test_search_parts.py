@@ -10,7 +10,7 @@ from fixwizard.geometry.octree import PositionGrid
 from fixwizard.geometry.se3 import make_transform
 from fixwizard.solver.cells import root_cells
 from fixwizard.solver.distance_grid import DistanceGrid
-from fixwizard.solver.interval_kernel import _nearest_vertex_interval_m
+from fixwizard.solver.interval_kernel import _nearest_vertex_interval_m, signed_interval_m
 from shapes import SHAPES, as_fixture
 
 
@@ -186,3 +186,44 @@ def test_a_located_set_pickles_as_before_and_locates_alike_after_the_trip():
     assert pickle.dumps(cells) == before  # the lookup stays behind, not sent to or from a solver process
     assert np.array_equal(pickle.loads(before).locate(rotations, positions), found)
     assert np.array_equal(found, rows)
+
+
+@numba.njit
+def _signed_intervals(points: np.ndarray, mesh: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    low, high = np.empty(len(points)), np.empty(len(points))
+    faces, signable = np.empty(len(points), np.int64), np.empty(len(points), np.bool_)
+    for row in range(len(points)):
+        low[row], high[row], faces[row], signable[row] = signed_interval_m(points[row], -1, False, mesh)
+    return low, high, faces, signable
+
+
+def _knife() -> trimesh.Trimesh:
+    """A wedge with a 6 degree knife edge along z: beyond the edge, points above the plane of one face lie below
+    the other's, so a face's plane tells their sign wrongly."""
+    outline = np.array([[0.0, 0.0], [0.08, -0.0042], [0.08, 0.0042]])
+    mesh = trimesh.creation.extrude_triangulation(outline, np.array([[0, 1, 2]]), height=0.02)
+    return mesh if mesh.volume > 0 else trimesh.Trimesh(mesh.vertices, np.asarray(mesh.faces)[:, ::-1])
+
+
+@pytest.mark.parametrize("name", ["knife", *sorted(SHAPES)])
+def test_the_compiled_exact_stage_signs_as_the_oracle_does_or_leaves_the_sign_to_it(name):
+    """Points all around the surface (and around the knife's edge): where the compiled stage signs an interval, it
+    is the oracle's, bit for bit; it leaves to the oracle every point whose closest point lies on an edge or a
+    corner (beyond the knife's edge those are outside, though below one face's plane)."""
+    fixture = as_fixture(name, _knife()) if name == "knife" else as_fixture(name)
+    rng = np.random.default_rng(7)
+    vertices, triangles = fixture.oracle.mesh_arrays
+    surface = np.vstack([trimesh.sample.sample_surface(trimesh.Trimesh(vertices, triangles), 3000, seed=7)[0],
+                         vertices[rng.integers(len(vertices), size=1000)]])
+    points = np.vstack([surface + rng.normal(0.0, 0.003, surface.shape),
+                        surface + rng.normal(0.0, 1e-5, surface.shape)])
+    if name == "knife":
+        edge = np.array([[0.0, 0.0, z] for z in rng.uniform(0.002, 0.018, 3000)]) - fixture.cad_p_center
+        points = np.vstack([points, edge + rng.normal(0.0, 0.002, edge.shape) * [1.0, 1.0, 0.0]])
+    low, high, faces, signable = _signed_intervals(points, fixture.oracle.kernel_arguments)
+    oracle_low, oracle_high, oracle_faces = fixture.oracle.distance_interval_m(points)
+    assert fixture.signed
+    np.testing.assert_array_equal(low[signable], oracle_low[signable])
+    np.testing.assert_array_equal(high[signable], oracle_high[signable])
+    np.testing.assert_array_equal(faces, oracle_faces)
+    assert 0 < np.count_nonzero(signable) < len(points)

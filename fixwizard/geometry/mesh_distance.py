@@ -166,6 +166,14 @@ def triangle_row(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(nogil=True, cache=True, inline="always")
+def row_point_m(row: np.ndarray, v: float, w: float) -> Vector3:
+    """The point (m) of a row's triangle with barycentric weights ``v``, ``w`` of its second and third vertex,
+    computed as ``a + v (b - a) + w (c - a)``."""
+    return (row[_A] + v * row[_AB] + w * row[_AC], row[_A + 1] + v * row[_AB + 1] + w * row[_AC + 1],
+            row[_A + 2] + v * row[_AB + 2] + w * row[_AC + 2])
+
+
+@numba.njit(nogil=True, cache=True, inline="always")
 def _plane_low_m(x0: float, x1: float, x2: float, row: np.ndarray) -> float:
     """A cheap lower bound (m) on the distance from point ``x`` to the row's triangle: the distance to its plane
     less the normal's slack and the rounding (negative where the triangle has no normal)."""
@@ -327,7 +335,7 @@ def _box_low_m(x: np.ndarray, low: np.ndarray, high: np.ndarray) -> float:
 
 
 @numba.njit(nogil=True, cache=True)
-def _query_point(x: np.ndarray, rows: np.ndarray, hierarchy: Arrays, hint: int,
+def query_point(x: np.ndarray, rows: np.ndarray, hierarchy: Arrays, hint: int,
                  cap: float) -> tuple[float, float, int, float, float]:
     """The mesh's distance interval at ``x`` (m), the triangle of the smallest ``high`` and its weights. ``hint``:
     a triangle likely to be near (-1: none); its interval starts the search, so that far nodes are pruned at once
@@ -375,7 +383,7 @@ def _query_range(start: int, stop: int, points: np.ndarray, rows: np.ndarray, hi
                  cap: float, out: Arrays) -> None:
     low_out, high_out, face_out, weights_out = out
     for point in range(start, stop):
-        low, high, face, v, w = _query_point(points[point], rows, hierarchy, hints[point], cap)
+        low, high, face, v, w = query_point(points[point], rows, hierarchy, hints[point], cap)
         low_out[point], high_out[point], face_out[point] = low, high, face
         weights_out[point, 0], weights_out[point, 1] = v, w
 
@@ -474,14 +482,15 @@ def _rays(origins: np.ndarray, directions: np.ndarray, rows: np.ndarray, hierarc
 class MeshDistance:
     """Unsigned distance intervals (m) from points to a triangle mesh (vertices ``(V, 3)`` m, triangles
     ``(F, 3)``), float64 throughout; see the module doc. ``rows``: each triangle's data for
-    ``triangle_row_interval_m`` and ``triangle_row_high_m``."""
+    ``triangle_row_interval_m`` and ``triangle_row_high_m``; ``hierarchy``: the bounding-volume hierarchy, as
+    ``query_point`` takes it."""
 
     def __init__(self, vertices_m: np.ndarray, triangles: np.ndarray) -> None:
         vertices = np.ascontiguousarray(vertices_m, np.float64)
         triangles = np.ascontiguousarray(triangles, np.int64)
         corners = vertices[triangles]
         self.rows = _triangle_rows(vertices, triangles)
-        self._hierarchy = _build_hierarchy(corners.min(axis=1), corners.max(axis=1))
+        self.hierarchy = _build_hierarchy(corners.min(axis=1), corners.max(axis=1))
 
     def query(self, points_m: np.ndarray, hint_faces: np.ndarray | None = None,
               cap_m: float = np.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -497,10 +506,10 @@ class MeshDistance:
             raise ValueError("one hint face (or -1) per point, within the mesh")
         out = (np.empty(count), np.empty(count), np.empty(count, np.int64), np.empty((count, 2)))
         if count < SERIAL_POINTS:  # waking the parallel workers costs milliseconds: more than a few queries
-            _query_range(0, count, points, self.rows, self._hierarchy, hints, float(cap_m), out)
+            _query_range(0, count, points, self.rows, self.hierarchy, hints, float(cap_m), out)
         else:
             with PARALLEL_KERNEL_LOCK:
-                _query(points, self.rows, self._hierarchy, hints, float(cap_m), out)
+                _query(points, self.rows, self.hierarchy, hints, float(cap_m), out)
         return out
 
     def rays(self, origins_m: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -511,8 +520,8 @@ class MeshDistance:
         directions = np.ascontiguousarray(np.broadcast_to(directions, origins.shape), np.float64)
         first, crossings = np.empty(len(origins)), np.empty(len(origins), np.int64)
         if len(origins) < SERIAL_POINTS:
-            _ray_range(0, len(origins), origins, directions, self.rows, self._hierarchy, first, crossings)
+            _ray_range(0, len(origins), origins, directions, self.rows, self.hierarchy, first, crossings)
         else:
             with PARALLEL_KERNEL_LOCK:
-                _rays(origins, directions, self.rows, self._hierarchy, first, crossings)
+                _rays(origins, directions, self.rows, self.hierarchy, first, crossings)
         return first, crossings

@@ -5,8 +5,12 @@ For cell ``c`` with centre frame ``(R_c, t_c)`` and tap ``p`` (base frame, m) th
 ``r_ball -/+ (b_s + b_p + min(|x| + b_p, lever_cap) * chord)`` (see ``search``). The cheap test
 bounds the distance at ``x`` by the parent's interval widened by ``|x - x_parent|`` and by the
 distance lattice (nearest vertex plus the offset to it, then the eight corners of the voxel);
-cells whose interval misses the band are rejected, intervals that still straddle a band edge are
-flagged for an exact query.
+cells whose interval misses the band are rejected. Intervals that still straddle a band edge are then settled,
+tap by tap in order, for the cells no tap has rejected: by the float64 mesh hierarchy's interval
+(``mesh_distance.query_point``), signed where the closest point lies inside a face with a trustworthy normal
+(the face's plane decides, as ``DistanceOracle`` does) and where the cheap interval does not already prove the
+point outside. The few others (closest point on an edge or a corner, or on a sliver face) are flagged for
+``DistanceOracle.distance_interval_m``, whose pseudonormal, ray parity and winding number decide their sign.
 
 Arithmetic is float64 without fast-math, so every value equals numpy's; the stored float32
 interval ends are rounded outward.
@@ -18,7 +22,7 @@ from typing import Any
 import numba
 import numpy as np
 
-from fixwizard.geometry.mesh_distance import triangle_row_high_m
+from fixwizard.geometry.mesh_distance import query_point, row_point_m, triangle_row_high_m
 from fixwizard.parallel import PARALLEL_KERNEL_LOCK
 
 Arrays = tuple[Any, ...]  # several arrays passed to a compiled kernel as one argument
@@ -129,31 +133,110 @@ def face_distances_m(points_m: np.ndarray, faces: np.ndarray, triangle_rows: np.
 
 
 @numba.njit(nogil=True, cache=True, parallel=True)
-def _parallel_cheap_pass(cells: Arrays, taps: Arrays, band: Arrays, parent_index: np.ndarray, parents: Arrays,
-                         lattice: Arrays, triangle_rows: np.ndarray, out: Arrays) -> None:
+def _parallel_filter(cells: Arrays, taps: Arrays, band: Arrays, parent_index: np.ndarray, parents: Arrays,
+                     lattice: Arrays, mesh: Arrays, out: Arrays) -> None:
     count = len(cells[1])
     blocks = (count + BLOCK_CELLS - 1) // BLOCK_CELLS
     for block in numba.prange(blocks):
-        _cheap_pass_range(block * BLOCK_CELLS, min(count, (block + 1) * BLOCK_CELLS), cells, taps, band,
-                          parent_index, parents, lattice, triangle_rows, out)
+        _filter_range(block * BLOCK_CELLS, min(count, (block + 1) * BLOCK_CELLS), cells, taps, band, parent_index,
+                      parents, lattice, mesh, out)
 
 
-def cheap_pass(cells: Arrays, taps: Arrays, band: Arrays, parent_index: np.ndarray, parents: Arrays, lattice: Arrays,
-               triangle_rows: np.ndarray, out: Arrays) -> None:
-    """``_cheap_pass_range`` over all cells, in blocks spread over the cores (a few blocks on the calling thread:
+def filter_pass(cells: Arrays, taps: Arrays, band: Arrays, parent_index: np.ndarray, parents: Arrays,
+                 lattice: Arrays, mesh: Arrays, out: Arrays) -> None:
+    """``_filter_range`` over all cells, in blocks spread over the cores (a few blocks on the calling thread:
     waking the parallel workers costs milliseconds)."""
     count = len(cells[1])
     if count <= 2 * BLOCK_CELLS:
-        _cheap_pass_range(0, count, cells, taps, band, parent_index, parents, lattice, triangle_rows, out)
+        _filter_range(0, count, cells, taps, band, parent_index, parents, lattice, mesh, out)
     else:
         with PARALLEL_KERNEL_LOCK:
-            _parallel_cheap_pass(cells, taps, band, parent_index, parents, lattice, triangle_rows, out)
+            _parallel_filter(cells, taps, band, parent_index, parents, lattice, mesh, out)
 
 
 @numba.njit(nogil=True, cache=True)
-def _cheap_pass_range(start: int, stop: int, cells: Arrays, taps: Arrays, band: Arrays, parent_index: np.ndarray,
-                      parents: Arrays, lattice: Arrays, triangle_rows: np.ndarray, out: Arrays) -> None:
-    """Cheap test of cells ``start .. stop`` of a chunk of ``n`` cells against every tap, in order.
+def _filter_range(start: int, stop: int, cells: Arrays, taps: Arrays, band: Arrays, parent_index: np.ndarray,
+                  parents: Arrays, lattice: Arrays, mesh: Arrays, out: Arrays) -> None:
+    """Cells ``start .. stop`` of a chunk of ``n``: the cheap test against every tap, then, for a cell no tap
+    rejected, the exact stage of the taps whose intervals straddle a band edge (``cells``, ``taps``, ``band``,
+    ``parents`` and ``lattice`` as for ``_cheap_cell``; ``mesh``: ``DistanceOracle.kernel_arguments``;
+    ``out = (rotated_positions (n, 3), low (n, T), high, faces, straddling, rejected_by (n,), deferred (n, T))``,
+    ``deferred`` all false on entry). Straddling intervals the exact stage cannot sign are left as they are and
+    flagged ``deferred``; the rest are replaced by the exact interval, or reject the cell."""
+    for cell in range(start, stop):
+        _cheap_cell(cell, cells, taps, band, parent_index, parents, lattice, mesh[0], out)
+        if out[5][cell] == NOT_REJECTED:
+            _exact_cell(cell, cells, taps, band, mesh, out)
+
+
+@numba.njit(nogil=True, cache=True, inline="always")
+def _rejects_or_keeps(cell: int, tap: int, low: float, high: float, face: int, band_low: float, band_high: float,
+                      out: Arrays) -> bool:
+    """Whether interval ``[low, high]`` (m) misses the band, so that ``tap`` rejects ``cell``; else the cell keeps
+    it (float32, rounded outward) with its face."""
+    if high < band_low or low > band_high:
+        out[5][cell] = tap
+        return True
+    out[1][cell, tap] = _round_down_f32(low)
+    out[2][cell, tap] = _round_up_f32(high)
+    out[3][cell, tap] = face
+    return False
+
+
+@numba.njit(nogil=True, cache=True)
+def signed_interval_m(x: np.ndarray, hint: int, outside: bool, mesh: Arrays) -> tuple[float, float, int, bool]:
+    """The exact stage's interval (m) at a point ``x`` (m, mesh frame): ``DistanceOracle.distance_interval_m``'s
+    (with ``hint``, signed unless ``outside``: known to lie outside) where it can tell the sign as the oracle
+    does (the closest point inside a face with a trustworthy normal: the face's plane decides; within
+    ``SIGN_FREE_M`` of the surface, both signs), with the closest face; and whether it could (else the interval
+    is unsigned and the oracle must sign it). ``mesh``: ``DistanceOracle.kernel_arguments``."""
+    rows, hierarchy = mesh[0], mesh[1:6]
+    signed, face_normals, reliable_normal, feature_margin, sign_free_m = mesh[6:]
+    low, high, face, v, w = query_point(x, rows, hierarchy, hint, np.inf)
+    if not signed or outside:
+        return low, high, face, True
+    if low <= sign_free_m:
+        return -high, high, face, True
+    if min(1.0 - (v + w), min(v, w)) <= feature_margin or not reliable_normal[face]:
+        return low, high, face, False
+    closest = row_point_m(rows[face], v, w)
+    normal = face_normals[face]
+    if (x[0] - closest[0]) * normal[0] + (x[1] - closest[1]) * normal[1] + (x[2] - closest[2]) * normal[2] < 0.0:
+        return -high, -low, face, True
+    return low, high, face, True
+
+
+@numba.njit(nogil=True, cache=True)
+def _exact_cell(cell: int, cells: Arrays, taps: Arrays, band: Arrays, mesh: Arrays, out: Arrays) -> None:
+    """The exact stage of one cell (see ``_filter_range``), its straddling taps in order until one rejects it."""
+    fix_R_base, rotation_index, _, chords, _ = cells
+    base_p_taps, tap_order = taps
+    ball_radius_m, sample_bound_m, position_bound_m, lever_cap_m = band
+    rotated_positions, low_m, faces_out, straddling, deferred = out[0], out[1], out[3], out[4], out[6]
+    rotation = fix_R_base[rotation_index[cell]]
+    chord = chords[rotation_index[cell]]
+    x = np.empty(3)
+    for tap in tap_order:
+        if not straddling[cell, tap]:
+            continue
+        p = base_p_taps[tap]
+        for axis in range(3):
+            x[axis] = (rotation[axis, 0] * p[0] + rotation[axis, 1] * p[1] + rotation[axis, 2] * p[2]
+                       - rotated_positions[cell, axis])
+        tolerance = _tolerance_m(x[0], x[1], x[2], chord, sample_bound_m, position_bound_m, lever_cap_m)
+        band_low, band_high = ball_radius_m - tolerance, ball_radius_m + tolerance
+        low, high, face, signable = signed_interval_m(x, faces_out[cell, tap], low_m[cell, tap] > 0.0, mesh)
+        if not signable:
+            deferred[cell, tap] = True
+            continue
+        if _rejects_or_keeps(cell, tap, low, high, face, band_low, band_high, out):
+            return
+
+
+@numba.njit(nogil=True, cache=True)
+def _cheap_cell(cell: int, cells: Arrays, taps: Arrays, band: Arrays, parent_index: np.ndarray, parents: Arrays,
+                lattice: Arrays, triangle_rows: np.ndarray, out: Arrays) -> None:
+    """Cheap test of cell ``cell`` of a chunk of ``n`` cells against every tap, in order.
 
     ``cells = (fix_R_base (U, 3, 3), rotation_index (n,), position_cells (n, 3), chords (U,), octree)`` with
     ``octree = [corner (3 values, m), cell side (m)]`` of the position level: cell ``k``'s centre (base frame, m)
@@ -163,7 +246,7 @@ def _cheap_pass_range(start: int, stop: int, cells: Arrays, taps: Arrays, band: 
     (cell ``k``'s parent is row ``parent_index[k]``; no rows at the root level); intervals are float32
     (parents, T).
     ``lattice``: ``DistanceGrid.kernel_arguments``; ``triangle_rows``: ``DistanceOracle.triangle_rows``.
-    ``out = (rotated_positions (n, 3), low (n, T), high, faces, straddling, rejected_by (n,))``: per
+    ``out = (rotated_positions (n, 3), low (n, T), high, faces, straddling, rejected_by (n,), ...)``: per
     tap tested, the interval, the face whose distance bounds it from above, and whether it straddles a
     band edge; the tap that rejected each cell or ``NOT_REJECTED``.
     """
@@ -171,71 +254,66 @@ def _cheap_pass_range(start: int, stop: int, cells: Arrays, taps: Arrays, band: 
     base_p_taps, tap_order = taps
     ball_radius_m, sample_bound_m, position_bound_m, lever_cap_m = band
     parent_fix_R_base, parent_rotation_index, parent_rotated_positions, parent_low, parent_high, parent_faces = parents
-    rotated_positions, low_m, high_m, faces_out, straddling, rejected_by = out
+    rotated_positions, straddling, rejected_by = out[0], out[4], out[5]
     has_parents = parent_low.shape[0] > 0
-    for cell in range(start, stop):
-        rotation = fix_R_base[rotation_index[cell]]
-        centre = (octree[0] + (position_cells[cell, 0] + 0.5) * octree[3],
-                  octree[1] + (position_cells[cell, 1] + 0.5) * octree[3],
-                  octree[2] + (position_cells[cell, 2] + 0.5) * octree[3])
-        t0 = rotation[0, 0] * centre[0] + rotation[0, 1] * centre[1] + rotation[0, 2] * centre[2]
-        t1 = rotation[1, 0] * centre[0] + rotation[1, 1] * centre[1] + rotation[1, 2] * centre[2]
-        t2 = rotation[2, 0] * centre[0] + rotation[2, 1] * centre[1] + rotation[2, 2] * centre[2]
-        rotated_positions[cell, 0], rotated_positions[cell, 1], rotated_positions[cell, 2] = t0, t1, t2
-        chord = chords[rotation_index[cell]]
-        parent = parent_index[cell]
-        rejected_by[cell] = NOT_REJECTED
-        for tap in tap_order:
-            p = base_p_taps[tap]
-            x0 = rotation[0, 0] * p[0] + rotation[0, 1] * p[1] + rotation[0, 2] * p[2] - t0
-            x1 = rotation[1, 0] * p[0] + rotation[1, 1] * p[1] + rotation[1, 2] * p[2] - t1
-            x2 = rotation[2, 0] * p[0] + rotation[2, 1] * p[1] + rotation[2, 2] * p[2] - t2
-            tolerance = _tolerance_m(x0, x1, x2, chord, sample_bound_m, position_bound_m, lever_cap_m)
-            band_low, band_high = ball_radius_m - tolerance, ball_radius_m + tolerance
-            low, high, face = -np.inf, np.inf, -1
-            if has_parents:
-                parent_rotation = parent_fix_R_base[parent_rotation_index[parent]]
-                shift_sq = 0.0
-                for axis in range(3):
-                    parent_x = (parent_rotation[axis, 0] * p[0] + parent_rotation[axis, 1] * p[1]
-                                + parent_rotation[axis, 2] * p[2] - parent_rotated_positions[parent, axis])
-                    delta = (x0, x1, x2)[axis] - parent_x
-                    shift_sq += delta * delta
-                shift = math.sqrt(shift_sq)
-                low = parent_low[parent, tap] - shift
-                high = parent_high[parent, tap] + shift
-                face = parent_faces[parent, tap]
-                if face >= 0 and high > band_high and _straddles(low, high, band_low, band_high):
-                    high = min(high, triangle_row_high_m(x0, x1, x2, triangle_rows[face]))
+    rotation = fix_R_base[rotation_index[cell]]
+    centre = (octree[0] + (position_cells[cell, 0] + 0.5) * octree[3],
+              octree[1] + (position_cells[cell, 1] + 0.5) * octree[3],
+              octree[2] + (position_cells[cell, 2] + 0.5) * octree[3])
+    t0 = rotation[0, 0] * centre[0] + rotation[0, 1] * centre[1] + rotation[0, 2] * centre[2]
+    t1 = rotation[1, 0] * centre[0] + rotation[1, 1] * centre[1] + rotation[1, 2] * centre[2]
+    t2 = rotation[2, 0] * centre[0] + rotation[2, 1] * centre[1] + rotation[2, 2] * centre[2]
+    rotated_positions[cell, 0], rotated_positions[cell, 1], rotated_positions[cell, 2] = t0, t1, t2
+    chord = chords[rotation_index[cell]]
+    parent = parent_index[cell]
+    rejected_by[cell] = NOT_REJECTED
+    for tap in tap_order:
+        p = base_p_taps[tap]
+        x0 = rotation[0, 0] * p[0] + rotation[0, 1] * p[1] + rotation[0, 2] * p[2] - t0
+        x1 = rotation[1, 0] * p[0] + rotation[1, 1] * p[1] + rotation[1, 2] * p[2] - t1
+        x2 = rotation[2, 0] * p[0] + rotation[2, 1] * p[1] + rotation[2, 2] * p[2] - t2
+        tolerance = _tolerance_m(x0, x1, x2, chord, sample_bound_m, position_bound_m, lever_cap_m)
+        band_low, band_high = ball_radius_m - tolerance, ball_radius_m + tolerance
+        low, high, face = -np.inf, np.inf, -1
+        if has_parents:
+            parent_rotation = parent_fix_R_base[parent_rotation_index[parent]]
+            shift_sq = 0.0
+            for axis in range(3):
+                parent_x = (parent_rotation[axis, 0] * p[0] + parent_rotation[axis, 1] * p[1]
+                            + parent_rotation[axis, 2] * p[2] - parent_rotated_positions[parent, axis])
+                delta = (x0, x1, x2)[axis] - parent_x
+                shift_sq += delta * delta
+            shift = math.sqrt(shift_sq)
+            low = parent_low[parent, tap] - shift
+            high = parent_high[parent, tap] + shift
+            face = parent_faces[parent, tap]
+            if face >= 0 and high > band_high and _straddles(low, high, band_low, band_high):
+                high = min(high, triangle_row_high_m(x0, x1, x2, triangle_rows[face]))
+        undecided = _straddles(low, high, band_low, band_high)
+        if undecided:
+            lattice_low, lattice_high, lattice_face = _nearest_vertex_interval_m(x0, x1, x2, lattice)
+            low, high = max(low, lattice_low), min(high, lattice_high)
+            if face < 0:
+                face = lattice_face
+            if lattice_face != face and high > band_high and _straddles(low, high, band_low, band_high):
+                lattice_face_distance = triangle_row_high_m(x0, x1, x2, triangle_rows[lattice_face])
+                if lattice_face_distance < high:
+                    high, face = lattice_face_distance, lattice_face
             undecided = _straddles(low, high, band_low, band_high)
             if undecided:
-                lattice_low, lattice_high, lattice_face = _nearest_vertex_interval_m(x0, x1, x2, lattice)
-                low, high = max(low, lattice_low), min(high, lattice_high)
-                if face < 0:
-                    face = lattice_face
-                if lattice_face != face and high > band_high and _straddles(low, high, band_low, band_high):
-                    lattice_face_distance = triangle_row_high_m(x0, x1, x2, triangle_rows[lattice_face])
-                    if lattice_face_distance < high:
-                        high, face = lattice_face_distance, lattice_face
+                voxel_low, voxel_high = _voxel_interval_m(x0, x1, x2, lattice)
+                low, high = max(low, voxel_low), min(high, voxel_high)
                 undecided = _straddles(low, high, band_low, band_high)
-                if undecided:
-                    voxel_low, voxel_high = _voxel_interval_m(x0, x1, x2, lattice)
-                    low, high = max(low, voxel_low), min(high, voxel_high)
-                    undecided = _straddles(low, high, band_low, band_high)
-            if high < band_low or low > band_high:
-                rejected_by[cell] = tap
-                break
-            low_m[cell, tap] = _round_down_f32(low)
-            high_m[cell, tap] = _round_up_f32(high)
-            faces_out[cell, tap] = face
-            straddling[cell, tap] = undecided
+        if _rejects_or_keeps(cell, tap, low, high, face, band_low, band_high, out):
+            break
+        straddling[cell, tap] = undecided
 
 
 @numba.njit(nogil=True, cache=True)
 def query_band(cells: Arrays, rotated_positions: np.ndarray, rows: np.ndarray, taps: np.ndarray,
                base_p_taps: np.ndarray, band: Arrays) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Query points (m, fixture frame) of cell-tap pairs ``(rows[k], taps[k])``, and their bands' low and high
-    ends (m); ``cells`` and ``band`` as for ``cheap_pass``."""
+    ends (m); ``cells`` and ``band`` as for ``filter_pass``."""
     fix_R_base, rotation_index, _, chords, _ = cells
     ball_radius_m, sample_bound_m, position_bound_m, lever_cap_m = band
     queries = np.empty((len(rows), 3))

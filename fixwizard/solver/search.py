@@ -14,9 +14,10 @@ A child's query point lies ``|x_child - x_parent|`` from its parent's, so the pa
 widened by that much holds the child's value; the distance from the child's query point to the
 parent's face (any single face) bounds ``|s|`` from above, and a precomputed distance lattice
 (``distance_grid``) narrows the interval further. This cheap test runs compiled (``interval_kernel``)
-for every tap, the tap that rejected most at the previous level first; Open3D queries then settle
-the intervals that still straddle a band's edge, tap by tap, for the cells no tap rejected, and
-need no inside test where the interval already proves the point outside.
+for every tap, the tap that rejected most at the previous level first; exact queries of the float64 mesh
+hierarchy then settle the intervals that still straddle a band's edge, tap by tap, for the cells no tap
+rejected, in the same compiled pass, and need no inside test where the interval already proves the point
+outside. The few whose sign that pass cannot tell (closest point on an edge or a corner) go to the oracle.
 
 ``add_taps`` goes on from an earlier set when taps are added: a new tap can only remove poses.
 """
@@ -37,7 +38,7 @@ from fixwizard.geometry.so3_grid import chord
 from fixwizard.geometry.socp_box import ball_intersection_box
 from fixwizard.solver.cells import CellSet, root_cells
 from fixwizard.solver.distance_grid import DistanceGrid, distance_grid_for
-from fixwizard.solver.interval_kernel import NOT_REJECTED, cheap_pass, query_band
+from fixwizard.solver.interval_kernel import NOT_REJECTED, filter_pass, query_band
 
 QUERY_CHUNK = 1 << 18  # cells per batch; a multiple of 8 so batches hold whole families
 CHUNK_CELL_TAPS = 1 << 23  # at most this many cell-tap pairs per batch (~100 MB of per-tap arrays), any tap count
@@ -196,8 +197,10 @@ def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: in
     """Survivor mask; ``R_c^T t_c``, distance intervals and faces of the survivors among cells
     ``first .. first + count``; the tap that rejected each cell (``NOT_REJECTED`` for survivors).
 
-    Two passes: every tap first rejects what the inherited intervals and the lattice decide (compiled), then exact
-    queries settle the intervals still straddling the band, tap by tap, only for cells no tap has rejected yet.
+    One compiled pass (``interval_kernel.filter_pass``): per cell, every tap first rejects what the inherited
+    intervals and the lattice decide, then exact queries settle the intervals still straddling the band, tap by
+    tap, if no tap has rejected the cell. The few the compiled pass cannot sign (closest point on an edge or a
+    corner) are then settled by the oracle, tap by tap, for the cells still alive.
     """
     if cancel is not None and cancel.is_set():
         raise SearchCancelled
@@ -209,6 +212,7 @@ def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: in
     high = np.empty_like(low)
     faces = np.empty((count, taps), np.int32)
     straddling = np.zeros((count, taps), bool)
+    deferred = np.zeros((count, taps), bool)
     rejected_by = np.empty(count, np.int64)
     if parents is None:
         parent_arrays = (np.zeros((0, 3, 3)), np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, taps), np.float32),
@@ -220,13 +224,13 @@ def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: in
     position_grid, position_level = frames.cells.position_grid, frames.cells.position_level
     cells = (frames.fix_R_base, rotation_index, frames.cells.position_cells[chunk], frames.chords,
              np.append(position_grid.corner_m, position_grid.cell_side_m(position_level)))
-    cheap_pass(cells, (problem.base_p_taps, np.asarray(tap_order, np.int64)), band_figures,
-               parent_index[chunk], parent_arrays, grid.kernel_arguments, problem.oracle.triangle_rows,
-               (rotated_positions, low, high, faces, straddling, rejected_by))
+    filter_pass(cells, (problem.base_p_taps, np.asarray(tap_order, np.int64)), band_figures, parent_index[chunk],
+                parent_arrays, grid.kernel_arguments, problem.oracle.kernel_arguments,
+                (rotated_positions, low, high, faces, straddling, rejected_by, deferred))
     for tap_index in tap_order:
         if cancel is not None and cancel.is_set():
             raise SearchCancelled
-        rows = np.flatnonzero((rejected_by == NOT_REJECTED) & straddling[:, tap_index])
+        rows = np.flatnonzero((rejected_by == NOT_REJECTED) & deferred[:, tap_index])
         if len(rows) == 0:
             continue
         queries, band_low, band_high = query_band(cells, rotated_positions, rows, np.full(len(rows), tap_index),
