@@ -27,7 +27,7 @@ from fixwizard.parallel import PARALLEL_KERNEL_LOCK
 
 Arrays = tuple[Any, ...]  # several arrays passed to a compiled kernel as one argument
 NOT_REJECTED = -1
-BLOCK_CELLS = 4096  # cells per parallel work item
+BLOCK_CELLS = 1024  # cells per parallel work item
 
 
 @numba.njit(nogil=True, cache=True, inline="always")
