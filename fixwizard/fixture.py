@@ -18,6 +18,7 @@ from fixwizard.errors import MeshError, MeshUnitsError
 from fixwizard.geometry.meb import minimum_enclosing_ball
 from fixwizard.geometry.mesh_distance import MeshDistance
 from fixwizard.geometry.se3 import invert, make_transform, points_in_frames
+from fixwizard.mesh_format import FORMAT_NAMES, content_format
 from fixwizard.mesh_hygiene import clean_mesh, refuse_non_finite
 
 METRES_PER_UNIT = {"m": 1.0, "mm": 1e-3}
@@ -253,6 +254,10 @@ def _load_trimesh(path: Path) -> trimesh.Trimesh:
                         "PLY or OBJ")
     if path.stat().st_size == 0:
         raise MeshError(f"the mesh file {path} is empty; export the fixture's CAD model again")
+    found, suffix = content_format(path), path.suffix.lower()
+    if found is not None and found != suffix:
+        raise MeshError(f"{path} holds a mesh in {FORMAT_NAMES[found]} format, not {FORMAT_NAMES[suffix]} as its name "
+                        f"says (fixwizard reads a mesh by its suffix): rename it to {path.with_suffix(found).name}")
     try:
         mesh = trimesh.load(path, force="mesh", process=False)
     except Exception as error:  # trimesh raises many types for malformed files

@@ -49,6 +49,42 @@ def test_a_missing_file_and_a_foreign_format_are_named(tmp_path):
         load_fixture(step)
 
 
+EXPORTS = {"binary STL": ("stl", ".stl"), "ASCII STL": ("stl_ascii", ".stl"), "binary PLY": ("ply", ".ply"),
+           "OBJ": ("obj", ".obj")}
+
+
+def _exported(kind: str, header: bytes = b"") -> bytes:
+    """The L-plate exported as ``kind`` (a binary STL's 80-byte header replaced by ``header`` if given)."""
+    data = SHAPES["l_prism"]().export(file_type=EXPORTS[kind][0])
+    data = data.encode() if isinstance(data, str) else data
+    return header.ljust(80, b" ") + data[80:] if header else data
+
+
+@pytest.mark.parametrize("kind", sorted(EXPORTS))
+def test_a_mesh_saved_with_another_formats_suffix_is_named_for_what_it_holds(tmp_path, kind):
+    """Under its own suffix it loads; under each other one the message says what it holds and the name to give."""
+    fmt = EXPORTS[kind][1]
+    for suffix in (".stl", ".ply", ".obj"):
+        path = tmp_path / f"fixture{suffix}"
+        path.write_bytes(_exported(kind))
+        if suffix == fmt:
+            assert len(load_fixture(path).mesh.faces) > 0
+        else:
+            with pytest.raises(MeshError, match=rf"in {fmt[1:].upper()} format, .* rename it to fixture\{fmt}$"):
+                load_fixture(path)
+
+
+@pytest.mark.parametrize("content", [b"\xef\xbb\xbf" + _exported("OBJ"),
+                                     b"# exported by a CAD tool\n" + _exported("OBJ"),
+                                     _exported("binary STL", header=b"solid part exported binary")])
+def test_exports_that_look_odd_still_load(tmp_path, content):
+    """A byte-order mark before an OBJ, comments first, a binary STL whose header starts with "solid" (as some CAD
+    tools write it)."""
+    path = tmp_path / ("fixture.stl" if content.startswith(b"solid") else "fixture.obj")
+    path.write_bytes(content)
+    assert len(load_fixture(path).mesh.faces) == len(SHAPES["l_prism"]().faces)
+
+
 def test_a_point_cloud_has_no_faces(tmp_path):
     path = tmp_path / "cloud.ply"
     trimesh.PointCloud(np.random.default_rng(0).random((50, 3)) * 0.1).export(path)

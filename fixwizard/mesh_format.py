@@ -1,0 +1,32 @@
+"""What kind of mesh a file holds, by its first bytes: to tell the user of a file saved with the wrong suffix (an
+OBJ export named ``.stl``) what it is, instead of reading it as the suffix says and finding no triangles."""
+
+import struct
+from pathlib import Path
+
+FORMAT_NAMES = {".stl": "STL", ".ply": "PLY", ".obj": "OBJ"}
+HEAD_BYTES = 4096
+STL_HEADER_BYTES, STL_TRIANGLE_BYTES = 84, 50  # binary STL: 80-byte header, uint32 count, 50 bytes per triangle
+OBJ_KEYWORDS = {"v", "vn", "vt", "vp", "f", "l", "o", "g", "s", "mtllib", "usemtl"}
+
+
+def content_format(path: Path) -> str | None:
+    """The suffix (``.stl``, ``.ply`` or ``.obj``) of the format the file's content is in, None when its first
+    bytes match none of them (then the reader of its suffix says what is wrong)."""
+    with path.open("rb") as file:
+        head = file.read(HEAD_BYTES)
+    size = path.stat().st_size
+    if size >= STL_HEADER_BYTES and size == STL_HEADER_BYTES + STL_TRIANGLE_BYTES * struct.unpack(
+            "<I", head[80:84])[0]:
+        return ".stl"  # binary, whatever its header says (it may start with "solid" too)
+    text = head.removeprefix(b"\xef\xbb\xbf").lstrip()
+    if text.startswith(b"ply") and text[3:4] in (b"\n", b"\r"):
+        return ".ply"
+    if text[:5].lower() == b"solid":
+        return ".stl"
+    for line in text.splitlines()[:-1] if len(head) == HEAD_BYTES else text.splitlines():
+        words = line.split()
+        if not words or words[0].startswith(b"#"):
+            continue
+        return ".obj" if words[0].decode("latin-1") in OBJ_KEYWORDS else None
+    return None
