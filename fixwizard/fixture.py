@@ -19,7 +19,7 @@ from fixwizard.geometry.meb import minimum_enclosing_ball
 from fixwizard.geometry.mesh_distance import MeshDistance
 from fixwizard.geometry.se3 import invert, make_transform, points_in_frames
 from fixwizard.mesh_format import FORMAT_NAMES, content_format
-from fixwizard.mesh_hygiene import clean_mesh, refuse_non_finite
+from fixwizard.mesh_hygiene import clean_mesh, refuse_far_vertices, refuse_non_finite
 
 METRES_PER_UNIT = {"m": 1.0, "mm": 1e-3}
 # Rays for the parity cross-check of inside tests leave along the axis to the nearest side of the mesh's bounding
@@ -259,7 +259,8 @@ def _load_trimesh(path: Path) -> trimesh.Trimesh:
         raise MeshError(f"{path} holds a mesh in {FORMAT_NAMES[found]} format, not {FORMAT_NAMES[suffix]} as its name "
                         f"says (fixwizard reads a mesh by its suffix): rename it to {path.with_suffix(found).name}")
     try:
-        mesh = trimesh.load(path, force="mesh", process=False)
+        with np.errstate(all="ignore"):  # absurd coordinates overflow in the reader; they are refused below
+            mesh = trimesh.load(path, force="mesh", process=False)
     except Exception as error:  # trimesh raises many types for malformed files
         raise MeshError(f"{path} could not be read as a mesh ({error}); check that it is an STL, PLY or "
                         "OBJ export of the fixture") from error
@@ -267,6 +268,7 @@ def _load_trimesh(path: Path) -> trimesh.Trimesh:
         raise MeshError(f"{path} holds no triangles (a point cloud or an empty model?); export the "
                         "fixture's surface as a triangle mesh")
     refuse_non_finite(np.asarray(mesh.vertices), str(path))
+    refuse_far_vertices(np.asarray(mesh.vertices), str(path))
     return mesh.process()
 
 

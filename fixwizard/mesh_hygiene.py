@@ -31,6 +31,7 @@ from fixwizard.errors import MeshError
 
 # Vertices of a body tested against another body's winding number to tell nesting apart from cutting through.
 NESTING_SAMPLE = 64
+MAX_COORDINATE = 1e9  # in the file's units: a million kilometres in metres, a thousand in millimetres
 
 
 @dataclass(frozen=True)
@@ -48,6 +49,15 @@ def refuse_non_finite(vertices: np.ndarray, name: str) -> None:
     if len(bad):
         raise MeshError(f"{name} has {len(bad)} vertices that are not finite numbers (NaN or infinity; the first "
                         f"is vertex {bad[0] + 1}); export the mesh again from CAD")
+
+
+def refuse_far_vertices(vertices: np.ndarray, name: str) -> None:
+    """Raise ``MeshError`` when a coordinate lies beyond ``MAX_COORDINATE`` (no fixture in metres or millimetres
+    does; squares of such numbers overflow in every later step)."""
+    largest = float(np.max(np.abs(vertices))) if len(vertices) else 0.0
+    if largest > MAX_COORDINATE:
+        raise MeshError(f"{name} has vertex coordinates up to {largest:.3g}, far beyond any fixture in metres or "
+                        "millimetres: the export went wrong (or is in other units); export the mesh again from CAD")
 
 
 def _adjacency(mesh: trimesh.Trimesh) -> coo_matrix:
@@ -188,8 +198,9 @@ def _orient(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, bool, li
 
 def clean_mesh(mesh: trimesh.Trimesh, name: str) -> CleanMesh:
     """Check and repair a mesh (see the module doc); ``name`` names it in messages. Raises ``MeshError`` for
-    vertices that are not finite numbers."""
+    vertices that are not finite numbers or lie absurdly far."""
     refuse_non_finite(np.asarray(mesh.vertices), name)
+    refuse_far_vertices(np.asarray(mesh.vertices), name)
     mesh, warnings = _drop_degenerate(mesh, name)
     if not mesh.is_watertight:
         warnings.append(("mesh_not_watertight",

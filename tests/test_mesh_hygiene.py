@@ -2,6 +2,7 @@
 sign of the distance is used only where it can be trusted."""
 
 import os
+import warnings
 
 import igl
 import numpy as np
@@ -126,9 +127,40 @@ def test_a_vertex_that_is_not_a_number_is_refused_not_dropped(tmp_path, suffix):
     vertices = np.asarray(box.vertices).copy()
     vertices[5] = [np.nan, 0.0, np.inf]
     path = tmp_path / f"broken{suffix}"
-    trimesh.Trimesh(vertices, box.faces, process=False).export(path)
+    with np.errstate(invalid="ignore"):  # the export's face normals
+        trimesh.Trimesh(vertices, box.faces, process=False).export(path)
     with pytest.raises(MeshError, match="not finite numbers"):
         load_fixture(path)
+
+
+FAR_IN_FLOAT32 = ("every vertex near 1e30", "one vertex at 1e30", "one vertex at 1e10")
+
+
+@pytest.mark.parametrize("suffix, far", [(suffix, far) for suffix in (".stl", ".ply", ".obj") for far in FAR_IN_FLOAT32]
+                         + [(".obj", "every vertex near 1e300"), (".obj", "one vertex at 1e300")])
+def test_absurdly_far_vertices_are_refused_without_warnings_nor_a_wrong_cause(tmp_path, suffix, far):
+    """Not "zero-area faces" (squares overflow: float32 in binary STL and PLY, float64 in OBJ text), not numpy's
+    overflow warnings on the terminal."""
+    box = trimesh.creation.box((0.05, 0.04, 0.03))
+    vertices = np.asarray(box.vertices).copy()
+    value = float(far.split()[-1])
+    if far.startswith("every"):
+        vertices *= value / 0.025
+    else:
+        vertices[5] = [value, 0.0, 0.0]
+    path = tmp_path / f"far{suffix}"
+    trimesh.Trimesh(vertices, box.faces, process=False).export(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(MeshError, match="far beyond any fixture in metres or millimetres"):
+            load_fixture(path)
+
+
+def test_a_plant_layouts_far_offset_is_no_absurd_coordinate(tmp_path):
+    """A fixture 40 m from its CAD origin, in millimetres: coordinates of 4e4 load."""
+    path = tmp_path / "offset.stl"
+    trimesh.creation.box((50.0, 40.0, 30.0)).apply_translation([4e4, 0.0, 0.0]).export(path)
+    assert load_fixture(path, "mm").mesh.extents == pytest.approx([0.05, 0.04, 0.03])
 
 
 def test_a_folder_given_as_the_mesh_is_called_a_folder(tmp_path):
