@@ -41,6 +41,7 @@ from fixwizard.fixture import Fixture
 from fixwizard.solver.distance_grid import distance_grid_for
 from fixwizard.solver.search import SearchCancelled, SearchProgress, SearchTree
 from fixwizard.solver.solve import Solution, SolveStage, solve
+from fixwizard.solver.warm_up import warm_up_solver
 from fixwizard.workflow.identify import IdentifyStep, MeshVerdict, identify
 from fixwizard.workflow.live import LiveCheck, LiveView
 from fixwizard.workflow.live_pipeline import NextTap, live_pipeline
@@ -248,7 +249,7 @@ class _Worker:
 
 def serve(conn: Connection, current: Synchronized) -> None:
     """The worker process's main: receive the fixture (its state, or None for identify only) and build it and its
-    lattice, then answer requests until the pipe closes."""
+    lattice, load the compiled kernels (``warm_up``), then answer requests until the pipe closes."""
     os.nice(NICENESS)
     try:
         fixture_state = pickle.loads(conn.recv_bytes())
@@ -257,6 +258,7 @@ def serve(conn: Connection, current: Synchronized) -> None:
     fixture = None if fixture_state is None else _fixture_from_state(fixture_state)
     if fixture is not None:
         distance_grid_for(fixture.oracle)  # the search's lattice, before the first request needs it
+    warm_up_solver()  # the compiled kernels, too (compiled once after installing: half a minute)
     worker = _Worker(conn, current, fixture)
     while True:
         try:
