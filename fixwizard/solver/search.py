@@ -40,7 +40,7 @@ from fixwizard.solver.cells import CellSet, root_cells
 from fixwizard.solver.distance_grid import DistanceGrid, distance_grid_for
 from fixwizard.solver.interval_kernel import NOT_REJECTED, filter_pass, query_band
 
-QUERY_CHUNK = 1 << 18  # cells per batch; a multiple of 8 so batches hold whole families
+QUERY_CHUNK = 1 << 17  # cells per batch (a multiple of 8: whole families); a cancel is seen between batches
 CHUNK_CELL_TAPS = 1 << 23  # at most this many cell-tap pairs per batch (~100 MB of per-tap arrays), any tap count
 RESTART_ROOT_SHRINK = 0.95
 # The uniform descent stops before a level would evaluate more than UNIFORM_SHARE of the cell budget
