@@ -111,6 +111,14 @@ def _figures(position_m: float, rotation_rad: float, point_m: float) -> dict:
             "max_point_displacement_m": round_up(point_m, POSITION_DECIMALS)}
 
 
+def robot_pose_text(status: str, ur_pose: str) -> str:
+    """The UR pose literal ``ur_pose`` where a robot program may take it (a unique result), else why there is none,
+    for the summaries people read (the report itself says so in its header)."""
+    if status == "unique":
+        return ur_pose
+    return f"none ({status}: robots take only a unique result's pose)"
+
+
 def pose_dict(base_T_cad: np.ndarray) -> dict:
     """Report form of a pose: position (m), rotation vector (rad), quaternion (x, y, z, w) and UR literal, rounded;
     the quaternion is that of the written rotation vector."""

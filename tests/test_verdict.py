@@ -128,7 +128,8 @@ def test_a_set_no_found_pose_explains_is_undetermined_not_unique(real_data, boun
 
 @pytest.mark.slow
 def test_no_robot_output_takes_the_pose_of_an_unexplained_set(real_data, tmp_path, capsys):
-    """The same unexplained set through the command line: solve exits undetermined, and export refuses its report."""
+    """The same unexplained set through the command line: solve exits undetermined, shows no UR pose literal, and
+    export refuses its report."""
     from conftest import real_taps
 
     points, report = tmp_path / "expert.yaml", tmp_path / "report.yaml"
@@ -137,7 +138,9 @@ def test_no_robot_output_takes_the_pose_of_an_unexplained_set(real_data, tmp_pat
                  "--sample-bound", "0.1mm", "--max-cells", "1e5", "-q", "-o", str(report)])
     assert code == EXIT_CODES["undetermined"]
     assert "status: undetermined" in report.read_text()
-    capsys.readouterr()
+    said = capsys.readouterr()
+    assert "UR pose: none (undetermined: robots take only a unique result's pose)" in said.out + said.err
+    assert "p[" not in said.out + said.err  # no UR literal to paste into a robot program
     assert main(["export", str(report), "--format", "urscript", "-o", str(tmp_path / "pose.script")]) == 1
     assert "undetermined, so a robot must not use its pose" in capsys.readouterr().err
     assert not (tmp_path / "pose.script").exists()

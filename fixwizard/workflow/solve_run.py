@@ -61,7 +61,7 @@ def summary_lines(outcome: SolveOutcome) -> list[str]:
         bounds = solution.bounds
         lines += [f"pose of the CAD frame: x {x:.2f} mm, y {y:.2f} mm, z {z:.2f} mm, "
                   f"rotation {np.degrees(np.linalg.norm(pose['rotvec_rad'])):.2f} deg",
-                  f"UR pose: {pose['ur']}",
+                  f"UR pose: {report.robot_pose_text(solution.status, pose['ur'])}",
                   f"guaranteed: CAD origin within {bounds.position_m * 1e3:.2f} mm, rotation within "
                   f"{np.degrees(bounds.rotation_rad):.2f} deg, any fixture point within "
                   f"{bounds.max_point_displacement_m * 1e3:.2f} mm"]

@@ -6,6 +6,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from fixwizard.geometry.se3 import format_ur_pose, rotation_angle_rad
+from fixwizard.report import robot_pose_text
 from fixwizard.solver.estimates import Bounds
 from fixwizard.solver.solve import Mode, Solution
 from fixwizard.workflow.advice import TapAdvice
@@ -28,13 +29,14 @@ def headline(solution: Solution, tap_count: int) -> str:
                                                                                        modes=len(solution.modes))
 
 
-def pose_lines(base_T_cad: np.ndarray) -> list[str]:
-    """Position (mm), turn (rotation vector in deg, as the UR pendant shows it) and the UR pose literal."""
+def pose_lines(base_T_cad: np.ndarray, status: str) -> list[str]:
+    """Position (mm), turn (rotation vector in deg, as the UR pendant shows it) and the UR pose literal (only for a
+    unique result: ``report.robot_pose_text``)."""
     x, y, z = base_T_cad[:3, 3] * 1e3
     rx, ry, rz = np.degrees(Rotation.from_matrix(base_T_cad[:3, :3]).as_rotvec())
     return [f"  position  x {x:.2f}  y {y:.2f}  z {z:.2f} mm",
             f"  turn      rx {rx:.2f}  ry {ry:.2f}  rz {rz:.2f} deg (as the UR pendant shows it)",
-            f"  UR pose   {format_ur_pose(base_T_cad)}"]
+            f"  UR pose   {robot_pose_text(status, format_ur_pose(base_T_cad))}"]
 
 
 def bounds_text(bounds: Bounds) -> str:
@@ -46,7 +48,8 @@ def summary_lines(solution: Solution) -> list[str]:
     """The expected pose, its guaranteed bounds and the 95/99 % intervals (unique or ambiguous)."""
     base_T_cad, bounds = solution.base_T_cad, solution.bounds
     assert base_T_cad is not None and bounds is not None, "a unique or ambiguous solution has a pose and bounds"
-    lines = ["Fixture pose (CAD frame in the robot base frame, most probable):", *pose_lines(base_T_cad),
+    lines = ["Fixture pose (CAD frame in the robot base frame, most probable):",
+             *pose_lines(base_T_cad, solution.status),
              "Guaranteed: the true pose lies within these of the centre pose",
              f"  centre    {format_ur_pose(bounds.base_T_cad_center)}",
              f"  {bounds_text(bounds)}",
