@@ -21,8 +21,8 @@ SAMPLE_BOUND_M = 0.001
 
 def warm_up_solver() -> None:
     """A whole solve (search, hull refinement, samples, mode masses, intervals) of point-probe taps on a 5 x 4 x 3 cm
-    box, three of them on its edges (where the oracle decides signs), and a batch of signed distances near its
-    edges (the parallel queries and rays of large batches)."""
+    box, three of them on its edges; a batch of signed distances near its edges (the parallel queries and rays of
+    large batches); and ``query_band`` with the search's types (its pairs do not occur on this box)."""
     box = fixture_from_mesh(trimesh.creation.box((0.05, 0.04, 0.03)), Path("warm-up box"), "m", "generated")
     corner = box.mesh.bounds[1]
     on_edges = np.array([[corner[0], 0.0, corner[2]], [0.0, corner[1], corner[2]], [corner[0], corner[1], 0.0]])
@@ -31,7 +31,6 @@ def warm_up_solver() -> None:
     solve(box, taps, 0.0, SAMPLE_BOUND_M, max_cells=1e5, max_samples=1000, diagnose_inconsistent=False)
     near_edges = np.repeat(on_edges, 4000, axis=0) + rng.normal(0.0, 0.002, (12000, 3))
     box.oracle.signed_distance_m(near_edges - box.cad_p_center)
-    # the query points of the pairs the compiled pass leaves to the oracle (none on this box), with the search's types
     cells = (np.eye(3)[None], np.zeros(1, np.int64), np.zeros((1, 3), np.int32), np.zeros(1), np.zeros(4))
     query_band(cells, np.zeros((1, 3)), np.zeros(1, np.int64), np.zeros(1, np.int64), taps, (0.0, 0.0, 0.0, 0.0))
 
