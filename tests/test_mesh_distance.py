@@ -178,6 +178,37 @@ def test_a_hint_face_only_speeds_the_search_up():
         distance.query(points[:2], np.array([0, len(mesh.faces)]))
 
 
+@pytest.mark.parametrize("cap_m", [1e-4, 0.004, 0.03, 0.2])
+def test_a_capped_query_is_exact_where_it_names_a_face_and_far_only_where_every_face_lies_beyond_the_cap(cap_m):
+    """A noisy sphere with 300 mm slivers beside it, half of its faces flipped and some repeated, queried from
+    points on it, near it and far from it, with hints and without: a query names a face exactly where the exact
+    distance could be within the cap, and then gives the uncapped interval bit for bit."""
+    rng = np.random.default_rng(11)
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.05)
+    sphere.vertices += rng.normal(size=sphere.vertices.shape) * 0.003
+    slivers = trimesh.creation.cylinder(radius=0.02, height=0.3, sections=256).apply_translation([0.03, 0.0, 0.0])
+    mesh = trimesh.util.concatenate([sphere, slivers])
+    faces = np.asarray(mesh.faces).copy()
+    flipped = rng.random(len(faces)) < 0.5
+    faces[flipped] = faces[flipped][:, ::-1]
+    faces = np.vstack([faces, faces[rng.integers(len(faces), size=200)]])
+    distance = MeshDistance(mesh.vertices, faces)
+    on_surface = trimesh.sample.sample_surface(mesh, 1500, seed=11)[0]
+    points = np.vstack([on_surface + rng.normal(0.0, 1e-3, on_surface.shape), on_surface,
+                        rng.uniform(-0.3, 0.3, (1500, 3))])
+    truth = exact_distances_m(trimesh.Trimesh(mesh.vertices, faces, process=False), points)
+    for hints in (np.full(len(points), -1), rng.integers(0, len(faces), len(points))):
+        exact = distance.query(points, hints)
+        low, high, found, weights = distance.query(points, hints, cap_m)
+        far = found < 0
+        assert np.all(truth[far] >= cap_m - 1e-12)  # nothing within the cap is called far
+        assert np.all(low[far] == cap_m) and np.all(high[far] == np.inf)
+        near = ~far
+        for capped, uncapped in zip((low, high, found, weights), exact, strict=True):
+            np.testing.assert_array_equal(capped[near], uncapped[near])
+        assert 0 < np.count_nonzero(far) < len(points) or cap_m == 0.2
+
+
 def test_rays_find_the_first_hit_and_cross_a_closed_mesh_an_odd_number_of_times_from_inside():
     rng = np.random.default_rng(8)
     mesh = trimesh.creation.icosphere(subdivisions=2, radius=0.05)

@@ -189,11 +189,12 @@ def test_a_located_set_pickles_as_before_and_locates_alike_after_the_trip():
 
 
 @numba.njit
-def _signed_intervals(points: np.ndarray, mesh: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _signed_intervals(points: np.ndarray, mesh: tuple,
+                      cap: float = np.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     low, high = np.empty(len(points)), np.empty(len(points))
     faces, signable = np.empty(len(points), np.int64), np.empty(len(points), np.bool_)
     for row in range(len(points)):
-        low[row], high[row], faces[row], signable[row] = signed_interval_m(points[row], -1, False, mesh)
+        low[row], high[row], faces[row], signable[row] = signed_interval_m(points[row], -1, False, mesh, cap)
     return low, high, faces, signable
 
 
@@ -227,3 +228,26 @@ def test_the_compiled_exact_stage_signs_as_the_oracle_does_or_leaves_the_sign_to
     np.testing.assert_array_equal(high[signable], oracle_high[signable])
     np.testing.assert_array_equal(faces, oracle_faces)
     assert 0 < np.count_nonzero(signable) < len(points)
+
+
+@pytest.mark.parametrize("name", ["knife", *sorted(SHAPES)])
+def test_the_capped_exact_stage_calls_a_point_far_only_where_the_oracle_puts_it_beyond_the_cap_on_either_side(name):
+    """The exact stage caps its search at the band's outer edge (a distance beyond it, of either sign, misses the
+    band): a point it calls far has the oracle's signed distance at least the cap away from the surface, inside
+    or outside; every other point gets the uncapped result bit for bit."""
+    fixture = as_fixture(name, _knife()) if name == "knife" else as_fixture(name)
+    rng = np.random.default_rng(13)
+    vertices, triangles = fixture.oracle.mesh_arrays
+    surface = trimesh.sample.sample_surface(trimesh.Trimesh(vertices, triangles), 3000, seed=13)[0]
+    points = np.vstack([surface + rng.normal(0.0, 0.004, surface.shape),
+                        rng.uniform(vertices.min(axis=0) - 0.02, vertices.max(axis=0) + 0.02, (3000, 3))])
+    uncapped = _signed_intervals(points, fixture.oracle.kernel_arguments)
+    oracle_low, oracle_high, _ = fixture.oracle.distance_interval_m(points)
+    for cap_m in (5e-4, 0.002, 0.01):
+        low, high, faces, signable = _signed_intervals(points, fixture.oracle.kernel_arguments, cap_m)
+        far = faces < 0
+        assert 0 < np.count_nonzero(far) < len(points)
+        assert np.all((oracle_low[far] >= cap_m * (1.0 - 1e-12)) | (oracle_high[far] <= -cap_m * (1.0 - 1e-12)))
+        assert np.all(signable[far]) and np.all(low[far] == cap_m) and np.all(high[far] == np.inf)
+        for capped, exact in zip((low, high, faces, signable), uncapped, strict=True):
+            np.testing.assert_array_equal(capped[~far], exact[~far])

@@ -335,34 +335,33 @@ def _box_low_m(x: np.ndarray, low: np.ndarray, high: np.ndarray) -> float:
 
 
 @numba.njit(nogil=True, cache=True)
-def query_point(x: np.ndarray, rows: np.ndarray, hierarchy: Arrays, hint: int,
-                 cap: float) -> tuple[float, float, int, float, float]:
-    """The mesh's distance interval at ``x`` (m), the triangle of the smallest ``high`` and its weights. ``hint``:
-    a triangle likely to be near (-1: none); its interval starts the search, so that far nodes are pruned at once
-    (the result is the same: every triangle nearer than its ``high`` is still visited). ``cap`` (m): nothing
-    farther is looked for; where no triangle lies within it the interval is ``[cap, inf]`` and the triangle -1."""
+def _nearest_within(x: np.ndarray, rows: np.ndarray, hierarchy: Arrays, hint: int,
+                    cap: float) -> tuple[float, float, int, float, float]:
+    """The hierarchy's traversal for ``query_point``: boxes and planes farther than ``min(best high, cap)`` (m)
+    are pruned. The result is the exact interval where its ``high`` is at most ``cap``; where it is more, every
+    pruned triangle lies beyond ``cap`` and the interval's ``low`` is only the least among those visited."""
     node_low, node_high, children, ranges, order = hierarchy
     stack = np.empty(STACK_DEPTH, np.int64)
     reach = np.empty(STACK_DEPTH)  # each stacked node's box distance bound
     stack[0], reach[0] = 0, 0.0
     depth = 1
-    best_low, best_high, best_face, best_v, best_w = cap, cap, -1, 0.0, 0.0
+    best_low, best_high, best_face, best_v, best_w = np.inf, np.inf, -1, 0.0, 0.0
     if hint >= 0:
         best_low, best_high, best_v, best_w = triangle_row_interval_m(x[0], x[1], x[2], rows[hint])
         best_face = hint
     while depth > 0:
         depth -= 1
         node = stack[depth]
-        if reach[depth] > best_high:
+        if reach[depth] > min(best_high, cap):
             continue
         if children[node, 0] < 0:
             for slot in range(ranges[node, 0], ranges[node, 1]):
                 face = order[slot]
-                if _plane_low_m(x[0], x[1], x[2], rows[face]) > best_high:
+                if _plane_low_m(x[0], x[1], x[2], rows[face]) > min(best_high, cap):
                     continue
                 low, high, v, w = triangle_row_interval_m(x[0], x[1], x[2], rows[face])
                 best_low = min(best_low, low)
-                if high < best_high or best_face < 0:
+                if high < best_high:
                     best_high, best_face, best_v, best_w = high, face, v, w
             continue
         first, second = children[node, 0], children[node, 1]
@@ -373,9 +372,23 @@ def query_point(x: np.ndarray, rows: np.ndarray, hierarchy: Arrays, hint: int,
         stack[depth], reach[depth] = second, second_reach
         stack[depth + 1], reach[depth + 1] = first, first_reach
         depth += 2
-    if best_face < 0:
-        return cap, np.inf, -1, 0.0, 0.0
     return best_low, best_high, best_face, best_v, best_w
+
+
+@numba.njit(nogil=True, cache=True)
+def query_point(x: np.ndarray, rows: np.ndarray, hierarchy: Arrays, hint: int,
+                cap: float) -> tuple[float, float, int, float, float]:
+    """The mesh's distance interval at ``x`` (m), the triangle of the smallest ``high`` and its weights. ``hint``:
+    a triangle likely to be near (-1: none); its interval starts the search, so that far nodes are pruned at once
+    (the result is the same: every triangle nearer than its ``high`` is still visited). ``cap`` (m): where the
+    distance is surely at least ``cap`` the interval is ``[cap, inf]`` and the triangle -1, found without
+    searching beyond ``cap``; everywhere else the interval is the exact one (as with ``cap`` infinite)."""
+    low, high, face, v, w = _nearest_within(x, rows, hierarchy, hint, cap)
+    if high <= cap:
+        return low, high, face, v, w
+    if low >= cap:
+        return cap, np.inf, -1, 0.0, 0.0
+    return _nearest_within(x, rows, hierarchy, hint, np.inf)  # the nearest lies within cap or just beyond it
 
 
 @numba.njit(nogil=True, cache=True)

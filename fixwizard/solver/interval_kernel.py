@@ -184,15 +184,20 @@ def _rejects_or_keeps(cell: int, tap: int, low: float, high: float, face: int, b
 
 
 @numba.njit(nogil=True, cache=True)
-def signed_interval_m(x: np.ndarray, hint: int, outside: bool, mesh: Arrays) -> tuple[float, float, int, bool]:
+def signed_interval_m(x: np.ndarray, hint: int, outside: bool, mesh: Arrays,
+                      cap: float = np.inf) -> tuple[float, float, int, bool]:
     """The exact stage's interval (m) at a point ``x`` (m, mesh frame): ``DistanceOracle.distance_interval_m``'s
     (with ``hint``, signed unless ``outside``: known to lie outside) where it can tell the sign as the oracle
     does (the closest point inside a face with a trustworthy normal: the face's plane decides; within
     ``SIGN_FREE_M`` of the surface, both signs), with the closest face; and whether it could (else the interval
-    is unsigned and the oracle must sign it). ``mesh``: ``DistanceOracle.kernel_arguments``."""
+    is unsigned and the oracle must sign it). ``mesh``: ``DistanceOracle.kernel_arguments``. ``cap`` (m): where
+    the distance is surely at least ``cap`` on either side, ``[cap, inf]`` and face -1 (``query_point``'s cap),
+    the sign unknown."""
     rows, hierarchy = mesh[0], mesh[1:6]
     signed, face_normals, reliable_normal, feature_margin, sign_free_m = mesh[6:]
-    low, high, face, v, w = query_point(x, rows, hierarchy, hint, np.inf)
+    low, high, face, v, w = query_point(x, rows, hierarchy, hint, cap)
+    if face < 0:
+        return low, high, face, True
     if not signed or outside:
         return low, high, face, True
     if low <= sign_free_m:
@@ -225,7 +230,12 @@ def _exact_cell(cell: int, cells: Arrays, taps: Arrays, band: Arrays, mesh: Arra
                        - rotated_positions[cell, axis])
         tolerance = _tolerance_m(x[0], x[1], x[2], chord, sample_bound_m, position_bound_m, lever_cap_m)
         band_low, band_high = ball_radius_m - tolerance, ball_radius_m + tolerance
-        low, high, face, signable = signed_interval_m(x, faces_out[cell, tap], low_m[cell, tap] > 0.0, mesh)
+        # the band lies within (-band_high, band_high]: a distance beyond band_high on either side misses it
+        low, high, face, signable = signed_interval_m(x, faces_out[cell, tap], low_m[cell, tap] > 0.0, mesh,
+                                                      band_high * (1.0 + 1e-9))
+        if face < 0:
+            out[5][cell] = tap
+            return
         if not signable:
             deferred[cell, tap] = True
             continue
