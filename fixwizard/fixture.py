@@ -40,6 +40,8 @@ class Fixture:
     ``mesh``: CAD-frame mesh (m), checked and repaired (``mesh_hygiene``). ``signed``: whether inside and
     outside can be told apart (closed, consistently oriented). ``cad_p_center``: minimum enclosing ball centre
     in the CAD frame (m). ``radius_m``: that ball's radius. ``warnings``: (code, message) pairs to pass on.
+    ``meeting_faces``: the faces of bodies that cut through or touch another (``CleanMesh.meeting_faces``;
+    None: none).
     """
 
     path: Path
@@ -50,6 +52,7 @@ class Fixture:
     sha256: str
     signed: bool = True
     warnings: tuple[tuple[str, str], ...] = field(default=())
+    meeting_faces: np.ndarray | None = None
 
     @property
     def fix_T_cad(self) -> np.ndarray:
@@ -73,7 +76,7 @@ class Fixture:
     def oracle(self) -> "DistanceOracle":
         """Distance queries in the internal frame (signed where inside and outside can be told apart)."""
         fix_mesh = trimesh.Trimesh(self.fix_vertices_m, self.mesh.faces, process=False)
-        return DistanceOracle(fix_mesh, signed=self.signed)
+        return DistanceOracle(fix_mesh, signed=self.signed, meeting_faces=self.meeting_faces)
 
 
 class DistanceOracle:
@@ -95,7 +98,9 @@ class DistanceOracle:
     # sample bound.
     SIGN_FREE_M = 1e-7
 
-    def __init__(self, mesh_m: trimesh.Trimesh, signed: bool) -> None:
+    def __init__(self, mesh_m: trimesh.Trimesh, signed: bool, meeting_faces: np.ndarray | None = None) -> None:
+        """``meeting_faces``: faces whose plane does not tell inside from outside (of a body that cuts through or
+        touches another, ``CleanMesh.meeting_faces``): their points are signed as near an edge."""
         self.signed = signed
         self._vertices = np.asarray(mesh_m.vertices, np.float64)
         self._faces = np.asarray(mesh_m.faces, np.int64)
@@ -107,6 +112,8 @@ class DistanceOracle:
             twice_area = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
             longest_pair = np.sort(edges, axis=1)[:, 1:].prod(axis=1)
             self._reliable_normal = twice_area > RELIABLE_NORMAL_SINE * longest_pair
+            if meeting_faces is not None:
+                self._reliable_normal &= ~np.asarray(meeting_faces, bool)
             edge_normals = np.zeros((len(mesh_m.edges_unique), 3))
             np.add.at(edge_normals, mesh_m.faces_unique_edges.ravel(), np.repeat(self._face_normals, 3, axis=0))
             self._edge_normals = edge_normals[mesh_m.faces_unique_edges]
@@ -296,7 +303,8 @@ def fixture_from_mesh(mesh_m: trimesh.Trimesh, path: Path, units: str, sha256: s
     _check_size(path, clean.mesh, units)
     ball = minimum_enclosing_ball(clean.mesh.vertices)
     return Fixture(path=path, units=units, mesh=clean.mesh, cad_p_center=ball.center, radius_m=ball.radius,
-                   sha256=sha256, signed=clean.signed, warnings=clean.warnings)
+                   sha256=sha256, signed=clean.signed, warnings=clean.warnings,
+                   meeting_faces=clean.meeting_faces if np.any(clean.meeting_faces) else None)
 
 
 def warm_up_distance_queries() -> None:

@@ -7,18 +7,22 @@ so the signed distance is used only where the mesh is closed and consistently or
 - vertices that are not finite numbers: refused (nothing sensible can be made of them);
 - faces with a repeated vertex or zero area: dropped, unless that opens the mesh (they cover no surface, and a
   closed mesh keeps its sign); a mesh of such faces only: refused (it has no surface to tap);
+- faces that repeat another (the same three corners, wound either way): dropped (a copy adds no surface, and
+  leaves the edges around it with four faces, so the mesh would look open);
 - open (not watertight): unsigned distance;
 - faces wound against their neighbours: re-wound to agree with their neighbours, face by face outward from one
   face of each body (what ``trimesh.repair.fix_winding`` does, without its networkx walk), which is unambiguous on
   a closed manifold; if the mesh still cannot be wound consistently, unsigned distance;
 - a body inside out: each connected body is oriented by how deep it is nested, outward where it lies inside an
-  even number of other bodies (a solid), inward where odd (a cavity); bodies that cut through each other count
-  as separate solids, each oriented outward;
+  even number of other bodies (a solid), inward where odd (a cavity); bodies that cut through or touch each
+  other count as separate solids, each oriented outward (a body counts as nested only when its vertices lie inside
+  the other and the two surfaces do not meet: corners inside a concave body do not prove it);
 - several bodies: said, since the fixture is then taken as one rigid whole.
 
 Every repair and fallback is a warning that reaches the report.
 """
 
+import itertools
 from dataclasses import dataclass
 
 import igl
@@ -28,19 +32,24 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components, shortest_path
 
 from fixwizard.errors import MeshError
+from fixwizard.geometry.mesh_distance import MeshDistance
 
 # Vertices of a body tested against another body's winding number to tell nesting apart from cutting through.
 NESTING_SAMPLE = 64
+TOUCH_M = 1e-7  # a vertex this near another body's surface (m) counts as meeting it
 MAX_COORDINATE = 1e9  # in the file's units: a million kilometres in metres, a thousand in millimetres
 
 
 @dataclass(frozen=True)
 class CleanMesh:
-    """A checked mesh (m), whether its signed distance can be trusted, and (code, message) warnings."""
+    """A checked mesh (m), whether its signed distance can be trusted, (code, message) warnings, and which faces
+    belong to a body that meets another (``meeting_faces``, one per face): a point nearest to one of them may lie
+    inside the other body, so such a face's plane does not tell inside from outside."""
 
     mesh: trimesh.Trimesh
     signed: bool
     warnings: tuple[tuple[str, str], ...]
+    meeting_faces: np.ndarray
 
 
 def refuse_non_finite(vertices: np.ndarray, name: str) -> None:
@@ -114,22 +123,51 @@ def _signed_volume_m3(vertices: np.ndarray, faces: np.ndarray) -> float:
     return float(np.sum(np.einsum("ij,ij->i", corners[:, 0], np.cross(corners[:, 1], corners[:, 2]))) / 6.0)
 
 
-def _nesting_depths(mesh: trimesh.Trimesh, bodies: list[np.ndarray]) -> np.ndarray:
-    """How many other bodies wholly contain each body (bodies that cut through each other do not count)."""
+def _meets(vertices: np.ndarray, faces: np.ndarray, other: MeshDistance) -> bool:
+    """Whether a surface (``faces`` of ``vertices``, m) meets the surface ``other``: an edge of it crosses one of
+    ``other``'s triangles, or a vertex of it lies within ``TOUCH_M`` of them."""
+    starts = vertices[faces].reshape(-1, 3)
+    edges = vertices[np.roll(faces, -1, axis=1)].reshape(-1, 3) - starts
+    first_hit = other.rays(starts, edges)[0]  # in edge lengths
+    if np.any(first_hit <= 1.0 + 1e-9):
+        return True
+    corners = vertices[np.unique(faces)]
+    return bool(np.any(other.query(corners, cap_m=2.0 * TOUCH_M)[0] <= TOUCH_M))
+
+
+def _nesting(mesh: trimesh.Trimesh, bodies: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """How many other bodies wholly contain each body, and which bodies meet another (their surfaces cross or
+    touch). A body counts as contained when its vertices lie inside the other (winding number) and the two do
+    not meet: a body whose corners all lie inside a concave one can still cut through it. Bodies that meet count
+    as separate solids, each oriented outward, which is safe (the mesh then holds their union, or a cavity filled
+    in, which no tap can reach), where orienting a body that cuts through as a cavity turns its surface outside
+    in."""
     vertices = np.asarray(mesh.vertices)
     boxes = [(vertices[mesh.faces[faces]].reshape(-1, 3).min(0), vertices[mesh.faces[faces]].reshape(-1, 3).max(0))
              for faces in bodies]
+    surfaces: dict[int, MeshDistance] = {}
+
+    def surface(body: int) -> MeshDistance:
+        if body not in surfaces:
+            surfaces[body] = MeshDistance(vertices, mesh.faces[bodies[body]])
+        return surfaces[body]
+
     depths = np.zeros(len(bodies), int)
-    for inner, faces in enumerate(bodies):
-        used = np.unique(mesh.faces[faces])
-        sample = vertices[used[np.linspace(0, len(used) - 1, min(NESTING_SAMPLE, len(used))).astype(int)]]
-        for outer, outer_faces in enumerate(bodies):
-            low, high = boxes[outer]
-            if outer == inner or np.any(boxes[inner][0] < low) or np.any(boxes[inner][1] > high):
-                continue
-            winding = np.abs(igl.winding_number(vertices, np.ascontiguousarray(mesh.faces[outer_faces]), sample))
-            depths[inner] += bool(np.all(winding > 0.5))
-    return depths
+    meeting = np.zeros(len(bodies), bool)
+    for first, second in itertools.combinations(range(len(bodies)), 2):
+        (low_1, high_1), (low_2, high_2) = boxes[first], boxes[second]
+        if np.any(high_1 < low_2 - TOUCH_M) or np.any(high_2 < low_1 - TOUCH_M):
+            continue
+        if (_meets(vertices, mesh.faces[bodies[first]], surface(second))
+                or _meets(vertices, mesh.faces[bodies[second]], surface(first))):
+            meeting[[first, second]] = True
+            continue
+        for inner, outer in ((first, second), (second, first)):
+            used = np.unique(mesh.faces[bodies[inner]])
+            sample = vertices[used[np.linspace(0, len(used) - 1, min(NESTING_SAMPLE, len(used))).astype(int)]]
+            winding = igl.winding_number(vertices, np.ascontiguousarray(mesh.faces[bodies[outer]]), sample)
+            depths[inner] += bool(np.all(np.abs(winding) > 0.5))
+    return depths, meeting
 
 
 def _drop_degenerate(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, list[tuple[str, str]]]:
@@ -155,8 +193,23 @@ def _drop_degenerate(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh,
                    "surface).")]
 
 
-def _orient(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, bool, list[tuple[str, str]]]:
-    """A closed mesh consistently wound with every body oriented by its nesting, and whether that succeeded."""
+def _drop_repeated(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, list[tuple[str, str]]]:
+    """The mesh with each face that repeats an earlier one (the same three corners, wound either way) dropped: a
+    copy adds no surface, and a copy wound the other way would leave the mesh open in trimesh's eyes (each edge
+    then has four faces), unsigned. The faces kept are wound as ``_orient`` then says."""
+    faces = np.asarray(mesh.faces)
+    first = np.sort(np.unique(np.sort(faces, axis=1), axis=0, return_index=True)[1])
+    if len(first) == len(faces):
+        return mesh, []
+    kept = trimesh.Trimesh(mesh.vertices, faces[first], process=False)
+    return kept, [("mesh_repeated_faces_dropped",
+                   f"{name}: {len(faces) - len(first)} faces repeat another face (the same three corners) and were "
+                   "dropped (a copy adds no surface).")]
+
+
+def _orient(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, bool, list[tuple[str, str]], np.ndarray]:
+    """A closed mesh consistently wound with every body oriented by its nesting, whether that succeeded, and its
+    faces that belong to a body meeting another (``CleanMesh.meeting_faces``)."""
     original = np.asarray(mesh.faces)
     consistent = mesh.is_winding_consistent
     if not consistent:
@@ -166,9 +219,9 @@ def _orient(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, bool, li
                                   f"{name} is closed but its faces cannot be wound consistently (a non-manifold or "
                                   "non-orientable surface), so fixwizard cannot tell inside from outside and uses "
                                   "the unsigned distance: the bounds stay guaranteed but may be looser. Repair the "
-                                  "mesh in CAD for tighter bounds.")]
+                                  "mesh in CAD for tighter bounds.")], np.zeros(len(original), bool)
     bodies = _bodies(mesh)
-    depths = _nesting_depths(mesh, bodies) if len(bodies) > 1 else np.zeros(1, int)
+    depths, meeting = _nesting(mesh, bodies) if len(bodies) > 1 else (np.zeros(1, int), np.zeros(1, bool))
     faces = np.asarray(mesh.faces).copy()
     inverted = 0
     for body, depth in zip(bodies, depths, strict=True):
@@ -176,6 +229,9 @@ def _orient(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, bool, li
             faces[body] = faces[body][:, ::-1]
             inverted += 1
     mesh = trimesh.Trimesh(mesh.vertices, faces, process=False)
+    meeting_faces = np.zeros(len(faces), bool)
+    for meets, body_faces in zip(meeting, bodies, strict=True):
+        meeting_faces[body_faces] = meets
     turned = int(np.count_nonzero(np.any(faces != original, axis=1)))
     warnings: list[tuple[str, str]] = []
     if not consistent:
@@ -193,7 +249,7 @@ def _orient(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, bool, li
                                                                            if cavities else "")
                          + "; fixwizard takes them as one rigid fixture. If they are separate parts, solve each "
                          "with its own mesh."))
-    return mesh, True, warnings
+    return mesh, True, warnings, meeting_faces
 
 
 def clean_mesh(mesh: trimesh.Trimesh, name: str) -> CleanMesh:
@@ -202,11 +258,13 @@ def clean_mesh(mesh: trimesh.Trimesh, name: str) -> CleanMesh:
     refuse_non_finite(np.asarray(mesh.vertices), name)
     refuse_far_vertices(np.asarray(mesh.vertices), name)
     mesh, warnings = _drop_degenerate(mesh, name)
+    mesh, repeated = _drop_repeated(mesh, name)
+    warnings += repeated
     if not mesh.is_watertight:
         warnings.append(("mesh_not_watertight",
                          f"{name} is not watertight (it has holes or open edges), so fixwizard cannot tell inside "
                          "from outside and uses the unsigned distance: the bounds stay guaranteed but may be "
                          "looser. Close the mesh in CAD for tighter bounds."))
-        return CleanMesh(mesh, False, tuple(warnings))
-    mesh, signed, orient_warnings = _orient(mesh, name)
-    return CleanMesh(mesh, signed, tuple(warnings + orient_warnings))
+        return CleanMesh(mesh, False, tuple(warnings), np.zeros(len(mesh.faces), bool))
+    mesh, signed, orient_warnings, meeting_faces = _orient(mesh, name)
+    return CleanMesh(mesh, signed, tuple(warnings + orient_warnings), meeting_faces)

@@ -1,5 +1,6 @@
 """The guarantee on meshes as CAD tools export them: taps made on the true solid, solved with a mesh that has
 facets turned inside out (many, or a single one), is inside out as a whole, holds two bodies (one inside out),
+holds two bodies that overlap (an assembly exported without a union), repeats facets (some of the copies turned),
 is open, or is a metre-long bar or rail of long thin facets (aspect up to 400). Noise up to the bound, 30 % of
 the taps exactly at the bound along the normal. Zero misses and zero false "inconsistent" allowed."""
 
@@ -59,6 +60,16 @@ def messy_case(kind: str, seed: int):
         both = trimesh.util.concatenate([truth, second])
         exported = trimesh.util.concatenate([truth, trimesh.Trimesh(second.vertices, second.faces[:, ::-1])])
         return both, exported, np.ones(len(both.faces), bool)
+    if kind == "two overlapping bodies":
+        extent = truth.bounds[1] - truth.bounds[0]
+        second = trimesh.creation.box(0.6 * extent).apply_translation(truth.bounds[1] - 0.2 * extent)
+        both = trimesh.util.concatenate([truth, second])
+        return both, both, np.ones(len(both.faces), bool)
+    if kind == "repeated facets, some copies turned":
+        faces = np.asarray(truth.faces)
+        copies = faces[rng.choice(len(faces), max(2, len(faces) // 4), replace=False)]
+        copies[::2] = copies[::2, ::-1]
+        return truth, trimesh.Trimesh(truth.vertices, np.vstack([faces, copies]), process=False), everywhere
     if kind == "open":
         kept = np.ones(len(truth.faces), bool)
         kept[rng.choice(len(kept), 2, replace=False)] = False
@@ -69,7 +80,17 @@ def messy_case(kind: str, seed: int):
     raise ValueError(kind)
 
 
-KINDS = ("flipped facets", "one flipped facet", "inside out", "two bodies, one inside out", "open", "slivers")
+KINDS = ("flipped facets", "one flipped facet", "inside out", "two bodies, one inside out", "two overlapping bodies",
+         "repeated facets, some copies turned", "open", "slivers")
+
+
+def _outside_every_body(truth: trimesh.Trimesh, centres: np.ndarray, ball_radius_m: float) -> np.ndarray:
+    """Which ball centres (m) lie at least the ball radius outside each body of ``truth`` (overlapping bodies: a
+    ball touching one body's facet inside the other is no tap)."""
+    outside = np.ones(len(centres), bool)
+    for body in truth.split(only_watertight=False):
+        outside &= trimesh.proximity.signed_distance(body, centres) <= -ball_radius_m + 1e-9
+    return outside
 
 
 def messy_taps(kind: str, seed: int):
@@ -81,7 +102,14 @@ def messy_taps(kind: str, seed: int):
     ball_diameter = BALL_DIAMETERS_M[seed % 3]
     sample_bound = float(rng.uniform(0.0003, 0.0015))
     count = int(rng.integers(8, 14))
-    cad_p_centres, cad_normals = touching_ball_contacts(truth, count, ball_diameter / 2, rng, tappable.astype(float))
+    if kind == "two overlapping bodies":
+        cad_p_centres, cad_normals = touching_ball_contacts(truth, 4 * count, ball_diameter / 2, rng)
+        kept = np.flatnonzero(_outside_every_body(truth, cad_p_centres, ball_diameter / 2))[:count]
+        assert len(kept) == count
+        cad_p_centres, cad_normals = cad_p_centres[kept], cad_normals[kept]
+    else:
+        cad_p_centres, cad_normals = touching_ball_contacts(truth, count, ball_diameter / 2, rng,
+                                                            tappable.astype(float))
     noise = bounded_noise(count, sample_bound, rng)
     along_normal = rng.random(count) < 0.3
     noise[along_normal] = (sample_bound * rng.choice([-1.0, 1.0], size=(np.count_nonzero(along_normal), 1))

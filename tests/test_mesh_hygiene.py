@@ -113,10 +113,29 @@ def test_a_mesh_whose_every_face_has_zero_area_is_refused(tmp_path, suffix, corn
         load_fixture(path)
 
 
+@pytest.mark.parametrize("turned", ["none", "some", "all"])
+def test_faces_that_repeat_another_are_dropped_and_the_sign_kept(turned):
+    """A copy of a face (the same corners, wound either way) adds no surface; left in, each of its edges has four
+    faces and the mesh looked open (unsigned distance)."""
+    truth = SHAPES["l_prism"]()
+    faces = np.asarray(truth.faces)
+    copies = faces[::3].copy()
+    if turned != "none":
+        copies[:: 1 if turned == "all" else 2] = copies[:: 1 if turned == "all" else 2, ::-1]
+    fixture = as_fixture("l_prism", trimesh.Trimesh(truth.vertices, np.vstack([faces, copies]), process=False))
+    assert fixture.signed and "mesh_repeated_faces_dropped" in _codes(fixture)
+    assert f"{len(copies)} faces repeat another face" in dict(fixture.warnings)["mesh_repeated_faces_dropped"]
+    assert len(fixture.mesh.faces) == len(faces)
+    _sign_matches_the_true_solid(fixture, truth)
+
+
 def test_a_non_manifold_closed_mesh_falls_back_to_the_unsigned_distance():
+    """Two boxes sharing a face, each with its own copy of it: once the copy is dropped, the shared face's edges
+    each hold three faces."""
     box = trimesh.creation.box((0.05, 0.04, 0.03))
-    fin = trimesh.Trimesh(box.vertices, np.vstack([box.faces, box.faces[:2], box.faces[:2][:, ::-1]]), process=False)
-    fixture = as_fixture("box", fin)
+    both = trimesh.util.concatenate([box, box.copy().apply_translation([0.05, 0.0, 0.0])])
+    both.merge_vertices()
+    fixture = as_fixture("box", trimesh.Trimesh(both.vertices, both.faces, process=False))
     assert not fixture.signed and not fixture.oracle.signed
     assert set(_codes(fixture)) & {"mesh_not_watertight", "mesh_orientation_unknown"}
 

@@ -32,7 +32,7 @@ MARGIN_M = 0.01
 # The oracle's intervals are at most ~1e-8 m wide for metre-sized triangles of any shape (mesh_distance); a
 # cached error bound above this one did not come from it.
 MAX_VALUE_ERROR_M = 1e-6
-CACHE_FORMAT = 2  # raise whenever what a lattice holds or how the oracle computes it changes
+CACHE_FORMAT = 3  # raise whenever what a lattice holds or how the oracle computes it changes
 
 
 def cache_folder() -> Path:
