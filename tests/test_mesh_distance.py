@@ -11,7 +11,13 @@ import open3d as o3d
 import pytest
 import trimesh
 
-from fixwizard.geometry.mesh_distance import MeshDistance, triangle_interval_m
+from fixwizard.geometry.mesh_distance import (
+    MeshDistance,
+    row_normal,
+    triangle_interval_m,
+    triangle_row,
+    triangle_row_reach_high_m,
+)
 from fixwizard.synthetic import closest_on_triangles, exact_distances_m
 
 
@@ -94,6 +100,49 @@ def test_the_interval_holds_the_exact_distance_for_every_triangle_shape(kind):
         size = np.linalg.norm(x - a) + max(np.linalg.norm(b - a), np.linalg.norm(c - a), np.linalg.norm(c - b))
         widest = max(widest, (high - low) / max(size, 1e-300))
     assert widest < 1e-7  # about sqrt(2^-53) of the point's distance plus the triangle's size, whatever its shape
+
+
+def _float_above(value: Fraction) -> float:
+    """The smallest float64 not below an exact value."""
+    result = float(value)
+    return result if Fraction(result) >= value else float(np.nextafter(result, np.inf))
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_the_reach_bound_holds_for_every_point_within_reach_of_a_point_above_the_triangle(kind):
+    """``triangle_row_reach_high_m``: from a point whose foot lies inside the triangle, every point within
+    ``across`` of it and within ``along`` of it along the row's normal is no farther from the triangle than the
+    bound (exact rational arithmetic: the offsets are those of the float64 points), whatever the triangle's
+    shape; finite for most feet inside well-shaped triangles."""
+    rng = np.random.default_rng(20 + KINDS.index(kind))
+    finite = 0
+    for _ in range(400):
+        a, b, c = _random_triangle(rng, kind)
+        row = triangle_row(a, b, c)
+        normal = np.array(row_normal(row))
+        weights = rng.dirichlet([1, 1, 1]) if rng.random() < 0.8 else rng.normal(size=3) / 2 + 1 / 3
+        scale = max(np.linalg.norm(b - a), np.linalg.norm(c - a), 1e-9)
+        x = weights @ np.array([a, b, c]) + normal * scale * rng.choice([0.0, 1e-6, 0.01, 0.3]) * rng.choice([-1, 1])
+        across = scale * 10 ** rng.uniform(-4, 0)
+        along = across * rng.choice([0.0, rng.uniform(0, 1), 1.0])
+        tangent = np.cross(normal, rng.normal(size=3))
+        tangent /= max(np.linalg.norm(tangent), 1e-300)
+        offset_along = along * rng.choice([-1.0, 1.0, rng.uniform(-1, 1)])
+        room = np.sqrt(max(across**2 - offset_along**2, 0.0))
+        moved = x + offset_along * normal + rng.uniform(0, 1) ** 0.3 * room * tangent
+        offset = [Fraction(float(m)) - Fraction(float(y)) for m, y in zip(moved, x, strict=True)]
+        exact_along = abs(sum(Fraction(float(n)) * o for n, o in zip(normal, offset, strict=True)))
+        exact_across_sq = sum(o * o for o in offset)
+        across_used = _float_above(Fraction(np.sqrt(float(exact_across_sq))))
+        while Fraction(across_used) ** 2 < exact_across_sq:
+            across_used = float(np.nextafter(across_used, np.inf))
+        bound = triangle_row_reach_high_m(*x, row, _float_above(exact_along), across_used)
+        if not np.isfinite(bound):
+            continue
+        finite += 1
+        assert _exact_squared_distance(moved, a, b, c) <= Fraction(bound) ** 2, (a, b, c, x, moved)
+    if kind == "well_shaped":
+        assert finite > 200
 
 
 def test_the_returned_point_gives_the_upper_end():

@@ -10,6 +10,7 @@ from fixwizard.geometry.octree import PositionGrid
 from fixwizard.geometry.se3 import make_transform
 from fixwizard.solver.cells import root_cells
 from fixwizard.solver.distance_grid import DistanceGrid
+from fixwizard.geometry.mesh_distance import triangle_interval_m
 from fixwizard.solver.interval_kernel import _nearest_vertex_interval_m, signed_interval_m
 from shapes import SHAPES, as_fixture
 
@@ -251,3 +252,49 @@ def test_the_capped_exact_stage_calls_a_point_far_only_where_the_oracle_puts_it_
         assert np.all(signable[far]) and np.all(low[far] == cap_m) and np.all(high[far] == np.inf)
         for capped, exact in zip((low, high, faces, signable), uncapped, strict=True):
             np.testing.assert_array_equal(capped[~far], exact[~far])
+
+
+def _rotation_within(rng: np.random.Generator, gamma_rad: float) -> np.ndarray:
+    """A rotation matrix turning by at most ``gamma_rad`` (often exactly that much) about a random axis."""
+    axis = rng.normal(size=3)
+    angle = gamma_rad * (1.0 if rng.random() < 0.3 else rng.random() ** (1 / 3))
+    return Rotation.from_rotvec(axis / np.linalg.norm(axis) * angle).as_matrix()
+
+
+def test_a_cell_is_called_too_near_a_face_only_where_every_pose_of_it_is():
+    """The cheap pass's directional test (``_too_near_everywhere``): a cell ``(R_c, gamma) x (t_c +- h)`` it calls
+    too near a triangle has the query point ``R^T (p - t)`` nearer than the limit at every pose of the cell,
+    rotations up to gamma from ``R_c`` (beyond 90 deg too) and the cube's corners included; and it does call
+    many cells so that the Lipschitz bound (the centre's distance plus the largest shift) does not."""
+    from fixwizard.geometry.mesh_distance import triangle_row
+    from fixwizard.geometry.so3_grid import chord
+    from fixwizard.solver.interval_kernel import _too_near_everywhere
+
+    rng = np.random.default_rng(11)
+    called = beyond_lipschitz = 0
+    for _ in range(3000):
+        corners = rng.normal(size=(3, 3)) * 10 ** rng.uniform(-3, -1)
+        row = triangle_row(*corners)
+        base_R_centre = Rotation.random(random_state=rng).as_matrix()
+        gamma = 10 ** rng.uniform(-5, 0.4)
+        half_side = 10 ** rng.uniform(-6, -2)
+        base_p_centre = rng.normal(size=3) * 0.3
+        normal = np.cross(corners[1] - corners[0], corners[2] - corners[0])
+        fix_p_query = (rng.dirichlet([1, 1, 1]) @ corners
+                       + normal / np.linalg.norm(normal) * rng.choice([-1, 1]) * 10 ** rng.uniform(-6, -2))
+        base_p_tap = base_R_centre @ fix_p_query + base_p_centre
+        shift = half_side * np.sqrt(3) + (np.linalg.norm(fix_p_query) + half_side * np.sqrt(3)) * chord(gamma)
+        centre_distance = triangle_interval_m(fix_p_query, *corners)[1]
+        near = centre_distance + rng.uniform(0, 1.5) * shift
+        if not _too_near_everywhere(*fix_p_query, np.ascontiguousarray(base_R_centre.T), chord(gamma), half_side,
+                                    shift, row, near):
+            continue
+        called += 1
+        beyond_lipschitz += centre_distance + shift >= near
+        for _ in range(60):
+            base_R_fix = base_R_centre @ _rotation_within(rng, gamma)
+            corner = rng.random() < 0.3
+            base_p_fix = base_p_centre + half_side * (rng.choice([-1.0, 1.0], 3) if corner else rng.uniform(-1, 1, 3))
+            moved = base_R_fix.T @ (base_p_tap - base_p_fix)
+            assert triangle_interval_m(moved, *corners)[1] < near
+    assert called > 300 and beyond_lipschitz > 100

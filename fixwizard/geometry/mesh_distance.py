@@ -174,6 +174,12 @@ def row_point_m(row: np.ndarray, v: float, w: float) -> Vector3:
 
 
 @numba.njit(nogil=True, cache=True, inline="always")
+def row_normal(row: np.ndarray) -> Vector3:
+    """The row's unit normal (zero where the triangle is too thin for one)."""
+    return row[_NORMAL], row[_NORMAL + 1], row[_NORMAL + 2]
+
+
+@numba.njit(nogil=True, cache=True, inline="always")
 def _plane_low_m(x0: float, x1: float, x2: float, row: np.ndarray) -> float:
     """A cheap lower bound (m) on the distance from point ``x`` to the row's triangle: the distance to its plane
     less the normal's slack and the rounding (negative where the triangle has no normal)."""
@@ -238,6 +244,38 @@ def triangle_row_interval_m(x0: float, x1: float, x2: float, row: np.ndarray) ->
         if outside + 2.0 * slack < 0.0:
             high = min(high, height + 2.0 * slack + rounding)
     return max(low - rounding, 0.0), high, v, w
+
+
+@numba.njit(nogil=True, cache=True)
+def triangle_row_reach_high_m(x0: float, x1: float, x2: float, row: np.ndarray, along_m: float,
+                              across_m: float) -> float:
+    """An upper bound (m) on the distance to the row's triangle from every point ``x'`` with ``|x' - x| <= across_m``
+    and ``|n . (x' - x)| <= along_m`` (``n`` the row's unit normal), for a point ``x`` whose foot on the triangle's
+    plane lies inside the triangle; inf where that foot is not surely inside (or the triangle has no normal).
+
+    With the true unit normal ``n*``, ``x``'s true foot ``f`` and ``m`` its true in-plane distance from the three
+    edge lines, the disc of radius ``m`` about ``f`` lies in the triangle, so the distance from ``x'`` is at most
+    ``sqrt((|n* . (x - f)| + |n* . (x' - x)|)^2 + max(0, |x' - x| - m)^2)``. The row's normal errs by at most
+    ``phi`` (its slack is ``2 phi``), which moves the height ``|n . (x - a)|`` and each in-plane edge distance by at
+    most ``2 phi S`` (see the module doc) and ``n* . (x' - x)`` by at most ``2 phi |x' - x|``.
+    """
+    if row[_SLACK] <= 0.0:
+        return np.inf
+    p = (x0 - row[_A], x1 - row[_A + 1], x2 - row[_A + 2])
+    pb = (p[0] - row[_AB], p[1] - row[_AB + 1], p[2] - row[_AB + 2])
+    pc = (p[0] - row[_AC], p[1] - row[_AC + 1], p[2] - row[_AC + 2])
+    rounding = _rounding_m(p, row)
+    slack = row[_SLACK] * (rounding / (ROUNDING_ULPS * UNIT_ROUNDOFF)) + rounding
+    outside = max(_dot(p[0], p[1], p[2], row[_SIDES], row[_SIDES + 1], row[_SIDES + 2]),
+                  _dot(pb[0], pb[1], pb[2], row[_SIDES + 3], row[_SIDES + 4], row[_SIDES + 5]),
+                  _dot(pc[0], pc[1], pc[2], row[_SIDES + 6], row[_SIDES + 7], row[_SIDES + 8]))
+    margin = -outside - slack
+    if margin <= 0.0:
+        return np.inf
+    height = abs(_dot(p[0], p[1], p[2], row[_NORMAL], row[_NORMAL + 1], row[_NORMAL + 2])) + slack
+    along = height + along_m + row[_SLACK] * across_m
+    beside = max(across_m - margin, 0.0)
+    return math.sqrt(along * along + beside * beside) * (1.0 + 8.0 * UNIT_ROUNDOFF) + rounding
 
 
 @numba.njit(nogil=True, cache=True)

@@ -22,11 +22,19 @@ from typing import Any
 import numba
 import numpy as np
 
-from fixwizard.geometry.mesh_distance import query_point, row_point_m, triangle_row_high_m
+from fixwizard.geometry.mesh_distance import (
+    query_point,
+    row_normal,
+    row_point_m,
+    triangle_row_high_m,
+    triangle_row_reach_high_m,
+)
 from fixwizard.parallel import PARALLEL_KERNEL_LOCK
 
 Arrays = tuple[Any, ...]  # several arrays passed to a compiled kernel as one argument
 NOT_REJECTED = -1
+SQRT_3 = math.sqrt(3.0)
+ROUNDING_M = 1e-12  # far above float64's rounding of query points of fixtures within a kilometre, far below any bound
 BLOCK_CELLS = 1024  # cells per parallel work item
 
 
@@ -45,6 +53,39 @@ def _tolerance_m(x0: float, x1: float, x2: float, chord: float, sample_bound_m: 
                  lever_cap_m: float) -> float:
     lever = min(math.sqrt(x0 * x0 + x1 * x1 + x2 * x2) + position_bound_m, lever_cap_m)
     return sample_bound_m + position_bound_m + lever * chord
+
+
+@numba.njit(nogil=True, cache=True)
+def _too_near_everywhere(x0: float, x1: float, x2: float, rotation: np.ndarray, chord: float, half_side_m: float,
+                         shift_m: float, row: np.ndarray, near_m: float) -> bool:
+    """Whether at every pose of a cell the query point lies nearer than ``near_m`` (m) to the row's triangle, so
+    that its signed distance (never above the distance to any one triangle) is below ``near_m`` there.
+
+    The cell: centre frame ``rotation = R_c^T``, rotations within angle ``gamma`` of ``R_c`` (``chord =
+    2 sin(gamma / 2)``), positions in the cube of half side ``half_side_m`` (m, base frame) about ``t_c``;
+    ``x = R_c^T (p - t_c)`` (m) the centre's query point, and ``shift_m`` a bound on ``|x' - x|`` over the cell.
+    With ``R = R_c E`` (``E`` turning by ``theta <= gamma`` about a unit axis ``a``), ``x' - x = (E^T - I) x +
+    E^T R_c^T (t_c - t)``. Along the triangle's unit normal ``n`` (Rodrigues' formula):
+    ``|n . (E^T - I) x| <= sin(gamma) |x x n| + (1 - cos gamma) (|x| + |n . x|) / 2`` (the largest of
+    ``(a . n)(a . x)`` over unit ``a`` is ``(|x| + n . x) / 2``; ``sin(gamma)`` taken as 1 beyond 90 deg), and
+    ``|n . E^T R_c^T v| = |(R_c E n) . v| <= h (|R_c n|_1 + sqrt(3) chord)`` for ``v`` in the cube, never above
+    ``sqrt(3) h``. The offset of ``x'`` along ``n`` is what moves its distance most; ``mesh_distance.
+    triangle_row_reach_high_m`` turns both offsets into a bound on the distance."""
+    n0, n1, n2 = row_normal(row)
+    if n0 == 0.0 and n1 == 0.0 and n2 == 0.0:
+        return False
+    turned_l1 = (abs(rotation[0, 0] * n0 + rotation[1, 0] * n1 + rotation[2, 0] * n2)
+                 + abs(rotation[0, 1] * n0 + rotation[1, 1] * n1 + rotation[2, 1] * n2)
+                 + abs(rotation[0, 2] * n0 + rotation[1, 2] * n1 + rotation[2, 2] * n2))
+    position_along = half_side_m * min(SQRT_3, turned_l1 + SQRT_3 * chord)
+    sine = chord * math.sqrt(max(1.0 - 0.25 * chord * chord, 0.0)) if chord <= math.sqrt(2.0) else 1.0
+    c0, c1, c2 = x1 * n2 - x2 * n1, x2 * n0 - x0 * n2, x0 * n1 - x1 * n0
+    lever_across = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+    length = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+    rotation_along = sine * lever_across + 0.25 * chord * chord * (length + abs(x0 * n0 + x1 * n1 + x2 * n2))
+    # ROUNDING_M covers the rounding of the query points (m-sized coordinates, float64) and of these sums
+    along = (position_along + rotation_along) * (1.0 + 1e-12) + ROUNDING_M
+    return triangle_row_reach_high_m(x0, x1, x2, row, along, shift_m + ROUNDING_M) < near_m - ROUNDING_M
 
 
 @numba.njit(nogil=True, cache=True, inline="always")
@@ -241,6 +282,11 @@ def _exact_cell(cell: int, cells: Arrays, taps: Arrays, band: Arrays, mesh: Arra
             continue
         if _rejects_or_keeps(cell, tap, low, high, face, band_low, band_high, out):
             return
+        near_m = ball_radius_m - sample_bound_m
+        if low < near_m and _too_near_everywhere(x[0], x[1], x[2], rotation, chord, 0.5 * cells[4][3],
+                                                 tolerance - sample_bound_m, mesh[0][face], near_m):
+            out[5][cell] = tap
+            return
 
 
 @numba.njit(nogil=True, cache=True)
@@ -315,6 +361,12 @@ def _cheap_cell(cell: int, cells: Arrays, taps: Arrays, band: Arrays, parent_ind
                 low, high = max(low, voxel_low), min(high, voxel_high)
                 undecided = _straddles(low, high, band_low, band_high)
         if _rejects_or_keeps(cell, tap, low, high, face, band_low, band_high, out):
+            break
+        near_m = ball_radius_m - sample_bound_m
+        if face >= 0 and low < near_m and _too_near_everywhere(x0, x1, x2, rotation, chord, 0.5 * octree[3],
+                                                               tolerance - sample_bound_m, triangle_rows[face],
+                                                               near_m):
+            rejected_by[cell] = tap
             break
         straddling[cell, tap] = undecided
 
