@@ -6,11 +6,11 @@ import pytest
 import trimesh
 from scipy.spatial.transform import Rotation
 
+from fixwizard.geometry.mesh_distance import triangle_interval_m
 from fixwizard.geometry.octree import PositionGrid
 from fixwizard.geometry.se3 import make_transform
 from fixwizard.solver.cells import root_cells
 from fixwizard.solver.distance_grid import DistanceGrid
-from fixwizard.geometry.mesh_distance import triangle_interval_m
 from fixwizard.solver.interval_kernel import _nearest_vertex_interval_m, signed_interval_m
 from shapes import SHAPES, as_fixture
 
