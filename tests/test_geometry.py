@@ -39,6 +39,47 @@ def test_minimum_enclosing_ball_matches_brute_force(dim, seed):
     assert np.all(np.linalg.norm(points - ball.center, axis=1) <= ball.radius)
 
 
+def _centre_is_in_the_hull_of_the_boundary_points(points: np.ndarray, ball) -> bool:
+    """The optimality certificate of an enclosing ball: its centre is a convex combination of the points on its
+    boundary (else moving the centre towards them would shrink it)."""
+    from scipy.optimize import nnls
+
+    distances = np.linalg.norm(points - ball.center, axis=1)
+    boundary = np.unique(points[distances >= ball.radius * (1 - 1e-7)], axis=0)
+    system = np.vstack([boundary.T, np.ones(len(boundary)) * 10.0])
+    weights, residual = nnls(system, np.append(ball.center, 10.0))
+    return residual <= 1e-7 * max(ball.radius, 1e-6 * float(np.abs(points).max()), 1e-12)
+
+
+@pytest.mark.parametrize("kind", ["sphere surface", "cube", "clusters", "flat", "on a line", "repeated",
+                                  "far offset", "one point"])
+@pytest.mark.parametrize("count", [2, 7, 3000, 300_000])
+def test_minimum_enclosing_ball_of_many_points_holds_them_and_is_smallest(kind, count):
+    """Point sets as meshes and cell sets make them: a sphere's surface (every point on the hull), a cube's
+    lattice, clusters, flat and collinear sets, repeated points, far from the origin; from 2 to 300,000 points."""
+    rng = np.random.default_rng(count)
+    if kind == "sphere surface":
+        points = rng.normal(size=(count, 3))
+        points /= np.linalg.norm(points, axis=1, keepdims=True)
+    elif kind == "cube":
+        points = rng.integers(0, 20, (count, 3)) * 0.01
+    elif kind == "clusters":
+        points = rng.normal(size=(5, 3))[rng.integers(0, 5, count)] + rng.normal(size=(count, 3)) * 0.01
+    elif kind == "flat":
+        points = np.column_stack([rng.normal(size=(count, 2)), np.zeros(count)])
+    elif kind == "on a line":
+        points = np.outer(rng.normal(size=count), [0.3, -0.2, 0.5])
+    elif kind == "repeated":
+        points = np.repeat(rng.normal(size=(3, 3)), count // 3 + 1, axis=0)[:count]
+    elif kind == "far offset":
+        points = rng.normal(size=(count, 3)) * 0.05 + [4e4, -2e4, 1e3]
+    else:
+        points = np.repeat(rng.normal(size=(1, 3)), count, axis=0)
+    ball = minimum_enclosing_ball(points)
+    assert np.all(np.linalg.norm(points - ball.center, axis=1) <= ball.radius)
+    assert _centre_is_in_the_hull_of_the_boundary_points(points, ball)
+
+
 def test_minimum_enclosing_ball_of_two_points_is_centred_between_them():
     ball = minimum_enclosing_ball(np.array([[0.0, 0, 0], [1.0, 0, 0], [0.5, 0.1, 0]]))
     assert ball.center == pytest.approx([0.5, 0, 0])
