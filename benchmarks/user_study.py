@@ -88,7 +88,7 @@ def reach_of(run_points: Path, figures: dict) -> tuple[float, float, float]:
     bound_centre = BoundCentre(Rotation.from_rotvec(centre["rotvec_rad"]), np.array(centre["position_m"]))
     pose = figures["pose"]
     start = fixture.base_T_fix(make_transform(Rotation.from_rotvec(pose["rotvec_rad"]), pose["position_m"]))
-    found = reach(problem, [start], bound_centre, -fixture.cad_p_center, fixture.oracle.hull_vertices_m,
+    found = reach(problem, [start], bound_centre, -fixture.cad_p_center, fixture.oracle.hull_cover,
                   figures["bounds"][2] * 1e-3)
     if found is None:
         return (float("nan"),) * 3

@@ -15,6 +15,7 @@ import numpy as np
 import trimesh
 
 from fixwizard.errors import MeshError, MeshUnitsError
+from fixwizard.geometry.hull_cover import HullCover, hull_cover
 from fixwizard.geometry.meb import minimum_enclosing_ball
 from fixwizard.geometry.mesh_distance import MeshDistance
 from fixwizard.geometry.se3 import invert, make_transform, points_in_frames
@@ -140,10 +141,11 @@ class DistanceOracle:
                 self.SIGN_FREE_M)
 
     @cached_property
-    def hull_vertices_m(self) -> np.ndarray:
-        """Vertices (H, 3) of the mesh's convex hull (m, the mesh's frame): where a rigid motion moves a point of
-        the fixture farthest."""
-        return np.asarray(trimesh.convex.convex_hull(self._vertices).vertices, np.float64)
+    def hull_cover(self) -> HullCover:
+        """Balls (m, the mesh's frame) covering the vertices of the mesh's convex hull: where a rigid motion moves a
+        point of the fixture farthest (``geometry.hull_cover``; the hull vertices themselves unless there are
+        thousands)."""
+        return hull_cover(self._vertices)
 
     @property
     def triangle_count(self) -> int:
@@ -154,9 +156,10 @@ class DistanceOracle:
         """The mesh as float64 vertices (V, 3) in m and triangles (F, 3) of vertex indices."""
         return self._vertices, self._faces
 
-    @property
+    @cached_property
     def bounds_m(self) -> tuple[np.ndarray, np.ndarray]:
-        """Corners (m) of the mesh's axis-aligned bounding box in its frame."""
+        """Corners (m) of the mesh's axis-aligned bounding box in its frame (once: every inside test by ray parity
+        needs them, and a mesh of a million vertices took 40 ms a call)."""
         return self._vertices.min(axis=0), self._vertices.max(axis=0)
 
     def _pseudonormal_inside(self, points_m: np.ndarray, closest: np.ndarray, weights: np.ndarray,

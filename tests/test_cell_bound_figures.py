@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from fixwizard.geometry.hull_cover import HullCover
 from fixwizard.geometry.octree import PositionGrid
 from fixwizard.geometry.se3 import rotation_angle_rad
 from fixwizard.geometry.so3_grid import chord
@@ -26,12 +27,23 @@ def random_set(rng: np.random.Generator) -> CellSet:
 
 
 def random_case(seed: int):
+    """Cells, a centre, the CAD origin and a hull cover: points (a hull's own vertices, radii zero) for even
+    seeds, balls of up to 1 cm for odd ones (the cover of a hull of thousands of vertices)."""
     rng = np.random.default_rng(seed)
     cells = random_set(rng)
     centre = BoundCentre(Rotation.random(random_state=seed), rng.uniform(-0.5, 0.5, 3))
     fix_p_origin = rng.normal(0.0, 0.05, 3)
-    fix_p_hull = rng.normal(0.0, 0.05, (int(rng.integers(1, 80)), 3))
-    return rng, cells, centre, fix_p_origin, fix_p_hull
+    count = int(rng.integers(1, 80))
+    radii = np.zeros(count) if seed % 2 == 0 else rng.uniform(0.0, 0.01, count)
+    return rng, cells, centre, fix_p_origin, HullCover(rng.normal(0.0, 0.05, (count, 3)), radii)
+
+
+def points_in(cover: HullCover, rng: np.random.Generator) -> np.ndarray:
+    """Points of every ball of the cover, on its boundary or inside."""
+    directions = rng.normal(size=cover.points_m.shape)
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    reach = cover.radii_m * np.where(rng.random(len(directions)) < 0.5, 1.0, rng.random(len(directions)))
+    return cover.points_m + directions * reach[:, None]
 
 
 def poses_in(cells: CellSet, index: int, count: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -51,8 +63,8 @@ def poses_in(cells: CellSet, index: int, count: int, rng: np.random.Generator) -
 
 @pytest.mark.parametrize("seed", range(6))
 def test_every_pose_of_a_cell_lies_within_its_figures_of_the_centre(seed):
-    rng, cells, centre, fix_p_origin, fix_p_hull = random_case(seed)
-    position, angle, displacement = cell_bound_figures(cells, centre, fix_p_origin, fix_p_hull)
+    rng, cells, centre, fix_p_origin, cover = random_case(seed)
+    position, angle, displacement = cell_bound_figures(cells, centre, fix_p_origin, cover)
     centre_R = centre.rotation.as_matrix()
     centre_p_fix = centre.cad_origin_m - centre_R @ fix_p_origin
     for index in rng.choice(len(cells), 40, replace=False):
@@ -60,25 +72,27 @@ def test_every_pose_of_a_cell_lies_within_its_figures_of_the_centre(seed):
         cad_origins = rotations @ fix_p_origin + positions
         assert np.all(np.linalg.norm(cad_origins - centre.cad_origin_m, axis=1) <= position[index])
         assert np.all(rotation_angle_rad(centre_R.T @ rotations) <= angle[index] + 1e-12)
-        moved = (rotations - centre_R) @ fix_p_hull.T + (positions - centre_p_fix)[:, :, None]
+        moved = (rotations - centre_R) @ points_in(cover, rng).T + (positions - centre_p_fix)[:, :, None]
         assert np.max(np.linalg.norm(moved, axis=1)) <= displacement[index]
 
 
 @pytest.mark.parametrize("seed", range(6))
 def test_the_hull_bound_is_taken_for_every_cell_that_could_hold_the_largest_displacement(seed):
-    _, cells, centre, fix_p_origin, fix_p_hull = random_case(100 + seed)
+    _, cells, centre, fix_p_origin, cover = random_case(100 + seed)
     assert len(cells) > 3 * HULL_BLOCK_CELLS
-    displacement = cell_bound_figures(cells, centre, fix_p_origin, fix_p_hull)[2] - cells.position_bound_m
+    displacement = cell_bound_figures(cells, centre, fix_p_origin, cover)[2] - cells.position_bound_m
     # both bounds again, cell by cell, as the docstring of cell_bound_figures states them
     base_R_fix, gammas = cells.distinct_rotation_matrices()
     centre_R = centre.rotation.as_matrix()
     centre_p_fix = centre.cad_origin_m - centre_R @ fix_p_origin
     offsets = cells.positions_m() - centre_p_fix
     angles = np.minimum(rotation_angle_rad(centre_R.T @ base_R_fix) + gammas, np.pi)[cells.rotation_index]
-    ball = np.linalg.norm(offsets, axis=1) + np.max(np.linalg.norm(fix_p_hull, axis=1)) * chord(angles)
-    levers = (base_R_fix - centre_R)[cells.rotation_index] @ fix_p_hull.T
+    points, radii = cover.points_m, cover.radii_m
+    ball = np.linalg.norm(offsets, axis=1) + np.max(np.linalg.norm(points, axis=1) + radii) * chord(angles)
+    levers = (base_R_fix - centre_R)[cells.rotation_index] @ points.T
     hull = np.max(np.linalg.norm(levers + offsets[:, :, None], axis=1)
-                  + np.linalg.norm(fix_p_hull, axis=1) * chord(gammas)[cells.rotation_index][:, None], axis=1)
+                  + np.linalg.norm(points, axis=1) * chord(gammas)[cells.rotation_index][:, None]
+                  + radii * chord(angles)[:, None], axis=1)
     both = np.minimum(ball, hull)
     assert displacement.max() == pytest.approx(both.max(), rel=1e-9)
     needed = ball >= HULL_SCREEN_FRACTION * both.max()

@@ -240,3 +240,54 @@ def test_the_finest_rotation_level_still_holds_each_rotation_within_gamma_of_its
         assert np.all(angles <= grid.gamma(level, cells))
     with pytest.raises(ValueError):
         grid.children(MAX_LEVEL, cells[:1])
+
+
+@pytest.mark.parametrize("kind", ["ellipsoid", "box lattice", "rounded bar", "few"])
+@pytest.mark.parametrize("count", [300, 20_000, 200_000])
+def test_the_hull_cover_holds_every_hull_vertex_in_a_few_small_balls(kind, count):
+    """A finely tessellated rounded part has every vertex on its hull: the displacement bounds then run over at
+    most ``MAX_POINTS`` balls that hold every hull vertex (a few per cent of the radius wide); a hull of few
+    vertices is its own cover (radii zero)."""
+    from scipy.spatial import ConvexHull
+
+    from fixwizard.geometry.hull_cover import MAX_POINTS, hull_cover
+
+    rng = np.random.default_rng(count)
+    if kind == "ellipsoid":
+        points = rng.normal(size=(count, 3))
+        points = points / np.linalg.norm(points, axis=1, keepdims=True) * [0.08, 0.05, 0.02] + [0.3, -0.1, 0.02]
+    elif kind == "box lattice":
+        points = rng.integers(0, 50, (count, 3)) * [0.002, 0.001, 0.0005]
+    elif kind == "rounded bar":
+        angle = rng.uniform(0, 2 * np.pi, count)
+        points = np.column_stack([rng.uniform(0, 1.0, count), 0.01 * np.cos(angle), 0.01 * np.sin(angle)])
+    else:
+        points = rng.normal(size=(12, 3))[rng.integers(0, 12, count)]
+    cover = hull_cover(points)
+    vertices = points[ConvexHull(points).vertices]
+    assert len(cover.points_m) <= MAX_POINTS
+    for chunk in np.array_split(vertices, max(1, len(vertices) // 2000)):
+        gaps = np.min(np.linalg.norm(chunk[:, None] - cover.points_m[None], axis=2) - cover.radii_m, axis=1)
+        assert np.all(gaps <= 0.0)
+    size = np.max(np.ptp(points, axis=0))
+    assert np.max(cover.radii_m) <= 0.03 * size
+    if len(vertices) <= MAX_POINTS:  # a hull of few vertices is its own cover (up to rounding, for a large cloud)
+        assert len(cover.points_m) == len(vertices) and np.all(cover.radii_m <= 1e-9 * size)
+
+
+def test_the_enclosing_ball_of_cell_corners_far_from_the_origin_ends_at_once():
+    """Seven corners of a 0.1 mm cube of cells 0.6 m from the origin (cospherical, as sibling cells are): rounding
+    left a corner a hair outside a ball that could not grow, and the pivoting looped with a growing support."""
+    import itertools
+    import time
+
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        side = 10 ** rng.uniform(-6, -3)
+        corners = np.array(list(itertools.product([0.0, 1.0], repeat=3)))[rng.permutation(8)[:rng.integers(5, 9)]]
+        points = rng.uniform(-0.6, 0.6, 3) + corners * side
+        started = time.perf_counter()
+        ball = minimum_enclosing_ball(points)
+        assert time.perf_counter() - started < 0.5
+        assert np.all(np.linalg.norm(points - ball.center, axis=1) <= ball.radius)
+        assert ball.radius <= np.sqrt(3) / 2 * side * (1 + 1e-9)

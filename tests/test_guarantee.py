@@ -104,7 +104,7 @@ def test_true_cell_survives_every_level_down_to_fine_cells(name, seed):
     assert np.count_nonzero(true_cell_mask(siblings, base_T_fix)) == 1
     centre = bound_centre(siblings, -fixture.cad_p_center, siblings.distinct_rotations()[0][0])
     position, rotation, displacement = cell_bound_figures(siblings, centre, -fixture.cad_p_center,
-                                                          fixture.oracle.hull_vertices_m).max(axis=1)
+                                                          fixture.oracle.hull_cover).max(axis=1)
     centre_T_cad = make_transform(centre.rotation, centre.cad_origin_m)
     assert np.linalg.norm(base_T_cad[:3, 3] - centre.cad_origin_m) <= position
     assert Rotation.from_matrix(centre_T_cad[:3, :3].T @ base_T_cad[:3, :3]).magnitude() <= rotation

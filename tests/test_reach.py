@@ -22,13 +22,13 @@ def test_certified_poses_pushed_outward_stay_inside_the_guaranteed_bounds(real_d
     bounds = solution.bounds
     centre = BoundCentre(Rotation.from_matrix(bounds.base_T_cad_center[:3, :3]), bounds.base_T_cad_center[:3, 3])
     start = solution.base_T_cad @ invert(fixture.fix_T_cad)
-    found = reach(solution.problem, [start], centre, -fixture.cad_p_center, fixture.oracle.hull_vertices_m,
+    found = reach(solution.problem, [start], centre, -fixture.cad_p_center, fixture.oracle.hull_cover,
                   bounds.max_point_displacement_m)
     assert found is not None and len(found.poses) > 20
     for pose in found.poses:
         assert certified(solution.problem, pose)
         assert solution.contains(pose @ fixture.fix_T_cad)
-        assert np.all(pose_figures(pose, centre, -fixture.cad_p_center, fixture.oracle.hull_vertices_m)
+        assert np.all(pose_figures(pose, centre, -fixture.cad_p_center, fixture.oracle.hull_cover)
                       <= [bounds.position_m, bounds.rotation_rad, bounds.max_point_displacement_m])
     # pushed outward, the reach goes well beyond the start: the bounds are at most this much too wide
     assert np.all(found.figures > 0.6 * np.array([bounds.position_m, bounds.rotation_rad,

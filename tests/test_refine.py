@@ -84,7 +84,7 @@ def test_rounds_on_the_displacement_alone_keep_every_pose_that_explains_the_taps
     bounds = solution.bounds
     limits = np.array([bounds.position_m, bounds.rotation_rad, bounds.max_point_displacement_m])
     centre = BoundCentre(Rotation.from_matrix(bounds.base_T_cad_center[:3, :3]), bounds.base_T_cad_center[:3, 3])
-    fix_p_origin, hull = -fixture.cad_p_center, fixture.oracle.hull_vertices_m
+    fix_p_origin, hull = -fixture.cad_p_center, fixture.oracle.hull_cover
     problem = solution.problem
     start = base_T_cad @ invert(fixture.fix_T_cad)
     assert certified(problem, start)
@@ -96,7 +96,7 @@ def test_rounds_on_the_displacement_alone_keep_every_pose_that_explains_the_taps
     poses += pushed.poses
     centre_R = centre.rotation.as_matrix()
     centre_p_fix = centre.cad_origin_m - centre_R @ fix_p_origin
-    for point in hull:  # each hull vertex pushed as far as the taps let it go from where the centre puts it
+    for point in hull.points_m:  # each hull vertex pushed as far as the taps let it go from where the centre puts it
         def displacement_m(pose: np.ndarray, p: np.ndarray = point) -> float:
             return float(np.linalg.norm(pose[:3, :3] @ p + pose[:3, 3] - centre_R @ p - centre_p_fix))
 

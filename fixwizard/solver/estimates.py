@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation
 from scipy.special import gammaln, logsumexp
 
 from fixwizard.fixture import DistanceOracle
+from fixwizard.geometry.hull_cover import HullCover
 from fixwizard.geometry.meb import minimum_enclosing_ball
 from fixwizard.geometry.se3 import make_transform, points_in_frames, rotation_angle_rad
 from fixwizard.geometry.so3_grid import chord
@@ -115,38 +116,43 @@ HULL_BLOCK_CELLS = 2048  # cells per round of the parallel hull bounds, between 
 
 @numba.njit(nogil=True, cache=True, inline="always")
 def _hull_displacement_m(cell: int, base_R_fix: np.ndarray, rotation_index: np.ndarray, positions_m: np.ndarray,
-                         centre_R: np.ndarray, centre_p_m: np.ndarray, fix_p_hull: np.ndarray, norms: np.ndarray,
-                         chords: np.ndarray) -> float:
-    """``max_p |(R_c - C) p + t_c - t_C| + |p| chord`` over the hull vertices ``p`` for one cell (m)."""
+                         centre_R: np.ndarray, centre_p_m: np.ndarray, cover: tuple[np.ndarray, np.ndarray],
+                         norms: np.ndarray, chords: np.ndarray, turn_chords: np.ndarray) -> float:
+    """``max_u |(R_c - C) u + t_c - t_C| + |u| chord + e_u turn_chord`` over the cover's balls ``(u, e_u)`` for one
+    cell (m): ``chord`` of the cell's gamma, ``turn_chord`` of the largest angle between the centre's rotation and
+    the cell's."""
+    fix_p_cover, radii = cover
     rotation = base_R_fix[rotation_index[cell]]
     lever = rotation - centre_R
     offset = positions_m[cell] - centre_p_m
     chord_cell = chords[rotation_index[cell]]
+    turn_chord = turn_chords[rotation_index[cell]]
     best = 0.0
-    for vertex in range(len(fix_p_hull)):
+    for vertex in range(len(fix_p_cover)):
         total = 0.0
         for axis in range(3):
             value = offset[axis]
             for k in range(3):
-                value += lever[axis, k] * fix_p_hull[vertex, k]
+                value += lever[axis, k] * fix_p_cover[vertex, k]
             total += value * value
-        best = max(best, math.sqrt(total) + norms[vertex] * chord_cell)
+        best = max(best, math.sqrt(total) + norms[vertex] * chord_cell + radii[vertex] * turn_chord)
     return best
 
 
 @numba.njit(nogil=True, cache=True, parallel=True)
 def _hull_displacements_m(base_R_fix: np.ndarray, rotation_index: np.ndarray, positions_m: np.ndarray,
-                          centre_R: np.ndarray, centre_p_m: np.ndarray, fix_p_hull: np.ndarray,
-                          chords: np.ndarray, ball_m: np.ndarray, order: np.ndarray) -> np.ndarray:
+                          centre_R: np.ndarray, centre_p_m: np.ndarray, cover: tuple[np.ndarray, np.ndarray],
+                          chords: np.ndarray, turn_chords: np.ndarray, ball_m: np.ndarray,
+                          order: np.ndarray) -> np.ndarray:
     """For each cell (centre rotation ``base_R_fix[rotation_index]``, position), an upper bound (m) on the largest
     displacement of a fixture point between the centre pose and any pose of the cell: the smaller of its ball
-    bound ``ball_m`` and ``max_p |(R_c - C) p + t_c - t_C| + |p| chord`` over the hull vertices ``p`` (the
-    displacement is convex in ``p``, so the hull's vertices hold its maximum over the fixture). The hull bound is
-    computed in ``order`` (largest ball bound first), in rounds of ``HULL_BLOCK_CELLS`` spread over the cores,
+    bound ``ball_m`` and ``_hull_displacement_m`` over the hull cover (the displacement is convex in the point,
+    so the hull's vertices hold its maximum over the fixture, and each lies in a ball of the cover). That bound
+    is computed in ``order`` (largest ball bound first), in rounds of ``HULL_BLOCK_CELLS`` spread over the cores,
     for the cells whose ball bound reaches ``HULL_SCREEN_FRACTION`` of the largest bound of the rounds before,
     and no more once a round starts below it (those cells keep their ball bound)."""
     out = ball_m.copy()
-    norms = np.sqrt(np.sum(fix_p_hull**2, axis=1))
+    norms = np.sqrt(np.sum(cover[0]**2, axis=1))
     largest = 0.0
     start = 0
     while start < len(order) and ball_m[order[start]] >= HULL_SCREEN_FRACTION * largest:
@@ -156,7 +162,7 @@ def _hull_displacements_m(base_R_fix: np.ndarray, rotation_index: np.ndarray, po
             cell = order[position]
             if ball_m[cell] >= screen:
                 best = _hull_displacement_m(cell, base_R_fix, rotation_index, positions_m, centre_R, centre_p_m,
-                                            fix_p_hull, norms, chords)
+                                            cover, norms, chords, turn_chords)
                 out[cell] = min(ball_m[cell], best * (1.0 + 1e-12))
         for position in range(start, stop):
             largest = max(largest, out[order[position]])
@@ -165,11 +171,11 @@ def _hull_displacements_m(base_R_fix: np.ndarray, rotation_index: np.ndarray, po
 
 
 def cell_bound_figures(cells: CellSet, centre: BoundCentre, fix_p_origin: np.ndarray,
-                       fix_p_hull: np.ndarray) -> np.ndarray:
+                       cover: HullCover) -> np.ndarray:
     """(3, N): for each cell, the largest CAD-origin distance (m), rotation angle (rad) and fixture-point
-    displacement (m) between the centre and any pose in the cell. ``fix_p_hull``: the fixture's convex hull
-    vertices (m, internal frame); the displacement is the smaller of the hull-vertex bound and the fixture
-    ball's (``|t_c - t_C| + r chord(angle)``), both upper bounds."""
+    displacement (m) between the centre and any pose in the cell. ``cover``: balls covering the fixture's convex
+    hull vertices (m, internal frame); the displacement is the smaller of the hull bound and the fixture ball's
+    (``|t_c - t_C| + r chord(angle)``), both upper bounds."""
     base_R_fix, gammas = cells.distinct_rotation_matrices()
     rotation_index = cells.rotation_index
     positions = cells.positions_m()
@@ -180,13 +186,13 @@ def cell_bound_figures(cells: CellSet, centre: BoundCentre, fix_p_origin: np.nda
                 + origin_lever * chord(gammas[rotation_index]))
     angles = np.minimum(rotation_angle_rad(centre.rotation.as_matrix().T @ base_R_fix) + gammas, np.pi)
     center_fix = centre.cad_origin_m - centre.rotation.apply(fix_p_origin)
-    fixture_radius_m = float(np.max(np.linalg.norm(fix_p_hull, axis=1)))
-    ball = (np.linalg.norm(positions - center_fix, axis=1) + fixture_radius_m * chord(angles[rotation_index]))
+    ball = (np.linalg.norm(positions - center_fix, axis=1) + cover.radius_m * chord(angles[rotation_index]))
     with PARALLEL_KERNEL_LOCK:
         displacement = _hull_displacements_m(np.ascontiguousarray(base_R_fix), rotation_index,
                                              np.ascontiguousarray(positions), centre.rotation.as_matrix(), center_fix,
-                                             np.ascontiguousarray(fix_p_hull, float), chord(gammas), ball,
-                                             np.argsort(-ball))
+                                             (np.ascontiguousarray(cover.points_m, float),
+                                              np.ascontiguousarray(cover.radii_m, float)),
+                                             chord(gammas), chord(angles), ball, np.argsort(-ball))
     return np.vstack([position, angles[rotation_index], displacement + position_bound])
 
 

@@ -20,7 +20,9 @@ import numpy as np
 from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation
 
+from fixwizard.geometry.hull_cover import HullCover
 from fixwizard.geometry.se3 import make_transform, points_in_frames, rotation_angle_rad
+from fixwizard.geometry.so3_grid import chord
 from fixwizard.solver.estimates import BoundCentre
 from fixwizard.solver.mode_mass import laplace_peak
 from fixwizard.solver.search import SearchProblem
@@ -51,15 +53,17 @@ def certified(problem: SearchProblem, base_T_fix: np.ndarray) -> bool:
 
 
 def pose_figures(base_T_fix: np.ndarray, centre: BoundCentre, fix_p_origin: np.ndarray,
-                 fix_p_hull: np.ndarray) -> np.ndarray:
-    """(CAD-origin distance m, rotation angle rad, largest displacement m of the hull points) of a pose from the
-    centre pose."""
+                 cover: HullCover) -> np.ndarray:
+    """(CAD-origin distance m, rotation angle rad, largest displacement m of a fixture point) of a pose from the
+    centre pose; the displacement is at least that of the cover's ball centres less their radii times the turn's
+    chord (exact for a cover of the hull vertices themselves): a lower bound, as a reach must be."""
     base_R_fix = base_T_fix[:3, :3]
     origin = base_R_fix @ fix_p_origin + base_T_fix[:3, 3]
     centre_R = centre.rotation.as_matrix()
     centre_p_fix = centre.cad_origin_m - centre_R @ fix_p_origin
-    displacement = np.linalg.norm(fix_p_hull @ (base_R_fix - centre_R).T + (base_T_fix[:3, 3] - centre_p_fix), axis=1)
     angle = rotation_angle_rad(centre_R.T @ base_R_fix)
+    displacement = (np.linalg.norm(cover.points_m @ (base_R_fix - centre_R).T + (base_T_fix[:3, 3] - centre_p_fix),
+                                   axis=1) - cover.radii_m * chord(angle))
     return np.array([np.linalg.norm(origin - centre.cad_origin_m), angle, displacement.max()])
 
 
@@ -122,7 +126,7 @@ def _pulled_back(problem: SearchProblem, start: np.ndarray, end: np.ndarray) -> 
     return _pose(start, low * step, radius) if low > 0.0 else None
 
 
-def _objectives(centre: BoundCentre, fix_p_origin: np.ndarray, fix_p_hull: np.ndarray,
+def _objectives(centre: BoundCentre, fix_p_origin: np.ndarray, cover: HullCover,
                 rng: np.random.Generator) -> list[Callable[..., float]]:
     """Functions of a pose to push outward: the CAD origin along directions, the rotation about axes, the
     farthest hull points along directions."""
@@ -131,7 +135,8 @@ def _objectives(centre: BoundCentre, fix_p_origin: np.ndarray, fix_p_hull: np.nd
     directions = np.vstack([axes, random / np.linalg.norm(random, axis=1, keepdims=True)])
     centre_R = centre.rotation.as_matrix()
     centre_p_fix = centre.cad_origin_m - centre_R @ fix_p_origin
-    far = fix_p_hull[np.argsort(-np.linalg.norm(fix_p_hull - fix_p_hull.mean(axis=0), axis=1))[:2]]
+    points = cover.points_m
+    far = points[np.argsort(-np.linalg.norm(points - points.mean(axis=0), axis=1))[:2]]
     objectives: list[Callable[..., float]] = []
     for direction in directions:
         objectives.append(lambda pose, u=direction: float(u @ (pose[:3, :3] @ fix_p_origin + pose[:3, 3]
@@ -161,16 +166,16 @@ def certified_start(problem: SearchProblem, starts: list[np.ndarray], extent_m: 
 
 
 def reach(problem: SearchProblem, starts: list[np.ndarray], centre: BoundCentre, fix_p_origin: np.ndarray,
-          fix_p_hull: np.ndarray, extent_m: float, seed: int = 0) -> Reach | None:
+          cover: HullCover, extent_m: float, seed: int = 0) -> Reach | None:
     """The certified reach from ``certified_start`` of ``starts`` (poses ``base_T_fix``), pushed outward within
     ``extent_m`` (a bound on how far any pose of the set lies); None when no start certifies."""
     start = certified_start(problem, starts, extent_m)
     if start is None:
         return None
     poses = [start]
-    for objective in _objectives(centre, fix_p_origin, fix_p_hull, np.random.default_rng(seed)):
+    for objective in _objectives(centre, fix_p_origin, cover, np.random.default_rng(seed)):
         found = _pulled_back(problem, start, _push(problem, start, objective, extent_m))
         if found is not None:
             poses.append(found)
-    figures = np.max([pose_figures(pose, centre, fix_p_origin, fix_p_hull) for pose in poses], axis=0)
+    figures = np.max([pose_figures(pose, centre, fix_p_origin, cover) for pose in poses], axis=0)
     return Reach(figures, poses)

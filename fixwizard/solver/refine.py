@@ -60,7 +60,7 @@ class _Refinement:
     def pool_of(self, cells: Survivors) -> Pool:
         """Cells and their figures (3, N); a refined cell's figures are set to zero (its children hold it)."""
         return cells, cell_bound_figures(cells.cells, self.centre, self.fix_p_origin,
-                                         self.problem.oracle.hull_vertices_m)
+                                         self.problem.oracle.hull_cover)
 
     def largest(self) -> np.ndarray:
         return np.max([figures.max(axis=1) for _, figures in self.pools], axis=0)

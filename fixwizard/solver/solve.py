@@ -393,7 +393,7 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
         mode_cells = cells.subset(in_modes)
         centre = bound_centre(mode_cells, fix_p_origin, Rotation.from_matrix(top.bounds.base_T_cad_center[:3, :3]))
         bounds = bounds_from_figures(centre, cell_bound_figures(mode_cells, centre, fix_p_origin,
-                                                                fixture.oracle.hull_vertices_m).max(1))
+                                                                fixture.oracle.hull_cover).max(1))
     status = status_of([mode.bounds for mode in modes], fixture.radius_m)
     unexplained = _unexplained_warnings(problem, modes, fix_T_cad) if status != "undetermined" else []
     if unexplained:  # the set may be empty: its pose is not one a robot may use (see verdict)
