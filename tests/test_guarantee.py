@@ -173,6 +173,11 @@ def test_adding_taps_only_removes_poses_and_keeps_the_true_one(name, seed):
     later = add_taps(problem, earlier, max_cells)
     assert np.count_nonzero(true_cell_mask(later.final.cells, base_T_fix)) == 1
     assert np.all(ancestors_in(later.final.cells, earlier.final.cells))
+    finest = add_taps(problem, earlier, max_cells, descent="no_deeper")  # the finest level filtered alone
+    assert np.count_nonzero(true_cell_mask(finest.final.cells, base_T_fix)) == 1
+    assert finest.final.cells.position_level == earlier.final.cells.position_level
+    assert np.all(ancestors_in(finest.final.cells, earlier.final.cells))
+    assert finest.final.low_m.shape[1] == len(taps)
     solution = solve(fixture, taps, ball_diameter, sample_bound, max_cells=max_cells, max_samples=500,
                      previous=solve(fixture, taps[:-2], ball_diameter, sample_bound, max_cells=max_cells,
                                     max_samples=500))

@@ -115,20 +115,42 @@ def test_the_live_pipeline_stops_at_the_first_look_when_no_pose_fits(tapped):
     assert len(stages) == 1 and stages[0].rough and stages[0].verdict == "inconsistent"
 
 
-def test_the_first_look_filters_the_previous_set_without_going_deeper_and_the_quick_check_goes_on_from_it(tapped):
+def test_the_first_look_filters_the_previous_finest_level_and_the_quick_check_goes_on_from_the_previous_search(
+        tapped):
+    """The first look filters only the finest level of the previous check's search against the new tap (the coarse
+    levels of a set not yet pinned down hold far more cells); checks after it go on from that search, whose levels
+    are all filtered, never from the first look's partly filtered tree."""
     cell, base_p_taps = tapped
     before = quick_check(cell.fixture, base_p_taps[:9], BALL_DIAMETER_M, SAMPLE_BOUND_M)
     first = first_look(cell.fixture, base_p_taps[:10], BALL_DIAMETER_M, SAMPLE_BOUND_M, previous=before)
     depth = len(before.solution.tree.levels)
-    assert first.rough and len(first.solution.tree.levels) == depth
-    assert first.solution.cells.rotation_level == before.solution.cells.rotation_level
-    assert len(first.solution.cells) <= len(before.solution.cells)  # a new tap only removes poses
+    assert first.rough and first.filtered_from is before and len(first.solution.tree.levels) == depth
+    assert all(mine is theirs for mine, theirs in zip(first.solution.tree.levels[:-1],
+                                                      before.solution.tree.levels[:-1], strict=True))
+    kept, earlier = first.solution.cells, before.solution.cells
+    assert kept.rotation_level == earlier.rotation_level and kept.position_level == earlier.position_level
+    assert {(int(r), *map(int, p)) for r, p in zip(kept.rotation_cells, kept.position_cells, strict=True)} <= {
+        (int(r), *map(int, p)) for r, p in zip(earlier.rotation_cells, earlier.position_cells, strict=True)}
+    assert len(kept) < len(earlier)  # the tenth tap removes poses
     assert first.solution.contains(cell.truth.base_T_cad)
     quick = quick_check(cell.fixture, base_p_taps[:10], BALL_DIAMETER_M, SAMPLE_BOUND_M, previous=first)
-    assert len(quick.solution.tree.levels) >= depth and len(first.solution.tree.levels) == depth  # first kept
-    assert quick.solution.contains(cell.truth.base_T_cad)
+    from_before = quick_check(cell.fixture, base_p_taps[:10], BALL_DIAMETER_M, SAMPLE_BOUND_M, previous=before)
+    assert len(quick.solution.cells) == len(from_before.solution.cells) and len(quick.solution.tree.levels) >= depth
+    assert quick.filtered_from is None and quick.solution.contains(cell.truth.base_T_cad)
     scratch = quick_check(cell.fixture, base_p_taps[:10], BALL_DIAMETER_M, SAMPLE_BOUND_M)
     assert quick.solution.cells.rotation_level == scratch.solution.cells.rotation_level
+
+
+def test_a_first_look_after_a_first_look_filters_the_same_full_search(tapped):
+    """A tap while the quick check still runs cancels it: the next first look goes on from the search the last
+    first look filtered, with both new taps."""
+    cell, base_p_taps = tapped
+    before = quick_check(cell.fixture, base_p_taps[:9], BALL_DIAMETER_M, SAMPLE_BOUND_M)
+    first = first_look(cell.fixture, base_p_taps[:10], BALL_DIAMETER_M, SAMPLE_BOUND_M, previous=before)
+    second = first_look(cell.fixture, base_p_taps[:11], BALL_DIAMETER_M, SAMPLE_BOUND_M, previous=first)
+    assert second.filtered_from is before and second.solution.tree.final.low_m.shape[1] == 11
+    assert len(second.solution.cells) <= len(first.solution.cells)
+    assert second.solution.contains(cell.truth.base_T_cad)
 
 
 @pytest.mark.slow

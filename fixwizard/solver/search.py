@@ -402,6 +402,24 @@ def worth_extending(problem: SearchProblem, previous: SearchTree) -> bool:
                                           >= RESTART_ROOT_SHRINK * previous.final.cells.position_grid.side_m)
 
 
+def _add_taps_to_finest(problem: SearchProblem, new_problem: SearchProblem, previous: SearchTree,
+                        new_taps: np.ndarray, started: float, progress: Callable[[SearchProgress], None] | None,
+                        cancel: threading.Event | None) -> SearchTree:
+    """``previous`` with its finest level filtered against ``new_problem``'s taps (the taps of ``problem`` it was
+    not searched with), every cell from the lattice and exact queries (no parent's intervals: the level above
+    is not filtered against them)."""
+    final = previous.final
+    if len(final) == 0:
+        return previous
+    known = final.low_m.shape[1]
+    alive, new = _filter(new_problem, final.frames, None, new_taps, cancel)
+    kept = Survivors(new.frames, new.rotated_positions, np.hstack([final.low_m[alive], new.low_m]),
+                     np.hstack([final.high_m[alive], new.high_m]), np.hstack([final.faces[alive], new.faces]),
+                     np.concatenate([known + new.tap_order, final.tap_order]), final.parent_index[alive])
+    _report(progress, len(final), kept, started, final=True)
+    return SearchTree(previous.levels[:-1] + [kept], previous.evaluated, previous.spent)
+
+
 def add_taps(problem: SearchProblem, previous: SearchTree, max_cells: float = 1e7,
              progress: Callable[[SearchProgress], None] | None = None,
              cancel: threading.Event | None = None, descent: Descent = "thorough") -> SearchTree:
@@ -411,12 +429,15 @@ def add_taps(problem: SearchProblem, previous: SearchTree, max_cells: float = 1e
     still survives are filtered against the new taps alone (intervals of those taps only, until the finest
     level takes the previous intervals beside them). With fewer survivors, the finest level may then be
     split further within the cell budget: the same set a search from scratch reaches, for a fraction of the
-    work.
+    work. ``no_deeper`` filters the finest level alone (the levels above stay as they were: they hold every
+    pose still, and more), for an answer in a fraction of the time where the coarse levels are large.
     """
     started = time.perf_counter()
     known = previous.final.low_m.shape[1]
     new_problem = replace(problem, base_p_taps=problem.base_p_taps[known:])
     new_taps = np.arange(len(new_problem.base_p_taps))
+    if descent == "no_deeper":
+        return _add_taps_to_finest(problem, new_problem, previous, new_taps, started, progress, cancel)
     levels: list[Survivors] = []
     level_alive = np.zeros(0, bool)
     for depth, level in enumerate(previous.levels):

@@ -47,6 +47,8 @@ class LiveCheck:
     tap_count: int
     refined: bool = False  # the bounds come from the full solve's hull refinement
     rough: bool = False  # the first look: bounds straight from the search's cells, a rough estimate
+    # a first look that filtered this earlier check's finest level alone: later checks go on from this one's search
+    filtered_from: "LiveCheck | None" = None
 
     @property
     def verdict(self) -> Status:
@@ -104,6 +106,7 @@ def quick_check(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: floa
     base_p_taps = np.asarray(base_p_taps, float).reshape(-1, 3)
     if len(base_p_taps) < MIN_TAPS:
         return None
+    previous = _searched(previous)
     solution = solve(fixture, base_p_taps, ball_diameter_m, sample_bound_m, max_cells=max_cells, cancel=cancel,
                      max_samples=max_samples, previous=None if previous is None else previous.solution,
                      hull_cells=hull_cells, descent=descent, progress=progress, stage=stage)
@@ -114,13 +117,20 @@ def first_look(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float
                cancel: threading.Event | None = None, previous: LiveCheck | None = None,
                progress: Callable[[SearchProgress], None] | None = None,
                stage: Stage | None = None) -> LiveCheck | None:
-    """``quick_check`` that goes no deeper than the ``previous`` check's search (the new taps filter its set; from
-    scratch, as deep as a quick check), without hull refinement and with a rough estimate (``FIRST_LOOK_SAMPLES``):
-    the verdict and bounds straight from the cells (guaranteed, looser), shown first."""
+    """``quick_check`` that goes no deeper than the ``previous`` check's search (the new taps filter its finest
+    level; from scratch, as deep as a quick check), without hull refinement and with a rough estimate
+    (``FIRST_LOOK_SAMPLES``): the verdict and bounds straight from the cells (guaranteed, looser), shown first.
+    Checks after it go on from the search it filtered (``LiveCheck.filtered_from``)."""
     check = quick_check(fixture, base_p_taps, ball_diameter_m, sample_bound_m, cancel, previous=previous,
                         progress=progress, stage=stage, hull_cells=0.0, max_samples=FIRST_LOOK_SAMPLES,
                         descent="no_deeper")
-    return None if check is None else replace(check, rough=True)
+    return None if check is None else replace(check, rough=True, filtered_from=_searched(previous))
+
+
+def _searched(check: LiveCheck | None) -> LiveCheck | None:
+    """The check whose search tree a new check goes on from: a first look's tree is that of the check it filtered
+    at the finest level only (its coarser levels were not filtered against its new taps)."""
+    return check.filtered_from if check is not None and check.filtered_from is not None else check
 
 
 def refine_check(fixture: Fixture, check: LiveCheck, cancel: threading.Event | None = None,
