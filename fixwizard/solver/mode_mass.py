@@ -140,21 +140,25 @@ class ModeLikelihood:
 
 
 def mode_shares(fixture: Fixture, base_p_taps: np.ndarray, ball_radius_m: float, sigma_m: float,
-                sample_bound_m: float, modes: list[ModeLikelihood], rng: np.random.Generator) -> np.ndarray:
+                sample_bound_m: float, modes: list[ModeLikelihood], rng: np.random.Generator,
+                rough: bool = False) -> np.ndarray:
     """Each mode's probability (sum 1): its peak's share of the likelihood mass.
 
     A mode's peak is looked for from ``MASS_STARTS`` of its samples over all modes (at least 2 and at most 8
     per mode): half its most likely ones, half drawn at random, because in a coarse mode the most likely
     samples can all lie in the basin of a lesser peak. Then the best peak is carried to every mode with a
     lesser one by the fixture's symmetry, if it has one (surface matched within the sample bound) and the
-    carried pose lies in that mode.
+    carried pose lies in that mode. ``rough`` (a set the taps do not pin down, whose modes span centimetres and
+    whose shares no one acts on): from each mode's most likely sample only, nothing carried.
     """
     if len(modes) == 1:
         return np.ones(1)
     oracle, radius_m = fixture.oracle, fixture.radius_m
-    starts = min(MAX_STARTS_PER_MODE, max(MIN_STARTS_PER_MODE, MASS_STARTS // len(modes)))
+    starts = 1 if rough else min(MAX_STARTS_PER_MODE, max(MIN_STARTS_PER_MODE, MASS_STARTS // len(modes)))
     peaks = [mode_peak(oracle, base_p_taps, ball_radius_m, sigma_m, _starts(mode.samples, starts, rng), radius_m,
                        mode.extent_m) for mode in modes]
+    if rough:
+        return shares_of([peak.log_mass for peak in peaks])
     best = max(peaks, key=lambda peak: peak.log_mass)
     fix_p_surface = trimesh.sample.sample_surface(fixture.mesh, SYMMETRY_POINTS, seed=0)[0] - fixture.cad_p_center
     for index, (mode, peak) in enumerate(zip(modes, peaks, strict=True)):

@@ -49,7 +49,14 @@ from fixwizard.solver.search import (
     search,
     worth_extending,
 )
-from fixwizard.solver.verdict import MIN_INTERVAL_SAMPLES, Status, openness, status_of, undetermined_message
+from fixwizard.solver.verdict import (
+    MIN_INTERVAL_SAMPLES,
+    Status,
+    is_pinned,
+    openness,
+    status_of,
+    undetermined_message,
+)
 
 DEFAULT_MAX_CELLS = 1e7
 # Refining the hull of the set (the cells that decide the bounds) may evaluate HULL_SHARE of the cell budget: 1/10
@@ -291,8 +298,9 @@ def _modes(problem: SearchProblem, survivors: Survivors, likelihood: _Likelihood
     if not found:
         return [], np.zeros(len(cells), bool), None
     stage(SolveStage("masses"))
+    pinned = all(is_pinned(bounds, problem.fixture_radius_m) for bounds, *_ in found)
     shares = mode_shares(likelihood.fixture, problem.base_p_taps, problem.ball_radius_m, likelihood.sigma_m,
-                         problem.sample_bound_m, [mode for *_, mode in found], likelihood.rng)
+                         problem.sample_bound_m, [mode for *_, mode in found], likelihood.rng, rough=not pinned)
     modes = [Mode(float(share), expected_pose(samples, np.ones(len(samples.weights), bool), fix_T_cad), bounds,
                   len(rows))
              for share, (bounds, samples, rows, _) in zip(shares, found, strict=True)]
