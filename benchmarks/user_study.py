@@ -26,9 +26,11 @@ REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data" / "matlab-logo"
 RUNS = ("student_1", "student_2", "student_3", "expert")
 REFERENCE = {"student_1": (3.30, 2.65), "student_2": (2.71, 1.61), "student_3": (3.01, 4.05), "expert": (1.59, 1.16)}
-# runs the CLI and reports its own peak memory on the last line of stderr
-WRAPPER = ("import resource, sys\nfrom fixwizard.cli import main\ncode = main(sys.argv[1:])\n"
-           "print('MAXRSS_KB', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)\nsys.exit(code)")
+# runs the CLI and reports its own peak memory on the last line of stderr: the high-water mark of its own memory
+# since it started (VmHWM; ru_maxrss would count the memory of the process that started it, carried over the fork)
+WRAPPER = ("import sys\nfrom fixwizard.cli import main\ncode = main(sys.argv[1:])\n"
+           "hwm = open('/proc/self/status').read().split('VmHWM:')[1].split()[0]\n"
+           "print('MAXRSS_KB', hwm, file=sys.stderr)\nsys.exit(code)")
 
 
 def write_points(folder: Path) -> dict[str, Path]:
