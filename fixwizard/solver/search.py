@@ -402,12 +402,12 @@ def worth_extending(problem: SearchProblem, previous: SearchTree) -> bool:
                                           >= RESTART_ROOT_SHRINK * previous.final.cells.position_grid.side_m)
 
 
-def _add_taps_to_finest(problem: SearchProblem, new_problem: SearchProblem, previous: SearchTree,
-                        new_taps: np.ndarray, started: float, progress: Callable[[SearchProgress], None] | None,
+def _add_taps_to_finest(new_problem: SearchProblem, previous: SearchTree, new_taps: np.ndarray, started: float,
+                        progress: Callable[[SearchProgress], None] | None,
                         cancel: threading.Event | None) -> SearchTree:
-    """``previous`` with its finest level filtered against ``new_problem``'s taps (the taps of ``problem`` it was
-    not searched with), every cell from the lattice and exact queries (no parent's intervals: the level above
-    is not filtered against them)."""
+    """``previous`` with its finest level filtered against ``new_problem``'s taps (those it was not searched with),
+    every cell from the lattice and exact queries (no parent's intervals: the level above is not filtered against
+    them)."""
     final = previous.final
     if len(final) == 0:
         return previous
@@ -437,7 +437,7 @@ def add_taps(problem: SearchProblem, previous: SearchTree, max_cells: float = 1e
     new_problem = replace(problem, base_p_taps=problem.base_p_taps[known:])
     new_taps = np.arange(len(new_problem.base_p_taps))
     if descent == "no_deeper":
-        return _add_taps_to_finest(problem, new_problem, previous, new_taps, started, progress, cancel)
+        return _add_taps_to_finest(new_problem, previous, new_taps, started, progress, cancel)
     levels: list[Survivors] = []
     level_alive = np.zeros(0, bool)
     for depth, level in enumerate(previous.levels):

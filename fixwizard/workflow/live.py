@@ -47,7 +47,7 @@ class LiveCheck:
     tap_count: int
     refined: bool = False  # the bounds come from the full solve's hull refinement
     rough: bool = False  # the first look: bounds straight from the search's cells, a rough estimate
-    # a first look that filtered this earlier check's finest level alone: later checks go on from this one's search
+    # a first look's: the earlier check whose finest level it filtered alone; later checks go on from that search
     filtered_from: "LiveCheck | None" = None
 
     @property
