@@ -32,6 +32,8 @@ ROBUST_SCALE = 3.0
 MASS_STARTS = 24
 MIN_STARTS_PER_MODE = 2
 MAX_STARTS_PER_MODE = 8
+# Residual evaluations per fit of a rough share: most fits end within it; a coarse mode's robust fit can take 600
+ROUGH_FIT_EVALUATIONS = 60
 SYMMETRY_POINTS = 100  # surface points a symmetry of the fixture must carry onto the surface
 CARRY_WITHIN = 0.1  # a mode whose own peak is this close to the best one's (in log mass) keeps it
 
@@ -57,18 +59,18 @@ class Peak:
 
 
 def _fit(residuals: Callable[[np.ndarray], np.ndarray], batch: Callable[[np.ndarray], np.ndarray],
-         extent_m: float, robust: bool) -> OptimizeResult:
+         extent_m: float, robust: bool, max_evaluations: int | None = None) -> OptimizeResult:
     """Least squares over a 6-vector step within ``extent_m``; ``batch`` gives the residuals at several steps
     (K, 6) in one query, for the central-difference Jacobian (least_squares' own steps are relative to x,
     which is small here). ``robust``: a soft-L1 fit first, so that a point held on the wrong face does not pin
-    the fit."""
+    the fit. ``max_evaluations``: of the residuals per fit (None: least_squares' own limit)."""
     offsets = DIFFERENCE_STEP_M * np.vstack([np.eye(6), -np.eye(6)])
 
     def jacobian(step: np.ndarray) -> np.ndarray:
         shifted = batch(step + offsets)
         return (shifted[:6] - shifted[6:]).T / (2.0 * DIFFERENCE_STEP_M)
 
-    options = {"jac": jacobian, "bounds": (-extent_m, extent_m), "x_scale": extent_m}
+    options = {"jac": jacobian, "bounds": (-extent_m, extent_m), "x_scale": extent_m, "max_nfev": max_evaluations}
     start = np.zeros(6)
     if robust:
         start = least_squares(residuals, start, loss="soft_l1", f_scale=ROBUST_SCALE, **options).x
@@ -81,12 +83,12 @@ def _perturbed(base_T_fix: np.ndarray, step: np.ndarray, radius_m: float) -> np.
 
 
 def laplace_peak(oracle: DistanceOracle, base_p_taps: np.ndarray, ball_radius_m: float, sigma_m: float,
-                 base_T_fix: np.ndarray, radius_m: float, extent_m: float) -> Peak:
+                 base_T_fix: np.ndarray, radius_m: float, extent_m: float, max_evaluations: int | None = None) -> Peak:
     """The likelihood peak nearest a pose, within ``extent_m`` (the mode's largest point displacement) of it.
 
     Its mass is ``exp(-chi2 / 2) / sqrt(det H)`` with the Gauss-Newton Hessian ``H = J^T J``. ``H`` gains
     ``1 / extent_m^2`` on its diagonal: directions the taps leave free are limited by the mode's extent instead
-    of making the integral infinite.
+    of making the integral infinite. ``max_evaluations``: as for ``_fit`` (a peak not reached is a lesser mass).
     """
     base_R_fix = Rotation.from_matrix(base_T_fix[:3, :3])
 
@@ -95,7 +97,7 @@ def laplace_peak(oracle: DistanceOracle, base_p_taps: np.ndarray, ball_radius_m:
                           steps)
 
     extent_m = max(extent_m, DIFFERENCE_STEP_M * 10.0)
-    fit = _fit(lambda step: batch(step[None])[0], batch, extent_m, robust=True)
+    fit = _fit(lambda step: batch(step[None])[0], batch, extent_m, robust=True, max_evaluations=max_evaluations)
     hessian = fit.jac.T @ fit.jac + np.eye(6) / extent_m ** 2
     return Peak(float(-0.5 * np.sum(fit.fun ** 2) - 0.5 * np.linalg.slogdet(hessian)[1]),
                 _perturbed(base_T_fix, fit.x, radius_m))
@@ -149,16 +151,18 @@ def mode_shares(fixture: Fixture, base_p_taps: np.ndarray, ball_radius_m: float,
     samples can all lie in the basin of a lesser peak. Then the best peak is carried to every mode with a
     lesser one by the fixture's symmetry, if it has one (surface matched within the sample bound) and the
     carried pose lies in that mode. ``rough`` (a set the taps do not pin down, whose modes span centimetres and
-    whose shares no one acts on): from each mode's most likely sample only, nothing carried.
+    whose shares no one acts on): from each mode's most likely sample only, ``ROUGH_FIT_EVALUATIONS`` at most,
+    nothing carried.
     """
     if len(modes) == 1:
         return np.ones(1)
     oracle, radius_m = fixture.oracle, fixture.radius_m
-    starts = 1 if rough else min(MAX_STARTS_PER_MODE, max(MIN_STARTS_PER_MODE, MASS_STARTS // len(modes)))
+    if rough:
+        return shares_of([laplace_peak(oracle, base_p_taps, ball_radius_m, sigma_m, _starts(mode.samples, 1, rng)[0],
+                                       radius_m, mode.extent_m, ROUGH_FIT_EVALUATIONS).log_mass for mode in modes])
+    starts = min(MAX_STARTS_PER_MODE, max(MIN_STARTS_PER_MODE, MASS_STARTS // len(modes)))
     peaks = [mode_peak(oracle, base_p_taps, ball_radius_m, sigma_m, _starts(mode.samples, starts, rng), radius_m,
                        mode.extent_m) for mode in modes]
-    if rough:
-        return shares_of([peak.log_mass for peak in peaks])
     best = max(peaks, key=lambda peak: peak.log_mass)
     fix_p_surface = trimesh.sample.sample_surface(fixture.mesh, SYMMETRY_POINTS, seed=0)[0] - fixture.cad_p_center
     for index, (mode, peak) in enumerate(zip(modes, peaks, strict=True)):
