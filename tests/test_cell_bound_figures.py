@@ -61,7 +61,7 @@ def poses_in(cells: CellSet, index: int, count: int, rng: np.random.Generator) -
     return rotations, cells.positions_m()[index] + offsets * side_m
 
 
-@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("seed", range(12))  # seeds 5 and 11 fail with the cover's radii left out of the bound
 def test_every_pose_of_a_cell_lies_within_its_figures_of_the_centre(seed):
     rng, cells, centre, fix_p_origin, cover = random_case(seed)
     position, angle, displacement = cell_bound_figures(cells, centre, fix_p_origin, cover)
@@ -72,8 +72,14 @@ def test_every_pose_of_a_cell_lies_within_its_figures_of_the_centre(seed):
         cad_origins = rotations @ fix_p_origin + positions
         assert np.all(np.linalg.norm(cad_origins - centre.cad_origin_m, axis=1) <= position[index])
         assert np.all(rotation_angle_rad(centre_R.T @ rotations) <= angle[index] + 1e-12)
-        moved = (rotations - centre_R) @ points_in(cover, rng).T + (positions - centre_p_fix)[:, :, None]
+        levers, offsets = rotations - centre_R, (positions - centre_p_fix)[:, :, None]
+        moved = levers @ points_in(cover, rng).T + offsets
         assert np.max(np.linalg.norm(moved, axis=1)) <= displacement[index]
+        # and the point of each ball that each pose moves (about) farthest: pushed along the lever's pull
+        pull = np.transpose(levers, (0, 2, 1)) @ (levers @ cover.points_m.T + offsets)
+        farthest = cover.points_m.T + cover.radii_m * pull / np.maximum(np.linalg.norm(pull, axis=1, keepdims=True),
+                                                                       1e-300)
+        assert np.max(np.linalg.norm(levers @ farthest + offsets, axis=1)) <= displacement[index]
 
 
 @pytest.mark.parametrize("seed", range(6))

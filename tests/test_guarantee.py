@@ -75,6 +75,24 @@ def test_true_pose_is_inside_the_guaranteed_set_and_bounds(name, seed):
     assert largest_vertex_displacement_m(fixture, base_T_cad, centre) <= solution.bounds.max_point_displacement_m
 
 
+@pytest.mark.parametrize("seed", trial_seeds(6))
+@pytest.mark.parametrize("name", ["l_prism", "polytope", "cylinder"])
+def test_bounds_over_a_cover_of_balls_still_hold_every_point_of_the_fixture(name, seed, monkeypatch):
+    """A hull of thousands of vertices (a finely tessellated CAD export) is covered by balls (radii above zero)
+    instead: with so few balls allowed that every shape's hull takes that path, the full solve still holds the
+    true pose and every vertex's displacement."""
+    import fixwizard.geometry.hull_cover as hull_cover
+
+    monkeypatch.setattr(hull_cover, "MAX_POINTS", 3)
+    _, base_T_cad, taps, ball_diameter, sample_bound, max_cells = random_case(name, seed)
+    fixture = as_fixture(name)  # its own oracle, whose cover is made with the small limit
+    assert np.all(fixture.oracle.hull_cover.radii_m > 0.0)
+    solution = solve(fixture, taps, ball_diameter, sample_bound, max_cells=max_cells, max_samples=500, seed=seed)
+    assert solution.contains(base_T_cad)
+    centre = solution.bounds.base_T_cad_center
+    assert largest_vertex_displacement_m(fixture, base_T_cad, centre) <= solution.bounds.max_point_displacement_m
+
+
 DESCENT_LEVELS = 18
 
 
