@@ -121,10 +121,11 @@ def first_look(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float
     level; from scratch, as deep as a quick check), without hull refinement and with a rough estimate
     (``FIRST_LOOK_SAMPLES``): the verdict and bounds straight from the cells (guaranteed, looser), shown first.
     Checks after it go on from the search it filtered (``LiveCheck.filtered_from``)."""
-    check = quick_check(fixture, base_p_taps, ball_diameter_m, sample_bound_m, cancel, previous=previous,
+    searched = _searched(previous)
+    check = quick_check(fixture, base_p_taps, ball_diameter_m, sample_bound_m, cancel, previous=searched,
                         progress=progress, stage=stage, hull_cells=0.0, max_samples=FIRST_LOOK_SAMPLES,
                         descent="no_deeper")
-    return None if check is None else replace(check, rough=True, filtered_from=_searched(previous))
+    return None if check is None else replace(check, rough=True, filtered_from=searched)
 
 
 def _searched(check: LiveCheck | None) -> LiveCheck | None:
