@@ -48,6 +48,21 @@ def cone() -> trimesh.Trimesh:
     return trimesh.creation.cone(radius=0.04, height=0.07, sections=48)
 
 
+def two_boss_bar(boss_spacing_m: float = 0.05) -> trimesh.Trimesh:
+    """A 300 x 20 x 30 mm bar (x, y, z) with two identical 10 x 10 mm bosses on its top (y = 20 mm), at x = 20 mm and
+    x = 20 mm + ``boss_spacing_m``: taps on one boss fit the other as well."""
+    first, second = 0.02, 0.02 + boss_spacing_m
+    outline = np.array([[-0.15, 0], [0.15, 0], [0.15, 0.02], [second + 0.005, 0.02], [second + 0.005, 0.03],
+                        [second - 0.005, 0.03], [second - 0.005, 0.02], [first + 0.005, 0.02], [first + 0.005, 0.03],
+                        [first - 0.005, 0.03], [first - 0.005, 0.02], [-0.15, 0.02]])
+    faces = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 6], [0, 6, 7], [0, 7, 10], [0, 10, 11], [3, 4, 5], [3, 5, 6],
+                      [7, 8, 9], [7, 9, 10]])
+    mesh = trimesh.creation.extrude_triangulation(outline, faces, height=0.03)
+    if mesh.volume < 0:
+        mesh.invert()
+    return mesh
+
+
 SHAPES = {"l_prism": l_prism, "polytope": lambda: random_polytope(7), "cube": cube, "brick": brick,
           "triangular_prism": triangular_prism, "cylinder": cylinder, "cone": cone}
 

@@ -27,7 +27,7 @@ from fixwizard.solver.search import (
 )
 from fixwizard.solver.solve import solve
 from fixwizard.synthetic import bounded_noise, touching_ball_centres, touching_ball_contacts
-from shapes import SHAPES, as_fixture
+from shapes import SHAPES, as_fixture, two_boss_bar
 
 TRIALS_PER_SHAPE = 30
 
@@ -155,6 +155,43 @@ def test_discrete_symmetry_gives_one_mode_per_symmetric_pose(name, symmetries, m
     assert solution.intervals[0].rotation_rad > np.radians(90)  # 95 % of the mass spans the symmetric poses
     assert any(warning.code == "ambiguous" and f"{symmetries} distinct poses" in warning.message
                for warning in solution.warnings)
+    assert solution.contains(base_T_cad)
+
+
+def on_face(rng: np.random.Generator, count: int, x_m: tuple, y_m: tuple, z_m: tuple, normal: tuple,
+            radius_m: float) -> np.ndarray:
+    """Centres (count, 3) of balls of ``radius_m`` touching a face at random points of a box (x, y and z ranges, m)
+    whose outward normal is ``normal``."""
+    points = np.column_stack([rng.uniform(*x_m, count), rng.uniform(*y_m, count), rng.uniform(*z_m, count)])
+    return points + radius_m * np.asarray(normal, float)
+
+
+@pytest.mark.slow
+def test_taps_on_one_of_two_identical_bosses_give_two_modes_a_boss_spacing_apart():
+    """Taps on one boss of a bar with two, on the bar's top left of both, its bottom and its sides (never its ends):
+    the pose shifted by the bosses' 50 mm spacing explains them as well. Grouped by rotation alone, both made one
+    mode, called unique (its 27 mm bound is under a quarter of the 151 mm radius) or, when no pose near its middle
+    explained the taps, undetermined with a hint to check the sample bound; they are two modes, each pinned down."""
+    fixture = as_fixture("two_boss_bar", two_boss_bar(0.05))
+    rng = np.random.default_rng(0)
+    radius = 0.0015
+    cad_p_taps = np.vstack([
+        on_face(rng, 2, (0.017, 0.023), (0.03, 0.03), (0.003, 0.027), (0, 1, 0), radius),  # the first boss's top
+        on_face(rng, 2, (0.015, 0.015), (0.022, 0.028), (0.003, 0.027), (-1, 0, 0), radius),  # and its sides
+        on_face(rng, 2, (0.025, 0.025), (0.022, 0.028), (0.003, 0.027), (1, 0, 0), radius),
+        on_face(rng, 3, (-0.14, -0.04), (0.02, 0.02), (0.003, 0.027), (0, 1, 0), radius),  # the top left of both
+        on_face(rng, 3, (-0.14, 0.09), (0.0, 0.0), (0.003, 0.027), (0, -1, 0), radius),  # the bottom
+        on_face(rng, 2, (-0.14, 0.09), (0.003, 0.017), (0.0, 0.0), (0, 0, -1), radius),  # the sides
+        on_face(rng, 2, (-0.14, 0.09), (0.003, 0.017), (0.03, 0.03), (0, 0, 1), radius)])
+    base_T_cad = make_transform(Rotation.random(random_state=0), [0.5, 0.1, 0.2])
+    taps = transform_points(base_T_cad, cad_p_taps) + bounded_noise(len(cad_p_taps), 0.0005, rng)
+    solution = solve(fixture, taps, 2 * radius, 0.0005, max_cells=1e7, max_samples=5000)
+    assert solution.status == "ambiguous"
+    assert len(solution.modes) == 2
+    shifts = sorted(float((invert(base_T_cad) @ mode.base_T_cad)[0, 3]) for mode in solution.modes)
+    assert shifts == pytest.approx([-0.05, 0.0], abs=0.002)  # in the CAD frame: along the bar, by the spacing
+    assert [mode.probability for mode in solution.modes] == pytest.approx([0.5, 0.5], abs=0.05)
+    assert any(warning.code == "ambiguous" and "50.0 mm" in warning.message for warning in solution.warnings)
     assert solution.contains(base_T_cad)
 
 

@@ -34,7 +34,7 @@ from fixwizard.solver.estimates import (
     sample_cells,
 )
 from fixwizard.solver.mode_mass import ModeLikelihood, mode_shares
-from fixwizard.solver.modes import rotation_modes
+from fixwizard.solver.modes import mode_labels
 from fixwizard.solver.reach import certified_start
 from fixwizard.solver.refine import refined_largest_figures
 from fixwizard.solver.resources import available_memory_bytes, largest_cell_budget, search_peak_bytes
@@ -266,27 +266,27 @@ def _modes(problem: SearchProblem, survivors: Survivors, likelihood: _Likelihood
     sampling before its next round.
     """
     cells = survivors.cells
-    labels = rotation_modes(cells)
-    mode_labels = np.unique(labels)
-    per_mode_samples = max(1, likelihood.max_samples // len(mode_labels))
+    labels = mode_labels(cells, problem.fixture_radius_m)
+    distinct = np.unique(labels)
+    per_mode_samples = max(1, likelihood.max_samples // len(distinct))
     oracle = likelihood.fixture.oracle
     found = []
     sampler = ThreadPoolExecutor(max_workers=1, thread_name_prefix="fixwizard-samples")
     try:
-        for number, label in enumerate(mode_labels, start=1):
-            stage(SolveStage("bounds", number, len(mode_labels)))
-            mode_survivors = survivors if len(mode_labels) == 1 else survivors.subset(labels == label)
+        for number, label in enumerate(distinct, start=1):
+            stage(SolveStage("bounds", number, len(distinct)))
+            mode_survivors = survivors if len(distinct) == 1 else survivors.subset(labels == label)
             mode_cells = mode_survivors.cells
             sampling = sampler.submit(sample_cells, mode_cells, oracle, problem.base_p_taps, problem.ball_radius_m,
                                       likelihood.sigma_m, per_mode_samples, likelihood.rng, problem.fixture_radius_m,
                                       cancel)
             centre = bound_centre(mode_cells, fix_p_origin, rotation_center(mode_cells.distinct_rotations()[0]))
             def refining(round_: int, mode: int = number) -> None:
-                stage(SolveStage("bounds", mode, len(mode_labels), round_))
+                stage(SolveStage("bounds", mode, len(distinct), round_))
 
             largest = refined_largest_figures(problem, mode_survivors, centre, fix_p_origin,
-                                              refine_budget / len(mode_labels), cancel, refining)
-            stage(SolveStage("samples", number, len(mode_labels)))
+                                              refine_budget / len(distinct), cancel, refining)
+            stage(SolveStage("samples", number, len(distinct)))
             samples = sampling.result()
             if largest is None:
                 continue
@@ -411,9 +411,9 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
         distance, angle = _mode_separation(modes)
         warnings.append(SolveWarning(
             "ambiguous",
-            f"{len(modes)} distinct poses explain the taps (a symmetric fixture or taps on too few features); they "
-            f"lie up to {distance * 1e3:.1f} mm and {np.degrees(angle):.1f} deg apart. The pose shown is the most "
-            f"probable ({top.probability:.0%}); tap features that tell the poses apart."))
+            f"{len(modes)} distinct poses explain the taps (a symmetric fixture, a repeated feature or taps on too few "
+            f"features); they lie up to {distance * 1e3:.1f} mm and {np.degrees(angle):.1f} deg apart. The pose "
+            f"shown is the most probable ({top.probability:.0%}); tap features that tell the poses apart."))
     if status == "undetermined" and not unexplained:
         widest = max(modes, key=lambda mode: mode.bounds.max_point_displacement_m)
         why = openness(fixture, base_p_taps, sample_bound_m, cells, widest.bounds, top.base_T_cad)

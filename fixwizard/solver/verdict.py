@@ -8,6 +8,7 @@ The rule (``status_of``), for a set that is not empty:
   the fixture moves its farthest point by at least ``2 sin(15 deg) r = 0.52 r``: a pinned-down mode cannot hide
   two poses related by a rotational symmetry of order 12 or less (nor any turn of 30 degrees or more). It also
   bounds the rotation (``r * 2 sin(gamma / 2) <= r / 4``: under 14.4 degrees) and the position (under ``r / 4``).
+  Poses apart in position at one rotation (a repeated feature) are separate modes already (``modes``).
 - ``unique``: one mode, pinned down;
 - ``ambiguous``: several modes, each pinned down (distinct poses that each explain the taps);
 - ``undetermined``: some mode is not pinned down: more taps (on other faces), or a larger cell budget where
