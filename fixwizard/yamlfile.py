@@ -33,8 +33,11 @@ _Loader.add_constructor("tag:yaml.org,2002:int", _int_or_infinity)
 
 def parse_yaml(text: str) -> Any:
     """The YAML document in ``text``, as ``yaml.safe_load`` (raises ``yaml.YAMLError``) reads it but for integers
-    beyond any float (+-inf)."""
-    return yaml.load(text, Loader=_Loader)  # a SafeLoader subclass: no arbitrary objects
+    beyond any float (+-inf), and a ``yaml.YAMLError`` for lists or mappings nested too deeply to read."""
+    try:
+        return yaml.load(text, Loader=_Loader)  # a SafeLoader subclass: no arbitrary objects
+    except RecursionError:
+        raise yaml.YAMLError("lists or mappings nested too deeply to read (no fixwizard file nests so)") from None
 
 
 def load_document(path: Path, schema: str | tuple[str, ...], what: str, error: type[InputError] = InputError,

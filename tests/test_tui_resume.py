@@ -2,10 +2,12 @@
 it opened; every refusal is explained on screen and leaves the operator on the start screen."""
 
 import asyncio
+import json
 import os
 import shutil
 import subprocess
 import sys
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -97,6 +99,40 @@ def damaged_calibration(path: Path) -> str:
     return str(path)
 
 
+def not_a_number_in_a_tap(path: Path) -> str:
+    """A tap line with NaN (which JSON readers take, and no record holds), its checksum made to match."""
+    record = json.loads(path.read_bytes().splitlines()[2])
+    record["base_T_tcp_ur"][0] = float("nan")
+    damage_line(path, 3, with_checksum(record))
+    return str(path)
+
+
+def deeply_nested_line(path: Path) -> str:
+    damage_line(path, 3, b"[" * 100_000 + b"\n")
+    return str(path)
+
+
+def header_naming_no_fixture(path: Path) -> str:
+    """A header that checks out but whose fixture is a word, not the mesh's path, units and hash."""
+    header = json.loads(path.read_bytes().splitlines()[0])
+    header["fixture"] = "bracket"
+    damage_line(path, 1, with_checksum(header))
+    return str(path)
+
+
+def deeply_nested_calibration(path: Path) -> str:
+    (path.parents[1] / "calibrations" / "example_matlab_logo.yaml").write_text("[" * 100_000)
+    return str(path)
+
+
+def with_checksum(record: dict) -> bytes:
+    """A journal line holding ``record`` under a checksum that matches (the journal's own encoding)."""
+    record.pop("crc", None)
+    body = json.dumps(record, sort_keys=True, separators=(",", ":"))
+    record["crc"] = f"{zlib.crc32(body.encode()):08x}"
+    return (json.dumps(record, sort_keys=True, separators=(",", ":")) + "\n").encode()
+
+
 def no_unfinished_session(path: Path) -> str:
     with SamplingSession.open(path) as session:
         session.close(report="done.yaml")
@@ -109,6 +145,10 @@ def no_unfinished_session(path: Path) -> str:
     (checksum_mismatch, "is damaged (checksum or JSON)"),
     (deleted_calibration, "example_matlab_logo.yaml"),
     (damaged_calibration, "example_matlab_logo.yaml"),
+    (not_a_number_in_a_tap, "line 3 of the session"),
+    (deeply_nested_line, "line 3 of the session"),
+    (header_naming_no_fixture, "was not started by the wizard"),
+    (deeply_nested_calibration, "nested too deeply to read"),
     (no_unfinished_session, "there is no unfinished session in"),
 ])
 def test_every_refused_resume_is_explained_on_the_start_screen(tmp_path, spoil, reason):
@@ -171,3 +211,16 @@ def test_the_wizard_without_a_terminal_says_it_needs_one(tmp_path):
     assert result.returncode == 1
     assert "the wizard needs an interactive terminal" in result.stderr.decode()
     assert "Traceback" not in result.stderr.decode() and not list(tmp_path.iterdir())
+
+
+def test_a_journal_with_a_not_a_number_tap_does_not_stop_the_wizard_starting(tmp_path):
+    """The start screen lists the unfinished sessions as it opens: one damaged journal does not stop the wizard."""
+    not_a_number_in_a_tap(recorded_session(tmp_path))
+
+    async def run():
+        app = FixwizardApp(simulated_cell(3, pace_s=0.0, folder=tmp_path))
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await until(pilot, lambda: isinstance(app.screen, StartScreen) and app.screen.is_mounted)
+            await pilot.pause()
+            assert isinstance(app.screen, StartScreen)
+    asyncio.run(run())

@@ -123,14 +123,19 @@ def _decode_own(line: bytes) -> dict:
     return record
 
 
+def _no_constant(name: str) -> float:
+    raise ValueError(f"{name} is no number a journal holds")
+
+
 def _decode(line: bytes) -> dict | None:
-    """The record of a complete line, or None when it does not parse or its checksum does not match."""
+    """The record of a complete line, or None when it does not parse (NaN and infinities included, which no
+    record holds, and JSON nested too deeply to read) or its checksum does not match."""
     try:
-        record = json.loads(line)
+        record = json.loads(line, parse_constant=_no_constant)
         crc = record.pop("crc")
-    except (ValueError, TypeError, AttributeError, KeyError):
+        return record if crc == f"{zlib.crc32(_canonical(record).encode()):08x}" else None
+    except (ValueError, TypeError, AttributeError, KeyError, RecursionError):
         return None
-    return record if crc == f"{zlib.crc32(_canonical(record).encode()):08x}" else None
 
 
 def _after_torn(line: bytes) -> tuple[int, dict] | None:

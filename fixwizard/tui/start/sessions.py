@@ -46,7 +46,13 @@ def resume_session(cell: Cell, path: Path) -> Resumed:
         if header.get("robot") != cell.robot_name:
             raise SessionError(f"the session {path.name} was recorded on '{header.get('robot')}', not on "
                                f"'{cell.robot_name}': resume it with that robot, or start a new session")
-        fixture_info, tip_info = header["fixture"], header["tip"]
+        fixture_info, tip_info = header.get("fixture"), header.get("tip")
+        if not (isinstance(fixture_info, dict) and isinstance(tip_info, dict)
+                and all(isinstance(fixture_info.get(key), str) for key in ("path", "units", "sha256"))
+                and isinstance(tip_info.get("calibration"), str)):
+            raise SessionError(f"the session {path.name} was not started by the wizard (its header names no fixture "
+                               "mesh and tip calibration file): solve its points with `fixwizard solve`, or start a "
+                               "new session")
         fixture = load_fixture(fixture_info["path"], fixture_info["units"])
         if fixture.sha256 != fixture_info["sha256"]:
             raise SessionError(f"the mesh {fixture.path} changed since the session {path.name} started: put the "
@@ -57,10 +63,6 @@ def resume_session(cell: Cell, path: Path) -> Resumed:
         except CalibrationFileError as error:
             raise SessionError(f"{error}. The session was recorded with that tip calibration: put it back, or "
                                "start a new session") from error
-    except KeyError as missing:
-        session.release()
-        raise SessionError(f"the session {path.name} was not started by the wizard (its header has no {missing}): "
-                           "solve its points with `fixwizard solve`, or start a new session") from None
     except BaseException:
         session.release()
         raise
