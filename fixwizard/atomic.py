@@ -66,26 +66,25 @@ def same_file(path: Path, other: Path) -> bool:
 
 
 def _check_folder(folder: Path, fix: str) -> None:
-    """A folder that exists takes a small probe file; for a missing one the nearest existing folder must be
-    writable (it is made at write time)."""
+    """The folder, or for a missing one (made at write time) the nearest existing folder, takes a small probe
+    file: it can be written and its disk is not full."""
     existing = folder
     while not existing.exists() and existing != existing.parent:
         existing = existing.parent
     if not existing.is_dir():
         where = "not a folder" if existing == folder else f"so the folder {folder} cannot be made"
         raise InputError(f"{existing} is a file, {where}: {fix}")
-    if existing != folder:
-        if not os.access(existing, os.W_OK | os.X_OK):
-            raise InputError(f"cannot make the folder {folder}: no permission to write in {existing}: {fix}")
-        return
+    if existing != folder and not os.access(existing, os.W_OK | os.X_OK):
+        raise InputError(f"cannot make the folder {folder}: no permission to write in {existing}: {fix}")
+    what = f"write in the folder {folder}" if existing == folder else f"make the folder {folder} in {existing}"
     try:
-        handle, probe = tempfile.mkstemp(prefix=f".fixwizard-probe.{os.getpid()}.", suffix=".tmp", dir=folder)
+        handle, probe = tempfile.mkstemp(prefix=f".fixwizard-probe.{os.getpid()}.", suffix=".tmp", dir=existing)
     except OSError as error:
-        raise InputError(f"cannot write in the folder {folder}: {file_problem(error, folder)}") from error
+        raise InputError(f"cannot {what}: {file_problem(error, existing)}") from error
     try:
         os.write(handle, b"\0" * PROBE_BYTES)
     except OSError as error:
-        raise InputError(f"cannot write in the folder {folder}: {file_problem(error, folder)}") from error
+        raise InputError(f"cannot {what}: {file_problem(error, existing)}") from error
     finally:
         os.close(handle)
         os.unlink(probe)

@@ -47,7 +47,8 @@ def file_problem(error: OSError, path: object = None) -> str:
     if code == errno.EROFS:
         return f"{name or 'the file'} is on a read-only disk; choose a folder on a disk you can write to"
     if code in (errno.EACCES, errno.EPERM):
-        return f"no permission to write {name or 'there'}; choose a folder you can write to"
+        return (f"no permission to read or write {name or 'there'}; check its permissions, or choose a folder you "
+                "can write to")
     if code == errno.ENOENT:
         return f"{name or 'the file'} does not exist; check the path"
     return f"cannot read or write {name or 'the file'}: {error.strerror or error}; check the path and the disk"

@@ -19,6 +19,8 @@ from fixwizard.fixture import MESH_SUFFIXES
 from fixwizard.yamlfile import parse_yaml, yaml_problem
 
 POINTS_FRAME = "base"
+# 1000 taps (the solver's most) take under 100 kB; a larger file is a point cloud, refused before it is parsed.
+MAX_POINTS_FILE_BYTES = 1_000_000
 _NUMBER_START = re.compile(r"\s*[-+]?(?:\d|\.\d|nan|inf)", re.IGNORECASE)
 
 
@@ -27,6 +29,8 @@ def _rows_to_array(rows: Sequence[tuple[str, object]]) -> np.ndarray:
     points = []
     for where, row in rows:
         try:
+            if isinstance(row, bool) or any(isinstance(value, bool) for value in row):  # type: ignore[attr-defined]
+                raise TypeError("true or false is no coordinate")
             values = [float(value) for value in row]  # type: ignore[attr-defined]
         except (TypeError, ValueError):
             raise InputError(f"{where} is not three numbers: {quoted(row)}") from None
@@ -77,6 +81,10 @@ def load_points(path: str | Path) -> np.ndarray:
         raise InputError(f"{path} is a mesh, not a points file (YAML or CSV of the taps): are the arguments in the "
                          "wrong order? (solve MESH POINTS, identify POINTS MESH...)")
     try:
+        size = path.stat().st_size
+        if size > MAX_POINTS_FILE_BYTES:
+            raise InputError(f"{path} holds {size / 1e6:.1f} MB: a points file holds the taps (at most 1000, under "
+                             "100 kB), not a point cloud; give the file of the tapped ball centres")
         text = path.read_text(encoding="utf-8-sig")
     except OSError as error:
         raise InputError(f"cannot read the points file: {file_problem(error, path)}") from error

@@ -42,7 +42,7 @@ from xmlrpc.server import SimpleXMLRPCRequestHandler, SimpleXMLRPCServer
 
 from fixwizard import report
 from fixwizard.atomic import same_file
-from fixwizard.errors import InputError, file_problem
+from fixwizard.errors import InputError, file_problem, quoted
 from fixwizard.workflow.cell_reports import SUFFIXES, CellReports, folder_state, report_files, scan
 from fixwizard.workflow.verify import age_text
 
@@ -51,6 +51,9 @@ REQUEST_TIMEOUT_S = 10.0  # a client that stops sending mid-request is dropped a
 LOG = logging.getLogger("fixwizard.serve")
 # Fault codes a program can tell apart (the text says the same in words).
 NO_SUCH_FIXTURE, NOT_UNIQUE, SIMULATED, TOO_OLD, FROM_THE_FUTURE, BAD_CALL, INTERNAL = 1, 2, 3, 4, 5, 6, 9
+# A log line starts with its time (``LogFormatter``): 2026-12-06 05:59:00,123
+_LOG_LINE = re.compile(rb"\d{4}-\d{2}-\d{2} \d{2}:\d{2}:\d{2},\d{3} ")
+_CONTROL = re.compile(r"[\x00-\x1f\x7f]")  # written escaped in a log line
 _DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*(s|min|h|d)?\s*$")
 _SECONDS = {"s": 1.0, "min": 60.0, "h": 3600.0, "d": 86400.0}
 
@@ -118,7 +121,7 @@ class FixtureService:
         loaded = reports.newest.get(name)
         if loaded is None:
             known = ", ".join(reports.names) or "none yet"
-            raise Refused(NO_SUCH_FIXTURE, f"fixwizard: no report of a fixture named '{name}' in {self.folder} "
+            raise Refused(NO_SUCH_FIXTURE, f"fixwizard: no report of a fixture named {quoted(name)} in {self.folder} "
                           f"(fixtures: {known}); calibrate it, or check the name")
         age_s = self.clock() - loaded.created.timestamp()
         what = f"the newest report of '{name}' ({loaded.path.name})"
@@ -209,7 +212,7 @@ def _logged(service: FixtureService, function: str) -> Callable[..., Any]:
 
     def call(*args: object) -> Any:
         caller = getattr(_CALLER, "address", "?")
-        shown = f"{function}({', '.join(repr(arg) for arg in args)})"
+        shown = f"{function}({', '.join(quoted(arg) for arg in args)})"
         try:
             result = method(*args)
         except xmlrpc.client.Fault as fault:
@@ -260,6 +263,22 @@ def check_log(log: Path, folder: Path) -> None:
     if same_file(target.parent, folder) and target.suffix.lower() in SUFFIXES and not target.name.startswith("."):
         raise InputError(f"the log {log} would be a report file of the reports folder {folder} (a .yaml or .yml "
                          f"file in it), which serve reads as a report: {fix}")
+    if not _empty_or_a_log(target):
+        raise InputError(f"the log {log} is a file that is not a serve log (its first line is no log line); "
+                         f"appending the log to it would change it: {fix}")
+
+
+def _empty_or_a_log(path: Path) -> bool:
+    """Whether ``path`` is not a regular file (missing, or a device such as a terminal), empty, or a file whose
+    first line is a log line (``_LOG_LINE``)."""
+    try:
+        if not path.is_file():
+            return True
+        with path.open("rb") as stream:
+            first = stream.readline(200)
+    except OSError:  # unreadable: LogFile says why when it opens it
+        return True
+    return not first or _LOG_LINE.match(first) is not None
 
 
 class LogFile(logging.FileHandler):
@@ -291,13 +310,22 @@ class LogFile(logging.FileHandler):
                   file=sys.stderr, flush=True)
 
 
+class LogFormatter(logging.Formatter):
+    """One line per message: line breaks and other control characters in it (from a caller's text, or a report's
+    file name) are written escaped, so no caller can forge a log line; a traceback follows on lines of its own."""
+
+    def formatMessage(self, record: logging.LogRecord) -> str:
+        return _CONTROL.sub(lambda match: repr(match.group())[1:-1], super().formatMessage(record))
+
+
+
 def _log_handlers(log: str | None) -> list[logging.Handler]:
     """The handlers of the log: stderr, and the ``--log`` file when given; added to ``LOG``."""
     handlers: list[logging.Handler] = [logging.StreamHandler(sys.stderr)]
     if log:
         handlers.append(LogFile(log))
     for each in handlers:
-        each.setFormatter(logging.Formatter("%(asctime)s %(message)s"))
+        each.setFormatter(LogFormatter("%(asctime)s %(message)s"))
         LOG.addHandler(each)
     LOG.setLevel(logging.INFO)
     return handlers

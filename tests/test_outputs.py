@@ -105,11 +105,12 @@ def test_a_folder_that_cannot_take_the_report_is_found_before_the_solve(demo, ca
     refused(capsys, solve(demo, "-o", str(demo / "blocker" / "report.yaml")), "is a file, not a folder")
 
 
-def test_a_full_disk_is_found_before_the_solve_and_named_as_such(demo, capsys, small_disk):
+@pytest.mark.parametrize("report", ["report.yaml", "new/folders/report.yaml"])
+def test_a_full_disk_is_found_before_the_solve_and_named_as_such(demo, capsys, small_disk, report):
     fill_disk(small_disk)
-    err = refused(capsys, solve(demo, "-o", str(small_disk / "report.yaml")), "is full; free some space")
+    err = refused(capsys, solve(demo, "-o", str(small_disk / report)), "is full; free some space")
     assert "choose a folder you can write to" not in err
-    assert sorted(path.name for path in small_disk.iterdir()) == ["filler"]  # the probe is gone
+    assert sorted(path.name for path in small_disk.iterdir()) == ["filler"]  # the probe is gone, no folder made
 
 
 def test_a_read_only_disk_is_named_as_such(demo, capsys, small_disk):

@@ -132,3 +132,32 @@ def test_semicolons_between_numbers_are_named(tmp_path):
     path.write_text(csv_text([row.replace(",", ";") for row in tap_rows()]))
     with pytest.raises(InputError, match="tap 1 \\(line 1 of .*\\) separates the numbers with ';'"):
         load_points(path)
+
+
+@pytest.mark.parametrize("name", ["taps.yaml", "report.yaml"])
+def test_lists_nested_too_deeply_to_read_are_refused_in_a_short_message(tmp_path, name):
+    path = tmp_path / name
+    path.write_text("points_m: " + "[" * 100_000)
+    read = load_points if name == "taps.yaml" else load_report
+    with pytest.raises(InputError, match="nested too deeply to read") as caught:
+        read(path)
+    assert len(str(caught.value)) < MESSAGE_LIMIT
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".yaml"])
+def test_a_point_cloud_is_refused_by_its_size_before_it_is_read(tmp_path, suffix):
+    cloud = np.random.default_rng(3).uniform(-0.5, 0.5, (60_000, 3))
+    path = tmp_path / f"scan{suffix}"
+    path.write_text(csv_text(tap_rows(cloud)) if suffix == ".csv"
+                    else "points_m:\n" + "".join(f"- [{row}]\n" for row in tap_rows(cloud)))
+    started = time.perf_counter()
+    with pytest.raises(InputError, match=r"holds \d+\.\d MB: a points file holds the taps .* not a point cloud"):
+        load_points(path)
+    assert time.perf_counter() - started < 0.5
+
+
+def test_true_or_false_is_no_coordinate(tmp_path):
+    path = tmp_path / "taps.yaml"
+    path.write_text("frame: base\npoints_m:\n- [0.1, 0.2, 0.3]\n- [0.4, true, 0.2]\n")
+    with pytest.raises(InputError, match="tap 2 in .* is not three numbers: \\[0.4, True, 0.2\\]"):
+        load_points(path)

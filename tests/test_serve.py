@@ -6,6 +6,7 @@ is refused, and a log file that cannot be written (a full disk) stops neither se
 import datetime as dt
 import logging
 import os
+import re
 import shutil
 import signal
 import socket
@@ -22,7 +23,15 @@ import yaml
 from fixwizard import report
 from fixwizard.cli import main
 from fixwizard.errors import InputError
-from fixwizard.serve import LOG, FixtureServer, FixtureService, LogFile, make_server, parse_duration_s
+from fixwizard.serve import (
+    LOG,
+    FixtureServer,
+    FixtureService,
+    LogFile,
+    _log_handlers,
+    make_server,
+    parse_duration_s,
+)
 from fixwizard.workflow.cell_reports import scan
 from test_report import V1_REPORT
 
@@ -279,6 +288,35 @@ def stops_at_once(monkeypatch):
     monkeypatch.setattr(FixtureServer, "serve_forever", interrupted)
 
 
+def test_a_caller_cannot_forge_or_flood_log_lines(cell, tmp_path):
+    """A name with a line break and a log line in it, and a name of 100 000 characters: each call is one log line of
+    its own, the name quoted in part."""
+    handlers = _log_handlers(str(tmp_path / "serve.log"))
+    served = Running(cell)
+    try:
+        fw = served.client()
+        forged = "ok\n2026-12-06 05:59:00,000 10.9.9.9 get_pose('bracket') -> {'x': 0.5}"
+        assert fault_of(lambda: fw.get_pose(forged)).faultCode == 1
+        long_fault = fault_of(lambda: fw.get_pose("x" * 100_000))
+    finally:
+        served.stop()
+        for handler in handlers:
+            LOG.removeHandler(handler)
+            handler.close()
+    lines = (tmp_path / "serve.log").read_text().splitlines()
+    assert all(re.match(r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3} ", line) for line in lines)
+    calls = [line for line in lines if "get_pose(" in line]
+    assert len(calls) == 2  # one line per call
+    assert 'get_pose("ok\\n2026-12-06 05:59:00,000 10.9.9.9 get_pose(' in calls[0]
+    assert max(len(line) for line in lines) < 1000 and len(long_fault.faultString) < 1000
+
+
+def test_a_report_folder_file_nested_too_deeply_to_read_is_skipped_and_the_others_served(running, cell):
+    fw = running.client()
+    (cell / "deep.yaml").write_text("[" * 100_000)
+    assert fw.is_usable("bracket") and fw.get_pose("bracket")["x"] and "bracket" in fw.list_fixtures()
+
+
 def test_the_serve_command_refuses_a_log_that_is_one_of_its_inputs(cell, tmp_path, monkeypatch, capsys,
                                                                     stops_at_once):
     monkeypatch.chdir(tmp_path)  # a relative mesh path in a report is read from the current folder
@@ -308,6 +346,12 @@ def test_the_serve_command_refuses_a_log_that_is_one_of_its_inputs(cell, tmp_pat
     assert "would be a report file" in capsys.readouterr().err and not (cell / "serve.yaml").exists()
     assert main([*serve, str(cell / "serve.log")]) == 0 and main([*serve, "serve.log"]) == 0  # not inputs
     assert "read reports in" in (cell / "serve.log").read_text() and (tmp_path / "serve.log").is_file()
+    assert main([*serve, "serve.log"]) == 0  # an earlier log is appended to
+    assert (tmp_path / "serve.log").read_text().count("read reports in") == 2
+    (tmp_path / "taps.csv").write_text("0.1,0.2,0.3\n")  # any other file is not: it would be changed
+    assert main([*serve, "taps.csv"]) == 1
+    assert "is a file that is not a serve log" in capsys.readouterr().err
+    assert (tmp_path / "taps.csv").read_text() == "0.1,0.2,0.3\n"
 
 
 @needs_full_disk
