@@ -223,11 +223,11 @@ def _orient(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, bool, li
     bodies = _bodies(mesh)
     depths, meeting = _nesting(mesh, bodies) if len(bodies) > 1 else (np.zeros(1, int), np.zeros(1, bool))
     faces = np.asarray(mesh.faces).copy()
-    inverted = 0
+    inverted = [0, 0]  # solids that faced inward, cavities that faced outward
     for body, depth in zip(bodies, depths, strict=True):
         if (_signed_volume_m3(np.asarray(mesh.vertices), faces[body]) > 0.0) != (depth % 2 == 0):
             faces[body] = faces[body][:, ::-1]
-            inverted += 1
+            inverted[depth % 2] += 1
     mesh = trimesh.Trimesh(mesh.vertices, faces, process=False)
     meeting_faces = np.zeros(len(faces), bool)
     for meets, body_faces in zip(meeting, bodies, strict=True):
@@ -238,10 +238,15 @@ def _orient(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, bool, li
         warnings.append(("mesh_winding_repaired",
                          f"{name}: {turned} of its {len(faces)} faces were wound the wrong way round (inside out); "
                          "fixwizard turned them to face outward like their neighbours."))
-    elif inverted:
+    elif any(inverted):
+        solids, cavities = inverted
+        found = [f"{solids} solid{'s' if solids != 1 else ''} faced inward (inside out)" if solids else "",
+                 f"{cavities} cavit{'ies' if cavities != 1 else 'y'} (a body inside another) faced outward"
+                 if cavities else ""]
+        bodies_named = f"{len(bodies)} bod{'ies' if len(bodies) != 1 else 'y'}"
         warnings.append(("mesh_inverted_repaired",
-                         f"{name}: {inverted} of its {len(bodies)} bodies were inside out (faces pointing inward); "
-                         "fixwizard turned them outward."))
+                         f"{name}: of its {bodies_named}, {' and '.join(part for part in found if part)}; "
+                         "fixwizard turned solids to face outward and cavities inward."))
     if len(bodies) > 1:
         cavities = int(np.count_nonzero(depths % 2))
         warnings.append(("mesh_several_bodies",

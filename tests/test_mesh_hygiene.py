@@ -54,6 +54,7 @@ def test_a_mesh_inside_out_is_turned_outward():
     inverted = trimesh.Trimesh(truth.vertices, np.asarray(truth.faces)[:, ::-1], process=False)
     fixture = as_fixture("polytope", inverted)
     assert _codes(fixture) == ["mesh_inverted_repaired"]
+    assert "of its 1 body, 1 solid faced inward (inside out)" in dict(fixture.warnings)["mesh_inverted_repaired"]
     _sign_matches_the_true_solid(fixture, truth)
 
 
@@ -76,6 +77,12 @@ def test_a_cavity_stays_a_cavity_however_it_is_wound(cavity_wound):
     fixture = as_fixture("hollow", trimesh.util.concatenate([outer, trimesh.Trimesh(inner.vertices, inner_faces)]))
     assert fixture.signed
     assert "cavities" in dict(fixture.warnings)["mesh_several_bodies"]
+    repaired = dict(fixture.warnings).get("mesh_inverted_repaired")
+    if cavity_wound == "outward":
+        assert "1 cavity (a body inside another) faced outward" in repaired
+    else:
+        assert repaired is None
+    assert repaired is None or "inside out" not in repaired  # the cavity was turned inward, not outward
     assert fixture.oracle.signed_distance_m(np.zeros((1, 3)) - fixture.cad_p_center)[0] > 0.0  # the cavity is air
     _sign_matches_the_true_solid(fixture, truth)
 
