@@ -52,14 +52,16 @@ def test_a_mesh_given_twice_is_refused_not_called_ambiguous(tmp_path, capsys, se
     assert f"the mesh {DEMO_MESH}" in err and "is given twice: give each mesh once" in err
 
 
-def test_no_fitting_mesh_exits_2_and_an_unreadable_one_is_reported(tmp_path, other_mesh, capsys):
+def test_an_unreadable_mesh_is_reported_and_no_verdict_is_claimed_without_it(tmp_path, other_mesh, capsys):
+    """The unreadable mesh might be the one that fits: neither "none fits" (2) nor "exactly one fits" (0)."""
     text_file = tmp_path / "notes.stl"
     text_file.write_text("not a mesh")
-    assert main(["identify", str(DEMO_TAPS), str(text_file), str(other_mesh), *FLAGS]) == 2
-    out = capsys.readouterr().out
-    assert f"unreadable  {text_file}" in out
-    assert f"ruled out   {other_mesh}: no pose of this mesh explains the taps" in out
-    assert "no mesh fits: check the units" in out
+    for meshes, other in (([text_file, other_mesh], "ruled out"), ([text_file, DEMO_MESH], "fits"),
+                          ([tmp_path / "gone.stl", DEMO_MESH], "fits")):
+        assert main(["identify", str(DEMO_TAPS), *map(str, meshes), *FLAGS]) == 1
+        out, err = capsys.readouterr()
+        assert f"unreadable  {meshes[0]}" in out and f"{other:11} {meshes[1]}: " in out
+        assert f"{meshes[0].name} could not be read, so whether it fits is not known" in err
 
 
 @pytest.mark.slow

@@ -198,7 +198,7 @@ def _check_each_mesh_once(paths: list[Path]) -> None:
 
 def identify_command(args: argparse.Namespace) -> int:
     """Run ``fixwizard identify``: exit 0 when exactly one mesh fits, 2 when none fits or may fit, 3 when several
-    fit, 4 when none fits but some are not decided."""
+    fit, 4 when none fits but some are not decided; 1 when a mesh given could not be read (it may fit too)."""
     _check_each_mesh_once([Path(mesh) for mesh in args.meshes])
     base_p_taps = load_points(args.points)
     meshes = [(Path(mesh), args.mesh_units) for mesh in args.meshes]
@@ -206,6 +206,11 @@ def identify_command(args: argparse.Namespace) -> int:
         base_p_taps, meshes, parse_length_m(args.ball_diameter), parse_length_m(args.sample_bound), args.max_cells,
         args.time_limit, cancel, None if args.quiet else _print_step))
     print("\n".join(summary_lines(verdicts)))
+    unreadable = [verdict.mesh.name for verdict in verdicts if verdict.verdict == "unreadable"]
+    if unreadable:
+        print(f"fixwizard: {', '.join(unreadable)} could not be read, so whether it fits is not known; fix it or "
+              "leave it out", file=sys.stderr)
+        return 1
     fitting = sum(verdict.verdict == "fits" for verdict in verdicts)
     if fitting:
         return 0 if fitting == 1 else 3
