@@ -31,7 +31,9 @@ def test_the_peak_estimate_grows_with_the_taps():
     (np.random.default_rng(0).random((MAX_TAPS + 1, 3)), "point cloud"),
     (np.array([[1e15, 0, 0], [0.5, 0, 0], [0.4, 0.1, 0], [0.4, 0, 0.1]]), "beyond any robot arm's reach"),
     (np.array([[0.5, 0, 0], [0.4, 0.1, 1e30], [0.4, 0, 0.1]]), r"tap 2 lies 1e\+30 m"),
+    (np.array([[0.5, 0, 0], [0.4, 0.1, 0], [-1e300, 1e300, 0.1]]), r"tap 3 lies 1.41e\+300 m"),
 ])
+@pytest.mark.filterwarnings("error")  # no numpy overflow warning on the way to the message
 def test_taps_no_robot_made_are_refused_with_a_message(taps, said):
     with pytest.raises(InputError, match=said):
         solve(demo_fixture(), taps, 0.003, 0.001)

@@ -171,9 +171,11 @@ def validate_inputs(base_p_taps: np.ndarray, ball_diameter_m: float, sample_boun
     bad = np.flatnonzero(~np.all(np.isfinite(base_p_taps), axis=1))
     if len(bad):
         raise InputError(f"tap {bad[0] + 1} has a coordinate that is not a finite number; fix or remove it")
-    far = np.flatnonzero(np.linalg.norm(base_p_taps, axis=1) > MAX_TAP_DISTANCE_M)
+    largest = np.max(np.abs(base_p_taps), axis=1, keepdims=True)  # scaled first: 1e300 m squared overflows
+    distances = largest[:, 0] * np.linalg.norm(base_p_taps / np.where(largest > 0.0, largest, 1.0), axis=1)
+    far = np.flatnonzero(distances > MAX_TAP_DISTANCE_M)
     if len(far):
-        raise InputError(f"tap {far[0] + 1} lies {np.linalg.norm(base_p_taps[far[0]]):.3g} m from the robot base, "
+        raise InputError(f"tap {far[0] + 1} lies {distances[far[0]]:.3g} m from the robot base, "
                          "beyond any robot arm's reach: the points must be in metres (millimetres read as metres?)")
     if not np.isfinite(sample_bound_m) or sample_bound_m <= 0:
         raise InputError(f"the sample bound must be a positive length, not {sample_bound_m} m; take it from the "
