@@ -43,6 +43,12 @@ def _lengths_from(args: argparse.Namespace) -> tuple[float, float]:
     if ball is None or bound is None:
         raise InputError("give --ball-diameter and --sample-bound (e.g. --ball-diameter 3mm --sample-bound 1mm), "
                          "or --calibration with a tip calibration that holds them")
+    if tip is not None:
+        for flag, given, calibrated in (("--ball-diameter", ball, tip.ball_diameter_m),
+                                        ("--sample-bound", bound, tip.sample_bound_m)):
+            if calibrated is not None and abs(given - calibrated) > 1e-9:
+                print(f"fixwizard: note: {flag} {given * 1e3:g} mm is used, not the {calibrated * 1e3:g} mm of the "
+                      f"tip calibration {args.calibration}", file=sys.stderr)
     return ball, bound
 
 

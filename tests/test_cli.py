@@ -182,6 +182,13 @@ def test_solve_takes_ball_diameter_and_sample_bound_from_a_tip_calibration(tmp_p
     inputs = report.load(tmp_path / "report.yaml").data["inputs"]
     assert inputs["ball_diameter_m"] == pytest.approx(0.003)
     assert inputs["sample_bound_m"] == pytest.approx(0.0008)
+    assert "note:" not in capsys.readouterr().err
+    assert main(["solve", str(real_data / "meshes" / "matlab_logo.ply"), str(points), "--calibration",
+                 str(calibration), "--ball-diameter", "6mm", "--sample-bound", "0.8mm", "--max-cells", "1e5", "-q",
+                 "-o", str(tmp_path / "report.yaml")]) in (2, 3, 4)  # a flag wins, and says what it overrides
+    err = capsys.readouterr().err
+    assert f"note: --ball-diameter 6 mm is used, not the 3 mm of the tip calibration {calibration}" in err
+    assert "--sample-bound" not in err
 
 
 def test_a_length_without_unit_that_means_metres_is_caught(bracket, capsys):
