@@ -56,6 +56,16 @@ def check_output(path: str | Path, inputs: Iterable[tuple[str, str | Path | None
     return target
 
 
+def check_not_read_later(path: str | Path, folders: Iterable[str | Path], suffix: str, what: str, fix: str) -> None:
+    """InputError when ``path`` would be a ``*suffix`` file of one of ``folders``, which the next run reads as
+    ``what`` (an output among the inputs)."""
+    target = Path(os.path.realpath(path))
+    for folder in folders:
+        if target.name.endswith(suffix) and same_file(target.parent, Path(folder)):
+            raise InputError(f"{path} would be a {suffix} file of the folder {folder}, which the next run reads as "
+                             f"{what}: {fix}")
+
+
 def same_file(path: Path, other: Path) -> bool:
     """Whether two paths name one file (through symlinks and hard links); for a missing one, whether they
     resolve to the same path."""

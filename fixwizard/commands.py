@@ -7,7 +7,7 @@ import time
 from pathlib import Path
 
 from fixwizard import report
-from fixwizard.atomic import check_output
+from fixwizard.atomic import check_not_read_later, check_output
 from fixwizard.errors import InputError
 from fixwizard.exit_codes import EXIT_CODES, EXIT_OK
 from fixwizard.interrupt import run_interruptibly
@@ -83,8 +83,9 @@ def solve_command(args: argparse.Namespace) -> int:
 
 def import_poses_command(args: argparse.Namespace) -> int:
     pose_files = sorted(Path(args.directory).glob("*.pose")) if Path(args.directory).is_dir() else []
-    check_output(args.output, [("tip file", args.tip), *(("recorded pose file", path) for path in pose_files)],
-                 "give another POINTS path with -o, e.g. -o points.yaml")
+    fix = "give another POINTS path with -o, e.g. -o points.yaml"
+    check_output(args.output, [("tip file", args.tip), *(("recorded pose file", path) for path in pose_files)], fix)
+    check_not_read_later(args.output, [args.directory], ".pose", "a recorded pose", fix)
     paths, base_p_taps = import_pose_dir(args.directory, load_tip(args.tip))
     write_points(args.output, base_p_taps, source=[path.name for path in paths], tip=str(args.tip))
     print(f"{len(base_p_taps)} ball centres written to {args.output}")

@@ -136,6 +136,12 @@ def test_import_poses_never_replaces_the_tip_or_a_recorded_pose(tmp_path, capsys
         err = capsys.readouterr().err
         assert what in err and "give another POINTS path with -o" in err
         assert output.read_bytes() == before
+    new_pose = poses / "p2.pose"  # a new .pose among the recorded ones would be read as one next time
+    assert main(["import-poses", str(poses), "--tip", str(tmp_path / "tip.pose"), "-o", str(new_pose)]) == 1
+    assert "which the next run reads as a recorded pose" in capsys.readouterr().err and not new_pose.exists()
+    os.mkfifo(poses / "p3.pose")  # a pipe among them is refused, not waited on
+    assert main(["import-poses", str(poses), "--tip", str(tmp_path / "tip.pose"), "-o", str(tmp_path / "p.yaml")]) == 1
+    assert "p3.pose is not a regular file" in capsys.readouterr().err
 
 
 def test_calibrate_tip_never_replaces_a_recorded_pose(tmp_path, capsys):
@@ -150,6 +156,9 @@ def test_calibrate_tip_never_replaces_a_recorded_pose(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "the recorded pose file" in err and "give another calibration path with -o" in err
     assert victim.read_bytes() == before
+    assert main(["calibrate-tip", *(f"--{name}={folder}" for name, folder in folders.items()),
+                 "--ball-diameter", "3mm", "-o", str(folders["pivot"] / "tip.pose")]) == 1
+    assert "which the next run reads as a recorded pose" in capsys.readouterr().err
 
 
 def test_check_output_allows_a_new_file_in_a_folder_still_to_be_made(tmp_path):

@@ -108,6 +108,8 @@ def test_a_changed_or_missing_mesh_is_refused_and_a_copy_elsewhere_is_taken(expe
     assert run_verify(tmp_path, moved_report, taps[:4]) == 1
     err = capsys.readouterr().err
     assert "is missing" in err and "--mesh" in err and "Traceback" not in err
+    assert run_verify(tmp_path, moved_report, taps[:4], "--mesh", str(real_data / "meshes")) == 1
+    assert "meshes you gave is a folder or a special file, not a mesh file" in capsys.readouterr().err
     assert run_verify(tmp_path, moved_report, taps[:4], "--mesh", str(real_data / "meshes" / "matlab_logo.ply")) == 0
 
 

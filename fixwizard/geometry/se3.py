@@ -89,6 +89,9 @@ def quaternion_angle_rad(q_a: np.ndarray, q_b: np.ndarray) -> np.ndarray:
 def read_pose_file(path: str | Path) -> np.ndarray:
     """Read a ``*.pose`` file (six numbers ``x y z rx ry rz``, m and rad) as a 4x4 transform."""
     path = Path(path)
+    if path.exists() and not path.is_file():  # a pipe would wait for a writer: never read
+        raise InputError(f"the pose file {path} is not a regular file; a .pose file holds six numbers "
+                         "x y z rx ry rz (metres, radians)")
     try:
         values = np.array(path.read_text().split(), dtype=float)
     except (OSError, ValueError, UnicodeDecodeError) as error:

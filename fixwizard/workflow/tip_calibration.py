@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fixwizard.atomic import check_output
+from fixwizard.atomic import check_not_read_later, check_output
 from fixwizard.calibration.calibrate import calibrate_tip
 from fixwizard.calibration.residuals import ResidualStats
 from fixwizard.calibration.store import TipCalibration, save_calibration
@@ -70,8 +70,9 @@ def calibrate_tip_command(args: argparse.Namespace) -> int:
     folders = [folder for folder in (args.pivot, args.table, args.tilted, args.table_coarse) if folder]
     pose_files = [path for folder in folders if Path(folder).is_dir() for path in sorted(Path(folder).glob("*.pose"))]
     try:
-        check_output(output, [("recorded pose file", path) for path in pose_files],
-                     "give another calibration path with -o, e.g. -o calibrations/NAME.yaml")
+        fix = "give another calibration path with -o, e.g. -o calibrations/NAME.yaml"
+        check_output(output, [("recorded pose file", path) for path in pose_files], fix)
+        check_not_read_later(output, folders, ".pose", "a recorded pose", fix)
         calibration = calibrate_tip_from_dirs(args.pivot, args.table, args.tilted, parse_length_m(args.ball_diameter),
                                               args.table_coarse, output.stem, args.robot)
         save_calibration(calibration, output)

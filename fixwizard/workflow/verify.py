@@ -63,8 +63,8 @@ def fixture_of(loaded: report.Report, mesh: str | Path | None = None) -> Fixture
     path = Path(mesh) if mesh is not None else loaded.mesh
     if not path.is_file():
         where = "you gave" if mesh is not None else f"named by the report {loaded.path}"
-        raise InputError(f"the mesh {path} {where} is missing: put it back, or give where it is now with "
-                         "--mesh PATH")
+        state = "is missing" if not path.exists() else "is a folder or a special file, not a mesh file"
+        raise InputError(f"the mesh {path} {where} {state}: put it back, or give where it is now with --mesh PATH")
     try:
         sha256 = hashlib.sha256(path.read_bytes()).hexdigest()
     except OSError as error:
