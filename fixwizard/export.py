@@ -18,6 +18,7 @@ import argparse
 import json
 import re
 import sys
+import time
 
 import yaml
 from scipy.spatial.transform import Rotation
@@ -158,6 +159,10 @@ def export_command(args: argparse.Namespace) -> int:
         check_output(output, [("report", args.report), ("report's mesh", loaded.mesh)],
                      "give another output path with -o")
     text = export_text(loaded, args.format, args.frame_id, args.child_frame_id, args.allow_simulated)
+    ahead_s = loaded.created.timestamp() - time.time()
+    if ahead_s > report.FUTURE_TOLERANCE_S:
+        print(f"fixwizard: note: the report {args.report} is dated {ahead_s / 3600:.1f} h in the future: check the "
+              "clocks of the PCs (serve refuses it until then)", file=sys.stderr)
     if output:
         write_text_atomic(output, text)
         print(f"{args.format} of '{loaded.name}' written to {output}", file=sys.stderr)

@@ -41,6 +41,9 @@ SCHEMAS = (SCHEMA, SCHEMA_V1)
 FRAME = {"pose_of": "fixture CAD frame (the mesh file's own origin and axes)", "relative_to": "robot base frame"}
 UNITS = {"length": "m", "rotation_vector": "rad (axis times angle, as UR's rx, ry, rz)",
          "quaternion": "x, y, z, w", "angle": "deg"}
+# Clocks of the PC that wrote a report and the one that reads it may differ by this much (s); a report dated
+# further in the future says a clock is wrong.
+FUTURE_TOLERANCE_S = 300.0
 POSITION_DECIMALS = 7  # 0.1 um
 ROTVEC_DECIMALS = 6  # 1e-6 rad
 QUATERNION_DECIMALS = 7

@@ -46,7 +46,6 @@ from fixwizard.errors import InputError, file_problem, quoted
 from fixwizard.workflow.cell_reports import SUFFIXES, CellReports, folder_state, report_files, scan
 from fixwizard.workflow.verify import age_text
 
-FUTURE_TOLERANCE_S = 300.0  # clocks of the PC that wrote a report and this one may differ by this much
 REQUEST_TIMEOUT_S = 10.0  # a client that stops sending mid-request is dropped after this
 LOG = logging.getLogger("fixwizard.serve")
 # Fault codes a program can tell apart (the text says the same in words).
@@ -131,7 +130,7 @@ class FixtureService:
         if loaded.simulated:
             return Judgement(loaded, age_s, SIMULATED, f"fixwizard: {what} comes from the simulated cell, not from "
                              "this fixture: calibrate the fixture on the robot")
-        if age_s < -FUTURE_TOLERANCE_S:
+        if age_s < -report.FUTURE_TOLERANCE_S:
             return Judgement(loaded, age_s, FROM_THE_FUTURE, f"fixwizard: {what} is dated {age_text(-age_s)} in the "
                              "future: check the clocks of the PCs, then calibrate again")
         if age_s > self.max_age_s:

@@ -2,6 +2,7 @@
 way its user reads it; reports a robot must not use are refused."""
 
 import argparse
+import datetime as dt
 import json
 import re
 from pathlib import Path
@@ -213,3 +214,14 @@ def test_a_frame_name_that_is_given_is_refused_with_the_rule_it_breaks(real_repo
     assert main(["export", str(real_report), "--format", "ros2", option, frame]) == 1
     err = capsys.readouterr().err
     assert f"{option} {frame!r} is no ROS frame name: {rule}" in err and "Traceback" not in err
+
+
+def test_a_report_dated_in_the_future_is_exported_with_a_note_on_the_clocks(real_report, tmp_path, capsys):
+    data = yaml.safe_load(real_report.read_text())
+    assert main(["export", str(real_report), "--format", "urscript"]) == 0
+    assert "note:" not in capsys.readouterr().err
+    data["created"] = (dt.datetime.now(dt.UTC) + dt.timedelta(hours=3)).isoformat(timespec="seconds")
+    ahead = report.write(tmp_path / "ahead.yaml", data)
+    assert main(["export", str(ahead), "--format", "urscript"]) == 0
+    err = capsys.readouterr().err
+    assert f"note: the report {ahead} is dated 3.0 h in the future: check the clocks" in err
