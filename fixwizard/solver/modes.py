@@ -19,7 +19,6 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from fixwizard.geometry.se3 import quaternion_angle_rad
 from fixwizard.solver.cells import CellSet
 
 MODE_LEVEL = 4
@@ -39,9 +38,10 @@ def _touching_components(rotations: Rotation, gammas_rad: np.ndarray) -> np.ndar
     pairs = cKDTree(np.vstack([quaternions, -quaternions])).query_pairs(
         2.0 * np.sin(radius / 4.0), output_type="ndarray") % count
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
-    if len(pairs):
-        angles = quaternion_angle_rad(quaternions[pairs[:, 0]], quaternions[pairs[:, 1]])
-        pairs = pairs[angles <= (gammas_rad[pairs[:, 0]] + gammas_rad[pairs[:, 1]]) * TOUCH_SLACK]
+    if len(pairs):  # angle <= gamma_i + gamma_j  <=>  |q_i . q_j| = cos(angle / 2) >= cos((gamma_i + gamma_j) / 2)
+        dots = np.abs(np.einsum("ij,ij->i", quaternions[pairs[:, 0]], quaternions[pairs[:, 1]]))
+        half_reach = np.minimum((gammas_rad[pairs[:, 0]] + gammas_rad[pairs[:, 1]]) * TOUCH_SLACK / 2, np.pi / 2)
+        pairs = pairs[dots >= np.cos(half_reach)]
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(count, count))
     return connected_components(graph, directed=False)[1]
 
