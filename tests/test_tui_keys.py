@@ -199,7 +199,8 @@ def test_a_protective_stop_makes_the_wizard_stopped_and_rearm_waits_for_the_unlo
     asyncio.run(run())
 
 
-def test_quitting_while_the_robot_moves_asks_first(tmp_path):
+@pytest.mark.parametrize("cancel", ["n", "enter"])  # Enter presses the focused Cancel button
+def test_quitting_while_the_robot_moves_asks_first(tmp_path, cancel):
     async def run():
         app = FixwizardApp(wizard(tmp_path, pace_s=0.2))
         async with app.run_test(size=SIZE) as pilot:
@@ -210,9 +211,10 @@ def test_quitting_while_the_robot_moves_asks_first(tmp_path):
             await pilot.press("ctrl+q")
             await until(pilot, lambda: isinstance(app.screen, Confirm))
             assert "Stop and quit (y)" in str(app.screen.query_one("#yes").label)
-            await pilot.press("n")
+            await pilot.press(cancel)
             await until(pilot, lambda: isinstance(app.screen, AutoTapsScreen))
-            assert app.is_running
+            await pilot.pause(0.3)
+            assert isinstance(app.screen, AutoTapsScreen) and app.is_running  # the screen below stays
             await pilot.press("escape")  # cancels the automatic taps
             await until(pilot, lambda: not app.motion_running())
             await pilot.press("ctrl+q")  # nothing moves: quits at once
@@ -220,7 +222,8 @@ def test_quitting_while_the_robot_moves_asks_first(tmp_path):
     asyncio.run(run())
 
 
-def test_esc_on_the_pivot_asks_before_dropping_the_captured_poses(tmp_path):
+@pytest.mark.parametrize("stay, drop", [("n", "y"), ("enter", "#yes")])  # keys, or Enter and a click on a button
+def test_esc_on_the_pivot_asks_before_dropping_the_captured_poses(tmp_path, stay, drop):
     async def run():
         app = FixwizardApp(wizard(tmp_path))
         async with app.run_test(size=SIZE) as pilot:
@@ -233,12 +236,16 @@ def test_esc_on_the_pivot_asks_before_dropping_the_captured_poses(tmp_path):
             await pilot.press("escape")
             await until(pilot, lambda: isinstance(app.screen, Confirm))
             assert "drops the 1 captured pose;" in str(app.screen.query_one("#dialog-message").render())
-            await pilot.press("n")
+            await pilot.press(stay)
             await until(pilot, lambda: app.screen is pivot)
+            await pilot.pause(0.3)
+            assert app.screen is pivot and len(pivot.workflow.poses("pivot")) == 1  # one screen closed, not two
             await pilot.press("escape")
             await until(pilot, lambda: isinstance(app.screen, Confirm))
-            await pilot.press("y")
+            await (pilot.click(drop) if drop.startswith("#") else pilot.press(drop))
             await until(pilot, lambda: isinstance(app.screen, StartScreen))
+            await pilot.pause(0.3)
+            assert isinstance(app.screen, StartScreen)
     asyncio.run(run())
 
 

@@ -32,8 +32,8 @@ class Confirm(Dialog[bool]):
     def action_no(self) -> None:
         self.dismiss(False)
 
-    def on_button_pressed(self, event: Button.Pressed) -> None:
-        self.dismiss(event.button.id == "yes")
+    def result_of(self, button_id: str) -> bool:
+        return button_id == "yes"
 
 
 class ConfirmMove(Confirm):

@@ -42,7 +42,13 @@ class Dialog(ModalScreen[ResultType]):
         self.query_one(f"#{self.focused_id}", Button).focus()
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
-        self.dismiss(cast(ResultType, event.button.id))  # a plain dialog's result is the button's id
+        self.dismiss(self.result_of(event.button.id or ""))
+
+    def result_of(self, button_id: str) -> ResultType:
+        """The result of the button ``button_id``: a plain dialog's is the id. Subclasses override this, never the
+        handler: Textual calls the handler of every class in the chain, so a second one would close the screen
+        under the dialog too."""
+        return cast(ResultType, button_id)
 
     def action_no(self) -> None:
         self.dismiss(cast(ResultType, "ok"))
