@@ -439,3 +439,23 @@ def test_a_calibration_step_says_at_once_what_the_robot_does_and_clears_it_after
             assert not doing.display and "A: tapped" in text_of(app, "#points-state")
 
     asyncio.run(run())
+
+
+def test_a_session_that_cannot_be_started_is_explained_before_the_start_screen_returns(tmp_path):
+    """The start screen came back over the error, hiding it: each Continue stacked another unseen error."""
+    shutil.copytree(REPO / "calibrations", tmp_path / "calibrations")
+    (tmp_path / "sessions").write_text("a file where the sessions folder goes")
+
+    async def run():
+        app = FixwizardApp(wizard(tmp_path))
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            await choose(pilot, "#calibration", str(tmp_path / "calibrations" / "example_matlab_logo.yaml"))
+            await press_button(pilot, "#continue")
+            await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+            message = str(app.screen.query_one("#dialog-message").render())
+            assert message.startswith("Cannot start the session ") and "sessions is a file, not a folder" in message
+            await pilot.press("enter")
+            await until(pilot, lambda: isinstance(app.screen, StartScreen) and app.screen.is_mounted)
+            assert [type(screen).__name__ for screen in app.screen_stack[1:]] == ["StartScreen"]
+    asyncio.run(run())

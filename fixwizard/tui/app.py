@@ -217,12 +217,25 @@ class FixwizardApp(App[None]):
     def show_error(self, error: ShownError) -> None:
         """The error's message and next step in a modal; then the recovery the operator chose. Not while quitting:
         stopping a running step may end it with an error, and the app is closing."""
+        modal = self._error_modal(error)
+        if modal is not None:
+            self.push_screen(modal, self._recover)
+
+    async def _error_answered(self, error: ShownError) -> None:
+        """``show_error`` for the flow: it goes on once the operator closed the error (a screen the flow shows next
+        would otherwise cover it)."""
+        modal = self._error_modal(error)
+        if modal is not None:
+            recovery: Recovery = await self.push_screen_wait(modal)
+            self._recover(recovery)
+
+    def _error_modal(self, error: ShownError) -> ErrorModal | None:
         if self._quitting:
-            return
+            return None
         can_unlock = callable(getattr(self.cell.robot, "unlock_protective_stop", None))
         if isinstance(error, ProtectiveStop):
             self.stopped = True
-        self.push_screen(ErrorModal(error, self.cell.simulated, can_unlock), self._recover)
+        return ErrorModal(error, self.cell.simulated, can_unlock)
 
     def _recover(self, recovery: Recovery | None) -> None:
         robot, hands = self.cell.robot, self.cell.hands
@@ -253,7 +266,7 @@ class FixwizardApp(App[None]):
         try:
             return await self._off_loop(call)
         except (FixwizardError, OSError) as error:
-            self.show_error(error)
+            await self._error_answered(error)
             return None
 
     # --- the flow ---

@@ -244,6 +244,9 @@ class SamplingSession:
             path.parent.mkdir(parents=True, exist_ok=True)
             handle = os.open(path, os.O_RDWR | os.O_APPEND | os.O_CREAT | os.O_EXCL, 0o666)
         except FileExistsError:
+            if not path.parent.is_dir():
+                raise SessionError(f"cannot start the session {path}: {path.parent} is a file, not a folder; move it "
+                                   "away or work in another folder") from None
             raise SessionError(f"a session {path} exists already; resume it or choose another name") from None
         except OSError as error:
             raise SessionError(f"cannot start the session {path}: {file_problem(error)}") from error
