@@ -165,9 +165,10 @@ def test_stop_shows_stopped_refuses_motion_until_a_confirmed_rearm(tmp_path):
             await until(pilot, lambda: isinstance(app.screen, Confirm))
             await pilot.press("n")  # not yet
             await until(pilot, lambda: isinstance(app.screen, PivotScreen))
-            assert app.stopped
+            assert app.stopped and app.cell.robot.status().mode == "idle"  # the STOP ended freedrive
             await rearm(pilot)
             assert "STOPPED" not in status_of(app) and "F12 STOP" in status_of(app)
+            await until(pilot, lambda: app.cell.robot.status().mode == "freedrive")  # as the screen says it is
             await pilot.press("m")
             await until(pilot, lambda: len(app.screen.workflow.poses("pivot")) == 2)
     asyncio.run(run())
@@ -196,6 +197,7 @@ def test_a_protective_stop_makes_the_wizard_stopped_and_rearm_waits_for_the_unlo
             await until(pilot, lambda: not app.robot_status.protective_stop)
             assert app.stopped
             await rearm(pilot)
+            await until(pilot, lambda: context.robot.status().mode == "freedrive")  # sampling's freedrive is back
     asyncio.run(run())
 
 

@@ -170,7 +170,10 @@ class FixwizardApp(App[None]):
         def answered(yes: bool | None) -> None:
             if yes:
                 self.stopped = False
-                self.notify("Re-armed: the robot keys work again.")
+                freedrive = getattr(self.screen, "action_freedrive", None)  # a STOP ended the screen's freedrive
+                if freedrive is not None:
+                    freedrive()
+                self.notify("Re-armed: the robot keys work again" + (" and freedrive is on." if freedrive else "."))
 
         self.push_screen(Confirm("Re-arm the robot?", "The robot keys (tap, go, the automatic steps) will move the "
                                  "arm again. Is the cell checked and clear of people and objects?", "Re-arm"),

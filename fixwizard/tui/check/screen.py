@@ -60,6 +60,7 @@ class CheckScreen(Screen[None]):
         keys.binding(keys.UNDO),
         keys.binding(keys.CHECK),
         keys.binding(keys.HANDS),
+        keys.binding(keys.FREEDRIVE, show=False),
     ]
     HELP_TITLE = "check a calibrated fixture"
     HELP_ABOUT = ("Choose the fixture, then tap 3-5 of the suggested points spread over it (freedrive is on; the "
@@ -107,6 +108,10 @@ class CheckScreen(Screen[None]):
                       "back).")
             return
         self._choose(str(self.query_one("#check-fixture", Select).value))
+        self.action_freedrive()
+
+    def action_freedrive(self) -> None:
+        """Freedrive on (a STOP ends it; re-arming calls this)."""
         self._run(lambda: self.cell.robot.freedrive(True), lambda _: None)
 
     def on_unmount(self) -> None:

@@ -83,6 +83,7 @@ class SamplingScreen(Screen[bool]):
         keys.binding(keys.UNLOCK),
         keys.binding(keys.IDENTIFY, show=False),
         keys.binding(keys.DETAILS, show=False),
+        keys.binding(keys.FREEDRIVE, show=False),
     ]
     HELP_TITLE = "sampling"
     HELP_ABOUT = ("Freedrive is on: guide the ball 5-10 mm above the fixture, the tool pointing at the surface, and "
@@ -141,6 +142,10 @@ class SamplingScreen(Screen[bool]):
     def on_unmount(self) -> None:
         self._cancel_live()  # nobody is left to show them; the solver process stays for the solve
         self._end_identify()
+
+    def action_freedrive(self) -> None:
+        """Freedrive on again (a STOP ends it; re-arming calls this)."""
+        self._run_robot(lambda: self.cell.robot.freedrive(True), lambda _: None)
 
     # --- keys ---
 
