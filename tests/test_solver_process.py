@@ -5,7 +5,10 @@ answered by a fresh process."""
 import os
 import queue
 import signal
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -125,3 +128,45 @@ def test_starting_a_worker_and_sending_it_requests_never_waits_for_the_worker():
     answered_s = time.monotonic() - began
     assert returned_s < 0.1 * answered_s, (returned_s, answered_s)
     solver.close()
+
+
+KILLED_MID_REQUEST = """
+import os, queue, sys
+sys.path.insert(0, {tests!r})
+from fixwizard.demo import demo_cell
+from fixwizard.workflow.solver_process import Progress, SolveRequest, SolverProcess
+from tui_cell import SAMPLE_BOUND_M, spread_taps
+if __name__ == "__main__":  # the worker is spawned: it imports this file too
+    cell = demo_cell(0)
+    cell.connect()
+    taps = spread_taps(cell, 12)
+    solver = SolverProcess(cell.fixture)
+    events = queue.Queue()
+    solver.submit(SolveRequest(taps, cell.truth.ball_diameter_m, SAMPLE_BOUND_M, 1e7), events.put)
+    while not isinstance(events.get(timeout=300), Progress):
+        pass
+    print(solver.pid, flush=True)
+    os._exit(0)  # as kill -9 ends the wizard: no close, no goodbye to the worker
+"""
+
+
+@pytest.mark.slow
+def test_a_worker_whose_wizard_was_killed_mid_request_ends_quietly(tmp_path):
+    """Its next progress event finds the pipe closed: it ends without a traceback on the operator's terminal."""
+    script = tmp_path / "killed.py"
+    script.write_text(KILLED_MID_REQUEST.format(tests=str(Path(__file__).parent)))
+    result = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+    worker = int(result.stdout.split()[0])  # its stderr is the terminal's: this run ends once the worker has
+    assert "Traceback" not in result.stderr and "BrokenPipeError" not in result.stderr, result.stderr
+    deadline = time.monotonic() + 30.0  # gone: not left computing for no one
+    while running(worker) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not running(worker)
+
+
+def running(pid: int) -> bool:
+    """Whether process ``pid`` exists and has not ended (a zombie waiting to be reaped has)."""
+    try:
+        return "State:\tZ" not in Path(f"/proc/{pid}/status").read_text()
+    except FileNotFoundError:
+        return False

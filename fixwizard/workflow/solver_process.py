@@ -228,6 +228,8 @@ class _Worker:
         except FixwizardError as error:
             send(Failed(sentence(error)))
             return
+        except OSError:
+            raise  # the pipe to the wizard is gone (``serve`` ends)
         except Exception as error:  # a bug: said in one line, the wizard and the taps go on
             last = traceback.extract_tb(error.__traceback__)[-1]
             send(Failed(f"The solver failed ({type(error).__name__}: {error}, at {Path(last.filename).name}:"
@@ -263,9 +265,9 @@ def serve(conn: Connection, current: Synchronized) -> None:
     while True:
         try:
             request_id, request = pickle.loads(conn.recv_bytes())
-        except (EOFError, OSError):
+            worker.run(request_id, request)
+        except (EOFError, OSError):  # the pipe closed: the wizard is gone (quit, or killed mid-request)
             return
-        worker.run(request_id, request)
 
 
 # --- the wizard's side ---
