@@ -459,3 +459,30 @@ def test_a_session_that_cannot_be_started_is_explained_before_the_start_screen_r
             await until(pilot, lambda: isinstance(app.screen, StartScreen) and app.screen.is_mounted)
             assert [type(screen).__name__ for screen in app.screen_stack[1:]] == ["StartScreen"]
     asyncio.run(run())
+
+
+def test_table_points_tapped_on_one_spot_are_cleared_with_why_and_tapped_again(tmp_path):
+    """A, B and C tapped without moving the ball: the next step would have had no table frame and the points
+    could not be tapped again."""
+    async def run():
+        app = FixwizardApp(wizard(tmp_path))
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            await pivot_by_hand(pilot)
+            table = app.screen
+            await pilot.press(keys.HANDS.keys)  # the hands bring the ball above A
+            await until(pilot, lambda: not table.busy)
+            for _ in range(2):  # then B and C where A was
+                await pilot.press(keys.TAP.keys)
+                await until(pilot, lambda: not table.busy)
+            assert len(table.workflow.poses("table_coarse")) == 3
+            await pilot.press("n")
+            await until(pilot, lambda: "The points were cleared: tap A, B and C again" in text_of(app, "#points-state"))
+            assert "must be at least 10 mm from the corner B" in text_of(app, "#points-state")
+            assert app.screen is table and len(table.workflow.poses("table_coarse")) == 0
+            for _ in range(3):  # tapped again where they belong, the automatic taps come next
+                await pilot.press(keys.HANDS.keys)
+                await until(pilot, lambda: not table.busy)
+            await pilot.press("n")
+            await until(pilot, lambda: isinstance(app.screen, AutoTapsScreen))
+    asyncio.run(run())

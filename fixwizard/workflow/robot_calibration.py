@@ -108,6 +108,15 @@ class RobotTipCalibration:
         self._poses["table_coarse"].append(contact)
         return contact
 
+    def accept_table_points(self) -> None:
+        """Check that A, B, C make a table frame the automatic taps can start from; when they do not (on one spot,
+        on one line) they are dropped, to be tapped again, and the CalibrationError says why."""
+        try:
+            self._coarse_frame(None)
+        except CalibrationError:
+            self._poses["table_coarse"].clear()
+            raise
+
     # --- automatic steps ---
 
     def run_table_taps(self, progress: Progress | None = None, cancel: threading.Event | None = None) -> None:

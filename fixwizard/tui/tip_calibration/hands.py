@@ -7,6 +7,8 @@ from textual.widgets import Static
 
 from fixwizard.calibration.errors import CalibrationError
 from fixwizard.calibration.pivot import MIN_POSES
+from fixwizard.calibration.table import MIN_EDGE_M
+from fixwizard.errors import sentence
 from fixwizard.tui import keys
 from fixwizard.tui.tip_calibration.step import CalibrationStepScreen
 from fixwizard.tui.workers import ShownError
@@ -102,6 +104,9 @@ class PivotScreen(CalibrationStepScreen):
         self.refresh_bindings()
 
 
+TABLE_SPREAD_HINT = f"A and C each at least {MIN_EDGE_M * 1e3:.0f} mm from the corner B, along its two edges"
+
+
 class TablePointsScreen(CalibrationStepScreen):
     """Tap the table points A, B (the corner) and C."""
 
@@ -156,6 +161,13 @@ class TablePointsScreen(CalibrationStepScreen):
 
     def action_next(self) -> None:
         if self._tapped() == len(TABLE_POINTS):
+            try:
+                self.workflow.accept_table_points()
+            except CalibrationError as error:
+                self._show_points(f"{sentence(error)}. The points were cleared: tap A, B and C again, "
+                                  f"{TABLE_SPREAD_HINT}.")
+                self.action_freedrive()
+                return
             self.dismiss("next")
         else:
             self.notify(f"Not yet: tap {TABLE_POINTS[self._tapped()]} first ({keys.name(keys.TAP)}).",
