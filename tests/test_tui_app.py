@@ -13,10 +13,11 @@ from textual.widgets import Button, Input, Select, Static
 
 from fixwizard.calibration.store import load_calibration, save_calibration
 from fixwizard.demo import DEMO_MESH, demo_fixture
+from fixwizard.errors import InputError
 from fixwizard.tui import keys
 from fixwizard.tui.app import FixwizardApp
 from fixwizard.tui.cell import Cell, SavedCalibration
-from fixwizard.tui.launch import simulated_cell, ur_cell
+from fixwizard.tui.launch import robot_host, simulated_cell, ur_cell
 from fixwizard.tui.start.screen import NEW, StartScreen
 from fixwizard.tui.start.sessions import start_session
 from fixwizard.tui.tip_calibration.auto import AutoTapsScreen
@@ -486,3 +487,31 @@ def test_table_points_tapped_on_one_spot_are_cleared_with_why_and_tapped_again(t
             await pilot.press("n")
             await until(pilot, lambda: isinstance(app.screen, AutoTapsScreen))
     asyncio.run(run())
+
+
+@pytest.mark.parametrize("typed", ["999.999.1.1; rm -rf ~", "192.168.0", "ur arm", "-robot"])
+def test_a_typed_robot_address_that_is_none_is_refused_and_the_robot_stays(tmp_path, typed):
+    async def run():
+        app = FixwizardApp(wizard(tmp_path))
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            before = app.cell.robot_name
+            app.screen.query_one("#robot-host", Input).focus()
+            await pilot.press(*typed, "enter")
+            await until(pilot, lambda: isinstance(app.screen, ErrorModal) and bool(app.screen.query("#dialog-message")))
+            assert "is not the address of a robot: type its IP address (e.g. 192.168.0.10)" in \
+                text_of(app, "#dialog-message")
+            await press_button(pilot, "#ok")
+            await until(pilot, lambda: isinstance(app.screen, StartScreen))
+            assert app.cell.robot_name == before and app.cell.simulated and app.robot_status.connected
+    asyncio.run(run())
+
+
+@pytest.mark.parametrize("typed, host", [("192.168.0.10", "192.168.0.10"), (" ur5e-cell2.local ", "ur5e-cell2.local"),
+                                         ("fe80::1", "fe80::1"), ("10.0.0.07", None)])
+def test_robot_addresses_are_ip_addresses_or_host_names(typed, host):
+    if host is None:
+        with pytest.raises(InputError, match="is not the address of a robot"):
+            robot_host(typed)
+    else:
+        assert robot_host(typed) == host

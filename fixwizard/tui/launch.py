@@ -1,11 +1,14 @@
 """Starting the wizard: the cell of the simulated demo or of a UR arm, switching between them, and the session to
 resume."""
 
+import ipaddress
+import re
 from dataclasses import replace
 from pathlib import Path
 from typing import TypedDict
 
 from fixwizard.demo import demo_cell
+from fixwizard.errors import InputError, quoted
 from fixwizard.robot.base import Robot
 from fixwizard.robot.sim import SimulatedCell
 from fixwizard.robot.sim_hands import SimulatedHands
@@ -14,6 +17,7 @@ from fixwizard.tui.start.sessions import newest_unfinished
 
 # Seconds per simulated tap or move: slow enough to watch the progress, fast enough not to bore.
 SIMULATED_PACE_S = 0.05
+_HOST_LABEL = re.compile(r"[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?")  # one part of a host name (RFC 1123)
 
 
 def simulated_cell(seed: int = 0, pace_s: float = SIMULATED_PACE_S, folder: Path = Path(".")) -> Cell:
@@ -23,9 +27,25 @@ def simulated_cell(seed: int = 0, pace_s: float = SIMULATED_PACE_S, folder: Path
     return Cell(robot=robot, robot_name=name, simulated=True, hands=hands, **_folders(folder))
 
 
+def robot_host(text: str) -> str:
+    """``text`` as a robot's address: an IP address or a host name; InputError with an example otherwise (a
+    mistyped address, 999.1.1.1, or anything pasted with it)."""
+    host = text.strip()
+    try:
+        return str(ipaddress.ip_address(host))
+    except ValueError:
+        pass
+    labels = host.split(".")
+    if len(host) <= 253 and all(_HOST_LABEL.fullmatch(label) for label in labels) and \
+            not all(label.isdigit() for label in labels):
+        return host
+    raise InputError(f"{quoted(text)} is not the address of a robot: type its IP address (e.g. 192.168.0.10) or "
+                     "its host name")
+
+
 def ur_cell(host: str, folder: Path = Path(".")) -> Cell:
     """A Universal Robots arm at ``host``; the app connects to it when it starts."""
-    robot, name = _ur_arm(host)
+    robot, name = _ur_arm(robot_host(host))
     return Cell(robot=robot, robot_name=name, simulated=False, **_folders(folder))
 
 
@@ -37,7 +57,9 @@ def switch_to_simulated(cell: Cell, seed: int = 0, pace_s: float = SIMULATED_PAC
 
 
 def switch_to_ur_arm(cell: Cell, host: str) -> Cell:
-    """``cell`` with the UR arm at ``host`` as its robot (the old robot is closed); connecting comes next."""
+    """``cell`` with the UR arm at ``host`` as its robot (the old robot is closed); connecting comes next. A host
+    that is no address is refused before anything changes."""
+    host = robot_host(host)
     cell.robot.close()
     robot, name = _ur_arm(host)
     return replace(cell, robot=robot, robot_name=name, simulated=False, hands=None)
