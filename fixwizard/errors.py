@@ -60,4 +60,7 @@ def sentence(error: BaseException, text: str | None = None) -> str:
     text = str(error) if text is None else text
     for note in getattr(error, "__notes__", ()):
         text = f"{text if text.endswith(('.', '!', '?')) else text + '.'} {note}"
+    first_word = text.split(" ", 1)[0]
+    if any(mark in first_word for mark in "./\\"):  # a path the operator typed: kept as typed (disks tell case)
+        return text
     return text[:1].upper() + text[1:]

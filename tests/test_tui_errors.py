@@ -5,6 +5,7 @@ import asyncio
 
 from textual.app import App
 
+from fixwizard.errors import InputError
 from fixwizard.robot.base import ConnectionLost, ProtectiveStop
 from fixwizard.robot.ur_errors import LinkLost, URProtectiveStop
 from fixwizard.tui.widgets.errors import ErrorModal, error_message
@@ -39,3 +40,11 @@ def test_a_lost_link_offers_reconnect_and_shows_what_was_kept():
     assert set(buttons_of(error, simulated=False, can_unlock=True)) == {"ok", "reconnect"}
     assert isinstance(error, ConnectionLost)
     assert error_message(error).endswith("RTDE connection. The contact was saved as tap 4.")
+
+
+def test_a_message_is_a_sentence_but_a_path_it_starts_with_stays_as_typed():
+    """Linux tells Mymesh.stl from mymesh.stl: a capital the operator did not type would point at another file."""
+    assert error_message(InputError("mymesh.stl is the fixture mesh; choose another path")) == \
+        "mymesh.stl is the fixture mesh; choose another path"
+    assert error_message(InputError("sessions/a.jsonl is open elsewhere")).startswith("sessions/a.jsonl ")
+    assert error_message(InputError("the disk is full")) == "The disk is full"
