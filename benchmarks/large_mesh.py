@@ -13,13 +13,12 @@ reports (its elapsed seconds) and the peak memory.
 
 import argparse
 import statistics
-import subprocess
-import sys
 import tempfile
-import time
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
 from pathlib import Path
+
+from cli_process import timed_command
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -48,25 +47,11 @@ def make_inputs(folder: Path, subdivisions: int) -> tuple[Path, Path]:
     return mesh, points
 
 
-# runs the CLI and reports its own peak memory on the last line of stderr: the high-water mark of its own memory
-# since it started (VmHWM; ru_maxrss would count the memory of the process that started it, carried over the fork)
-WRAPPER = ("import sys\nfrom fixwizard.cli import main\ncode = main(sys.argv[1:])\n"
-           "hwm = open('/proc/self/status').read().split('VmHWM:')[1].split()[0]\n"
-           "print('MAXRSS_KB', hwm, file=sys.stderr)\nsys.exit(code)")
-
-
 def solve_process(mesh: Path, points: Path, report: Path) -> tuple[float, float, list[str]]:
     """Wall time (s) and peak memory (MB) of one whole `fixwizard solve` process, and the lines it wrote to
     stderr."""
-    command = [str(REPO / ".venv" / "bin" / "python"), "-c", WRAPPER, "solve", str(mesh), str(points),
-               "--sample-bound", "1mm", "--ball-diameter", "3mm", "-o", str(report)]
-    started = time.perf_counter()
-    result = subprocess.run(command, capture_output=True, text=True)
-    seconds = time.perf_counter() - started
-    if result.returncode not in (0, 3, 4):
-        sys.exit(f"solve failed ({result.returncode}):\n{result.stderr[-2000:]}")
-    lines = result.stderr.splitlines()
-    return seconds, float(lines[-1].split()[-1]) / 1024.0, lines[:-1]
+    return timed_command(REPO, ["solve", str(mesh), str(points), "--sample-bound", "1mm", "--ball-diameter", "3mm",
+                                "-o", str(report)])
 
 
 def main() -> None:

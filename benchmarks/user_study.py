@@ -16,21 +16,16 @@ bound; ``bound / reach`` is how much looser than necessary the bound can at most
 
 import argparse
 import statistics
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
+
+from cli_process import timed_command
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data" / "matlab-logo"
 RUNS = ("student_1", "student_2", "student_3", "expert")
 REFERENCE = {"student_1": (3.30, 2.65), "student_2": (2.71, 1.61), "student_3": (3.01, 4.05), "expert": (1.59, 1.16)}
-# runs the CLI and reports its own peak memory on the last line of stderr: the high-water mark of its own memory
-# since it started (VmHWM; ru_maxrss would count the memory of the process that started it, carried over the fork)
-WRAPPER = ("import sys\nfrom fixwizard.cli import main\ncode = main(sys.argv[1:])\n"
-           "hwm = open('/proc/self/status').read().split('VmHWM:')[1].split()[0]\n"
-           "print('MAXRSS_KB', hwm, file=sys.stderr)\nsys.exit(code)")
 
 
 def write_points(folder: Path) -> dict[str, Path]:
@@ -49,16 +44,10 @@ def write_points(folder: Path) -> dict[str, Path]:
 
 def solve_process(checkout: Path, points: Path, report: Path, max_cells: float) -> tuple[float, float]:
     """Wall time (s) and peak memory (MB) of one whole `fixwizard solve` process of ``checkout``."""
-    command = [str(checkout / ".venv" / "bin" / "python"), "-c", WRAPPER, "solve",
-               str(DATA / "meshes" / "matlab_logo.ply"), str(points), "--sample-bound", "1mm", "--ball-diameter", "3mm",
-               "--max-cells", f"{max_cells:g}", "-q", "-o", str(report)]
-    started = time.perf_counter()
-    result = subprocess.run(command, cwd=checkout, capture_output=True, text=True)
-    seconds = time.perf_counter() - started
-    if result.returncode not in (0, 3, 4):
-        sys.exit(f"{checkout}: solve failed ({result.returncode}):\n{result.stderr[-2000:]}")
-    peak_kb = float(result.stderr.strip().splitlines()[-1].split()[-1])
-    return seconds, peak_kb / 1024.0
+    seconds, peak_mb, _ = timed_command(checkout, [
+        "solve", str(DATA / "meshes" / "matlab_logo.ply"), str(points), "--sample-bound", "1mm", "--ball-diameter",
+        "3mm", "--max-cells", f"{max_cells:g}", "-q", "-o", str(report)])
+    return seconds, peak_mb
 
 
 def report_figures(report: Path) -> dict:

@@ -317,7 +317,6 @@ class LogFormatter(logging.Formatter):
         return _CONTROL.sub(lambda match: repr(match.group())[1:-1], super().formatMessage(record))
 
 
-
 def _log_handlers(log: str | None) -> list[logging.Handler]:
     """The handlers of the log: stderr, and the ``--log`` file when given; added to ``LOG``."""
     handlers: list[logging.Handler] = [logging.StreamHandler(sys.stderr)]

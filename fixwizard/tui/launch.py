@@ -1,6 +1,7 @@
 """Starting the wizard: the cell of the simulated demo or of a UR arm, switching between them, and the session to
 resume."""
 
+import contextlib
 import ipaddress
 import re
 from dataclasses import replace
@@ -31,10 +32,8 @@ def robot_host(text: str) -> str:
     """``text`` as a robot's address: an IP address or a host name; InputError with an example otherwise (a
     mistyped address, 999.1.1.1, or anything pasted with it)."""
     host = text.strip()
-    try:
+    with contextlib.suppress(ValueError):
         return str(ipaddress.ip_address(host))
-    except ValueError:
-        pass
     labels = host.split(".")
     if len(host) <= 253 and all(_HOST_LABEL.fullmatch(label) for label in labels) and \
             not all(label.isdigit() for label in labels):

@@ -228,7 +228,7 @@ class _Worker:
         except FixwizardError as error:
             send(Failed(sentence(error)))
             return
-        except OSError:
+        except ConnectionError:
             raise  # the pipe to the wizard is gone (``serve`` ends)
         except Exception as error:  # a bug: said in one line, the wizard and the taps go on
             last = traceback.extract_tb(error.__traceback__)[-1]

@@ -1,0 +1,26 @@
+"""One whole `fixwizard` command in a fresh process, as a user runs it: its wall time and its own peak memory."""
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+# runs the CLI and reports its own peak memory on the last line of stderr: the high-water mark of its own memory
+# since it started (VmHWM; ru_maxrss would count the memory of the process that started it, carried over the fork)
+WRAPPER = ("import sys\nfrom fixwizard.cli import main\ncode = main(sys.argv[1:])\n"
+           "hwm = open('/proc/self/status').read().split('VmHWM:')[1].split()[0]\n"
+           "print('MAXRSS_KB', hwm, file=sys.stderr)\nsys.exit(code)")
+SOLVED = (0, 3, 4)  # unique, ambiguous, undetermined: a solve that ran to its end
+
+
+def timed_command(checkout: Path, args: list[str]) -> tuple[float, float, list[str]]:
+    """Wall time (s), peak memory (MB) and the other lines on stderr of `fixwizard ARGS` run by ``checkout``'s
+    ``.venv`` in ``checkout``; the benchmark stops with the command's stderr when its exit code is no solve's."""
+    command = [str(checkout / ".venv" / "bin" / "python"), "-c", WRAPPER, *args]
+    started = time.perf_counter()
+    result = subprocess.run(command, cwd=checkout, capture_output=True, text=True)
+    seconds = time.perf_counter() - started
+    if result.returncode not in SOLVED:
+        sys.exit(f"{checkout}: {args[0]} failed ({result.returncode}):\n{result.stderr[-2000:]}")
+    lines = result.stderr.strip().splitlines()
+    return seconds, float(lines[-1].split()[-1]) / 1024.0, lines[:-1]
