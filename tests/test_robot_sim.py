@@ -106,6 +106,24 @@ def test_paced_motion_is_cut_short_by_stop_and_the_next_tap_works(fixture):
     assert cell.tap().travel_m > 0
 
 
+def test_status_says_moving_only_while_a_motion_takes_its_time(fixture):
+    """The wizard's status line shows ``mode``: the simulated cell said idle while it tapped."""
+    cell = SimulatedCell.with_fixture(fixture, seed=3, pace_s=0.6)
+    cell.connect()
+    cell.place_tip_near("table", np.random.default_rng(8))
+    seen = []
+    looker = threading.Timer(0.2, lambda: seen.append(cell.status().mode))
+    looker.start()
+    cell.tap()
+    looker.join()
+    assert seen == ["moving"] and cell.status().mode == "idle"
+    cell.freedrive(True)
+    cell.pace_s = 60.0  # a refused tap does not start: it fails at once, never moving
+    with pytest.raises(RobotError, match="freedrive is on"):
+        cell.tap()
+    assert cell.status().mode == "freedrive"
+
+
 def test_stop_ends_freedrive_as_a_controllers_stop_ends_its_program(cell):
     cell.freedrive(True)
     assert cell.status().mode == "freedrive"

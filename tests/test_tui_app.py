@@ -38,6 +38,10 @@ def text_of(app: FixwizardApp, selector: str) -> str:
     return str(app.screen.query_one(selector, Static).render())
 
 
+def status_of(app: FixwizardApp) -> str:
+    return str(app.screen.query_one(StatusBar).render())
+
+
 def screen_text(app: FixwizardApp) -> str:
     return "\n".join(str(widget.render()) for widget in app.screen.query(Static))
 
@@ -283,6 +287,25 @@ def test_the_stop_key_halts_the_robot_from_any_screen_and_keeps_the_taps(tmp_pat
             assert kept["table"] >= 1 and sum(kept.values()) < 56
             state = str(screen.query_one("#auto-state", Static).render())
             assert "was stopped on request; nothing was recorded from it" in state or "were cancelled after" in state
+    asyncio.run(run())
+
+
+def test_the_status_line_says_moving_while_the_simulated_arm_moves_and_only_then(tmp_path):
+    """On the simulated cell it said idle through the automatic taps (a UR arm says moving)."""
+    async def run():
+        context = wizard(tmp_path)
+        app = FixwizardApp(context)
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            await calibrate_by_hand(pilot)
+            screen = app.screen
+            await until(pilot, lambda: " | connected | idle | " in status_of(app))
+            context.robot.pace_s = 0.3
+            await pilot.press("g")
+            await until(pilot, lambda: " | connected | moving | " in status_of(app))
+            await pilot.press("escape")  # cancels after the current tap
+            await until(pilot, lambda: not screen.busy)
+            await until(pilot, lambda: " | connected | idle | " in status_of(app))
     asyncio.run(run())
 
 

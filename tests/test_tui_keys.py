@@ -28,9 +28,8 @@ from fixwizard.tui.tip_calibration.hands import PivotScreen, TablePointsScreen
 from fixwizard.tui.tip_calibration.result import CalibrationResultScreen
 from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.help import HelpScreen
-from fixwizard.tui.widgets.status import StatusBar
 from pilot_wait import until
-from test_tui_app import REPO, SIZE, at_start, calibrate_by_hand, press_button, rearm, wizard
+from test_tui_app import REPO, SIZE, at_start, calibrate_by_hand, press_button, rearm, status_of, wizard
 from tui_cell import ScreenHost, record_spread_taps, wizard_context
 
 
@@ -138,10 +137,6 @@ def test_help_on_the_sampling_screen_lists_its_keys(tmp_path):
             assert "  m       SIM hands" in text and "  i       Which?" in text  # also the keys the footer hides
             assert "SIM unlock" not in text  # only after a protective stop
     asyncio.run(run())
-
-
-def status_of(app) -> str:
-    return str(app.screen.query_one(StatusBar).render())
 
 
 def test_stop_shows_stopped_refuses_motion_until_a_confirmed_rearm(tmp_path):

@@ -95,6 +95,7 @@ class SimulatedCell:
         self._freedrive = False
         self._fault: Fault | None = None
         self._stop_requested = threading.Event()
+        self._moving = threading.Event()  # set while a tap or move takes its time (``status`` says so)
 
     @classmethod
     def with_fixture(cls, fixture: Fixture, seed: int = 0, base_T_cad: np.ndarray | None = None,
@@ -174,7 +175,7 @@ class SimulatedCell:
     def status(self) -> RobotStatus:
         with self._lock:
             mode = ("disconnected" if not self._connected else "protective stop" if self._protective_stop
-                    else "freedrive" if self._freedrive else "idle")
+                    else "moving" if self._moving.is_set() else "freedrive" if self._freedrive else "idle")
             return RobotStatus(self._connected, self._protective_stop, False, False, mode)
 
     def stop(self) -> None:
@@ -227,10 +228,17 @@ class SimulatedCell:
     # --- internals (call with the lock held, except ``_move_for_pace``) ---
 
     def _move_for_pace(self, motion: str) -> None:
-        """Let ``pace_s`` pass as the motion's duration; a ``stop()`` meanwhile aborts the motion."""
+        """Let ``pace_s`` pass as the motion's duration, ``status`` saying "moving" meanwhile; a motion the cell
+        refuses does not start, and a ``stop()`` meanwhile aborts it."""
+        with self._lock:
+            self._require_ready()
         self._stop_requested.clear()
-        if self.pace_s > 0.0 and self._stop_requested.wait(self.pace_s):
-            raise MotionStopped(motion)
+        self._moving.set()
+        try:
+            if self.pace_s > 0.0 and self._stop_requested.wait(self.pace_s):
+                raise MotionStopped(motion)
+        finally:
+            self._moving.clear()
 
     def _require_connected(self) -> None:
         if not self._connected:
