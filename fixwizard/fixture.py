@@ -42,7 +42,8 @@ class Fixture:
     outside can be told apart (closed, consistently oriented). ``cad_p_center``: minimum enclosing ball centre
     in the CAD frame (m). ``radius_m``: that ball's radius. ``warnings``: (code, message) pairs to pass on.
     ``meeting_faces``: the faces of bodies that cut through or touch another (``CleanMesh.meeting_faces``;
-    None: none).
+    None: none). ``surface_offset_m``: how far ``mesh``'s surface may lie from the file's (closed T-junctions,
+    ``CleanMesh.surface_offset_m``).
     """
 
     path: Path
@@ -54,6 +55,7 @@ class Fixture:
     signed: bool = True
     warnings: tuple[tuple[str, str], ...] = field(default=())
     meeting_faces: np.ndarray | None = None
+    surface_offset_m: float = 0.0
 
     @property
     def fix_T_cad(self) -> np.ndarray:
@@ -77,7 +79,8 @@ class Fixture:
     def oracle(self) -> "DistanceOracle":
         """Distance queries in the internal frame (signed where inside and outside can be told apart)."""
         fix_mesh = trimesh.Trimesh(self.fix_vertices_m, self.mesh.faces, process=False)
-        return DistanceOracle(fix_mesh, signed=self.signed, meeting_faces=self.meeting_faces)
+        return DistanceOracle(fix_mesh, signed=self.signed, meeting_faces=self.meeting_faces,
+                              surface_offset_m=self.surface_offset_m)
 
 
 class DistanceOracle:
@@ -99,10 +102,14 @@ class DistanceOracle:
     # sample bound.
     SIGN_FREE_M = 1e-7
 
-    def __init__(self, mesh_m: trimesh.Trimesh, signed: bool, meeting_faces: np.ndarray | None = None) -> None:
+    def __init__(self, mesh_m: trimesh.Trimesh, signed: bool, meeting_faces: np.ndarray | None = None,
+                 surface_offset_m: float = 0.0) -> None:
         """``meeting_faces``: faces whose plane does not tell inside from outside (of a body that cuts through or
-        touches another, ``CleanMesh.meeting_faces``): their points are signed as near an edge."""
+        touches another, ``CleanMesh.meeting_faces``): their points are signed as near an edge.
+        ``surface_offset_m``: how far this mesh's surface may lie from the fixture's as exported (m); the distances
+        are this mesh's, and the search widens each tap's band by it (``SearchProblem.tap_bound_m``)."""
         self.signed = signed
+        self.surface_offset_m = surface_offset_m
         self._vertices = np.asarray(mesh_m.vertices, np.float64)
         self._faces = np.asarray(mesh_m.faces, np.int64)
         self._distance = MeshDistance(self._vertices, self._faces)
@@ -307,7 +314,8 @@ def fixture_from_mesh(mesh_m: trimesh.Trimesh, path: Path, units: str, sha256: s
     ball = minimum_enclosing_ball(clean.mesh.vertices)
     return Fixture(path=path, units=units, mesh=clean.mesh, cad_p_center=ball.center, radius_m=ball.radius,
                    sha256=sha256, signed=clean.signed, warnings=clean.warnings,
-                   meeting_faces=clean.meeting_faces if np.any(clean.meeting_faces) else None)
+                   meeting_faces=clean.meeting_faces if np.any(clean.meeting_faces) else None,
+                   surface_offset_m=clean.surface_offset_m)
 
 
 def warm_up_distance_queries() -> None:

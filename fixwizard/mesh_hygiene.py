@@ -9,7 +9,11 @@ so the signed distance is used only where the mesh is closed and consistently or
   closed mesh keeps its sign); a mesh of such faces only: refused (it has no surface to tap);
 - faces that repeat another (the same three corners, wound either way): dropped (a copy adds no surface, and
   leaves the edges around it with four faces, so the mesh would look open);
-- open (not watertight): unsigned distance;
+- open only at T-junctions (a vertex of some faces lies on an edge of their neighbour, which is not split there,
+  as many STL exporters leave it): the neighbour is split at such vertices, which closes the mesh; a vertex may lie
+  off the edge by rounding (up to ``ZIP_SHARE`` of the mesh's size), so the closed surface lies up to that far from
+  the exported one (``CleanMesh.surface_offset_m``), and the search widens every tap's band by it;
+- open (not watertight) otherwise: unsigned distance;
 - faces wound against their neighbours: re-wound to agree with their neighbours, face by face outward from one
   face of each body (what ``trimesh.repair.fix_winding`` does, without its networkx walk), which is unambiguous on
   a closed manifold; if the mesh still cannot be wound consistently, unsigned distance;
@@ -30,6 +34,7 @@ import numpy as np
 import trimesh
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components, shortest_path
+from scipy.spatial import cKDTree
 
 from fixwizard.errors import MeshError
 from fixwizard.geometry.mesh_distance import MeshDistance
@@ -38,18 +43,28 @@ from fixwizard.geometry.mesh_distance import MeshDistance
 NESTING_SAMPLE = 64
 TOUCH_M = 1e-7  # a vertex this near another body's surface (m) counts as meeting it
 MAX_COORDINATE = 1e9  # in the file's units: a million kilometres in metres, a thousand in millimetres
+# A vertex this near an open edge (a share of the mesh's bounding-box diagonal) lies on it: a T-junction. An ASCII STL
+# of six significant digits puts such a vertex up to about 2e-6 of the size off the edge; 1e-5 of a 300 mm fixture is
+# 3 micrometres, which the bounds carry (``surface_offset_m``).
+ZIP_SHARE = 1e-5
+# float64 rounding of a vertex's distance off an edge (a difference, a projection and a norm of coordinates) and of a
+# face's centroid, as a share of the largest coordinate: a few ulps each, taken generously.
+ZIP_ROUNDING = 16.0 * float(np.finfo(np.float64).eps)
 
 
 @dataclass(frozen=True)
 class CleanMesh:
-    """A checked mesh (m), whether its signed distance can be trusted, (code, message) warnings, and which faces
+    """A checked mesh (m), whether its signed distance can be trusted, (code, message) warnings, which faces
     belong to a body that meets another (``meeting_faces``, one per face): a point nearest to one of them may lie
-    inside the other body, so such a face's plane does not tell inside from outside."""
+    inside the other body, so such a face's plane does not tell inside from outside), and how far the mesh's
+    surface may lie from the exported one (m: every point of either within that of the other; zero unless
+    T-junctions were closed)."""
 
     mesh: trimesh.Trimesh
     signed: bool
     warnings: tuple[tuple[str, str], ...]
     meeting_faces: np.ndarray
+    surface_offset_m: float = 0.0
 
 
 def refuse_non_finite(vertices: np.ndarray, name: str) -> None:
@@ -207,6 +222,71 @@ def _drop_repeated(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, l
                    "dropped (a copy adds no surface).")]
 
 
+@dataclass(frozen=True)
+class Zipped:
+    """A mesh whose T-junctions were split (m), how many vertices lay on an open edge, and the farthest of them
+    from its edge (m): the Hausdorff distance between the split surface and the exported one is at most that."""
+
+    mesh: trimesh.Trimesh
+    junctions: int
+    offset_m: float
+
+
+def _on_open_edges(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The T-junctions of a mesh: for each, the row of ``mesh.edges`` (face ``row // 3``, from its corner
+    ``row % 3`` to the next) of the open edge it lies on, the vertex, its place along the edge (0 to 1, in the
+    face's direction) and its distance off the edge (m). A vertex counts where it lies on an open edge's inner
+    part within ``ZIP_SHARE`` of the mesh's diagonal and is no corner of that edge's face."""
+    faces, vertices = np.asarray(mesh.faces), np.asarray(mesh.vertices)
+    edges = np.asarray(mesh.edges)
+    open_rows = trimesh.grouping.group_rows(np.sort(edges, axis=1), require_count=1)
+    rim = np.unique(edges[open_rows])
+    tolerance = ZIP_SHARE * float(np.linalg.norm(np.ptp(vertices, axis=0)))
+    starts, ends = vertices[edges[open_rows, 0]], vertices[edges[open_rows, 1]]
+    reach = 0.5 * np.linalg.norm(ends - starts, axis=1) + tolerance
+    near = cKDTree(vertices[rim]).query_ball_point(0.5 * (starts + ends), reach)
+    rows = np.repeat(open_rows, np.fromiter(map(len, near), np.int64, len(near)))
+    candidates = rim[np.fromiter(itertools.chain.from_iterable(near), np.int64, len(rows))]
+    start, along = vertices[edges[rows, 0]], vertices[edges[rows, 1]] - vertices[edges[rows, 0]]
+    places = np.einsum("ij,ij->i", vertices[candidates] - start, along) / np.einsum("ij,ij->i", along, along)
+    off_m = np.linalg.norm(vertices[candidates] - start - places[:, None] * along, axis=1)
+    own_corner = np.any(faces[rows // 3] == candidates[:, None], axis=1)
+    junction = ~own_corner & (places > 0.0) & (places < 1.0) & (off_m <= tolerance)
+    return rows[junction], candidates[junction], places[junction], off_m[junction]
+
+
+def _zip_t_junctions(mesh: trimesh.Trimesh) -> Zipped | None:
+    """The mesh with every face that has T-junctions on its open edges split there: a fan from the face's centroid
+    through its corners and those vertices, in the face's winding. None when there is no T-junction, the mesh is
+    still open after the split, or a new face would not face as the face it replaces (a vertex off its edge by
+    more than the face is wide)."""
+    rows, junction_vertices, places, off_m = _on_open_edges(mesh)
+    if len(rows) == 0:
+        return None
+    faces, vertices = np.asarray(mesh.faces), np.asarray(mesh.vertices)
+    split, face_of_junction = np.unique(rows // 3, return_inverse=True)
+    # each split face's outline: corner k (place -1 on edge k), then the junctions on edge k by their place
+    face_of = np.concatenate([np.repeat(np.arange(len(split)), 3), face_of_junction])
+    edge_of = np.concatenate([np.tile(np.arange(3), len(split)), rows % 3])
+    place_of = np.concatenate([np.full(3 * len(split), -1.0), places])
+    order = np.lexsort((place_of, edge_of, face_of))
+    face_of, outline = face_of[order], np.concatenate([faces[split].ravel(), junction_vertices])[order]
+    following = np.arange(1, len(outline) + 1)
+    ends = following == np.searchsorted(face_of, face_of, side="right")
+    following[ends] = np.searchsorted(face_of, face_of[ends], side="left")
+    fan_faces = np.stack([outline, outline[following], len(vertices) + face_of], axis=1)
+    zipped_faces = np.vstack([np.delete(faces, split, axis=0), fan_faces])
+    zipped_vertices = np.vstack([vertices, vertices[faces[split]].mean(axis=1)])
+    fan_normals = np.cross(zipped_vertices[fan_faces[:, 1]] - zipped_vertices[fan_faces[:, 0]],
+                           zipped_vertices[fan_faces[:, 2]] - zipped_vertices[fan_faces[:, 0]])
+    replaced = np.asarray(mesh.face_normals)[split][face_of]
+    zipped = trimesh.Trimesh(zipped_vertices, zipped_faces, process=False)
+    if not zipped.is_watertight or np.any(np.einsum("ij,ij->i", fan_normals, replaced) <= 0.0):
+        return None
+    rounding_m = ZIP_ROUNDING * float(np.max(np.abs(vertices)))  # of the distances off the edges and the centroids
+    return Zipped(zipped, len(rows), float(np.max(off_m)) + rounding_m)
+
+
 def _orient(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, bool, list[tuple[str, str]], np.ndarray]:
     """A closed mesh consistently wound with every body oriented by its nesting, whether that succeeded, and its
     faces that belong to a body meeting another (``CleanMesh.meeting_faces``)."""
@@ -266,6 +346,18 @@ def clean_mesh(mesh: trimesh.Trimesh, name: str) -> CleanMesh:
     mesh, repeated = _drop_repeated(mesh, name)
     warnings += repeated
     if not mesh.is_watertight:
+        zipped = _zip_t_junctions(mesh)
+        if zipped is not None:
+            oriented, signed, orient_warnings, meeting_faces = _orient(zipped.mesh, name)
+            if signed:
+                moved = (f"at most {zipped.offset_m * 1e6:.2g} micrometres" if zipped.offset_m >= 1e-9
+                         else "less than a nanometre")
+                warnings.append(("mesh_t_junctions_closed",
+                                 f"{name} was open only at {zipped.junctions} T-junctions (a vertex of some faces on "
+                                 "an edge of their neighbour, which was not split there); fixwizard split those "
+                                 f"faces to close the mesh, which moves its surface by {moved} (the bounds include "
+                                 "that)."))
+                return CleanMesh(oriented, True, tuple(warnings + orient_warnings), meeting_faces, zipped.offset_m)
         warnings.append(("mesh_not_watertight",
                          f"{name} is not watertight (it has holes or open edges), so fixwizard cannot tell inside "
                          "from outside and uses the unsigned distance: the bounds stay guaranteed but may be "

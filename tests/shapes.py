@@ -63,6 +63,31 @@ def two_boss_bar(boss_spacing_m: float = 0.05) -> trimesh.Trimesh:
     return mesh
 
 
+def with_t_junctions(mesh: trimesh.Trimesh, rng: np.random.Generator, share: float = 0.3,
+                     rounds: int = 2) -> tuple[trimesh.Trimesh, np.ndarray]:
+    """The mesh with a random ``share`` of its faces split at their edges' midpoints, ``rounds`` times (each round
+    among the faces of the last), the neighbours left whole, as STL exporters leave them: T-junctions, up to three
+    on an edge and on several edges of a face. Returns it and the indices of its new vertices."""
+    split = mesh.copy()
+    chosen = rng.random(len(split.faces)) < share
+    chosen[rng.integers(len(chosen))] = True
+    for _ in range(rounds):
+        before = len(split.faces)
+        split = split.subdivide(face_index=np.flatnonzero(chosen))
+        new_faces = np.arange(len(split.faces)) >= before - np.count_nonzero(chosen)
+        chosen = new_faces & (rng.random(len(split.faces)) < 0.5)
+    return split, np.arange(len(mesh.vertices), len(split.vertices))
+
+
+def moved(mesh: trimesh.Trimesh, vertices: np.ndarray, length_m: float, rng: np.random.Generator) -> trimesh.Trimesh:
+    """The mesh with the given vertices each moved ``length_m`` in a random direction (a T-junction's vertex off its
+    edge by an export's rounding)."""
+    directions = rng.normal(size=(len(vertices), 3))
+    shifted = np.asarray(mesh.vertices).copy()
+    shifted[vertices] += length_m * directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    return trimesh.Trimesh(shifted, mesh.faces, process=False)
+
+
 SHAPES = {"l_prism": l_prism, "polytope": lambda: random_polytope(7), "cube": cube, "brick": brick,
           "triangular_prism": triangular_prism, "cylinder": cylinder, "cone": cone}
 

@@ -1,7 +1,8 @@
 """The guarantee on meshes as CAD tools export them: taps made on the true solid, solved with a mesh that has
 facets turned inside out (many, or a single one), is inside out as a whole, holds two bodies (one inside out),
 holds two bodies that overlap (an assembly exported without a union), repeats facets (some of the copies turned),
-is open, or is a metre-long bar or rail of long thin facets (aspect up to 400). Noise up to the bound, 30 % of
+is open, has T-junctions (on their edges, or off them by rounding), or is a metre-long bar or rail of long thin
+facets (aspect up to 400). Noise up to the bound, 30 % of
 the taps exactly at the bound along the normal. Zero misses and zero false "inconsistent" allowed."""
 
 import numpy as np
@@ -11,11 +12,12 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from fixwizard.geometry.se3 import invert, make_transform, transform_points
+from fixwizard.mesh_hygiene import ZIP_SHARE
 from fixwizard.solver.cells import root_cells
 from fixwizard.solver.search import SearchProblem, filter_cells, rotation_splits_first, start_position_grid
 from fixwizard.solver.solve import solve
 from fixwizard.synthetic import bounded_noise, exact_distances_m, touching_ball_contacts
-from shapes import SHAPES, as_fixture
+from shapes import SHAPES, as_fixture, moved, with_t_junctions
 
 SEEDS = range(3)
 BALL_DIAMETERS_M = (0.0, 0.003, 0.006)
@@ -74,6 +76,12 @@ def messy_case(kind: str, seed: int):
         kept = np.ones(len(truth.faces), bool)
         kept[rng.choice(len(kept), 2, replace=False)] = False
         return truth, trimesh.Trimesh(truth.vertices, np.asarray(truth.faces)[kept], process=False), kept
+    if kind == "T-junctions":
+        return truth, with_t_junctions(truth, rng)[0], everywhere
+    if kind == "T-junctions off their edges":  # the exported surface is the true one: rounding is in the part too
+        split, new = with_t_junctions(truth, rng)  # moved 0.4 of the tolerance, with their edges' ends: 0.8 off them
+        exported = moved(split, new, 0.4 * ZIP_SHARE * float(np.linalg.norm(split.extents)), rng)
+        return exported, exported, np.ones(len(exported.faces), bool)
     if kind == "slivers":
         long_one = _rail() if seed % 2 == 0 else _bar()
         return long_one, _flipped(long_one, rng, 0.1), np.ones(len(long_one.faces), bool)
@@ -81,7 +89,7 @@ def messy_case(kind: str, seed: int):
 
 
 KINDS = ("flipped facets", "one flipped facet", "inside out", "two bodies, one inside out", "two overlapping bodies",
-         "repeated facets, some copies turned", "open", "slivers")
+         "repeated facets, some copies turned", "open", "T-junctions", "T-junctions off their edges", "slivers")
 
 
 def _outside_every_body(truth: trimesh.Trimesh, centres: np.ndarray, ball_radius_m: float) -> np.ndarray:
@@ -134,7 +142,25 @@ def test_no_miss_and_no_false_inconsistent_on_messy_meshes(kind, seed):
         assert fixture.signed
 
 
-DESCENT_LEVELS = 36  # down to cells of a few micrometres: finer than float32's errors on the bar's facets
+def _level_losing_the_true_cell(problem: SearchProblem, base_T_fix: np.ndarray, finest_m: float) -> int | None:
+    """Descend from the root keeping only the cell holding ``base_T_fix``, until its cells' position bound and
+    rotation chord at the fixture's radius are both below ``finest_m``: the level at which no cell holds it any
+    more, or None."""
+    cells, parents = root_cells(start_position_grid(problem)), None
+    for level in range(200):
+        parents = filter_cells(problem, cells, parents)
+        rotation = cells.rotation_grid.cell_of(parents.cells.rotation_level, Rotation.from_matrix(base_T_fix[:3, :3]))
+        position = parents.cells.position_grid.cell_of(parents.cells.position_level, base_T_fix[:3, 3])
+        mask = (parents.cells.rotation_cells == rotation[0]) & np.all(parents.cells.position_cells == position, axis=1)
+        if not np.any(mask):
+            return level
+        parents = parents.subset(mask)
+        family = parents.cells
+        chord_m = problem.fixture_radius_m * 2 * np.sin(float(np.max(family.distinct_rotations()[1])) / 2)
+        if family.position_bound_m < finest_m and chord_m < finest_m:
+            return None
+        cells = family.split_rotations() if rotation_splits_first(family, problem) else family.split_positions()
+    raise AssertionError("the descent did not reach cells that fine")
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -143,19 +169,8 @@ def test_the_true_cell_survives_every_level_down_to_fine_cells_on_slivers_and_fl
     """The exact stage runs on cells a few micrometres from the surface here, where float32 distances to 1 m
     facets err by tenths of a millimetre."""
     fixture, base_T_cad, taps, ball_diameter, sample_bound = messy_taps(kind, seed)
-    base_T_fix = base_T_cad @ invert(fixture.fix_T_cad)
     problem = SearchProblem(fixture.oracle, fixture.radius_m, taps, ball_diameter / 2, sample_bound)
-    cells, parents = root_cells(start_position_grid(problem)), None
-    for _ in range(DESCENT_LEVELS):
-        parents = filter_cells(problem, cells, parents)
-        rotation = cells.rotation_grid.cell_of(parents.cells.rotation_level, Rotation.from_matrix(base_T_fix[:3, :3]))
-        position = parents.cells.position_grid.cell_of(parents.cells.position_level, base_T_fix[:3, 3])
-        mask = (parents.cells.rotation_cells == rotation[0]) & np.all(parents.cells.position_cells == position, axis=1)
-        assert np.count_nonzero(mask) == 1, (parents.cells.rotation_level, parents.cells.position_level)
-        parents = parents.subset(mask)
-        family = parents.cells
-        cells = family.split_rotations() if rotation_splits_first(family, problem) else family.split_positions()
-    assert family.position_bound_m < 2e-5
+    assert _level_losing_the_true_cell(problem, base_T_cad @ invert(fixture.fix_T_cad), 2e-5) is None
 
 
 def test_taps_where_float32_distances_err_most_keep_the_true_cell_to_the_finest_level():
@@ -177,21 +192,45 @@ def test_taps_where_float32_distances_err_most_keep_the_true_cell_to_the_finest_
     assert overstated[worst[-1]] > 5e-5  # the float32 error these taps sit on
     cad_p_taps = np.vstack([candidates[worst], candidates[rng.choice(len(candidates), 6, replace=False)]])
     base_T_cad = make_transform(Rotation.from_rotvec([0.1, 0.2, 0.3]), [0.3, 0.1, 0.2])
-    base_T_fix = base_T_cad @ invert(fixture.fix_T_cad)
     problem = SearchProblem(fixture.oracle, fixture.radius_m, transform_points(base_T_cad, cad_p_taps), ball_radius,
                             bound)
-    cells, parents = root_cells(start_position_grid(problem)), None
-    for _ in range(44):
-        parents = filter_cells(problem, cells, parents)
-        rotation = cells.rotation_grid.cell_of(parents.cells.rotation_level, Rotation.from_matrix(base_T_fix[:3, :3]))
-        position = parents.cells.position_grid.cell_of(parents.cells.position_level, base_T_fix[:3, 3])
-        mask = (parents.cells.rotation_cells == rotation[0]) & np.all(parents.cells.position_cells == position, axis=1)
-        assert np.count_nonzero(mask) == 1, (parents.cells.rotation_level, parents.cells.position_level)
-        parents = parents.subset(mask)
-        family = parents.cells
-        cells = family.split_rotations() if rotation_splits_first(family, problem) else family.split_positions()
-    gamma = float(np.max(family.distinct_rotations()[1]))
-    assert family.position_bound_m + fixture.radius_m * 2 * np.sin(gamma / 2) < 2e-5  # cells finer than the error
+    assert _level_losing_the_true_cell(problem, base_T_cad @ invert(fixture.fix_T_cad), 1e-5) is None
+
+
+@pytest.mark.parametrize("offset_in_band", [True, False])
+def test_taps_beside_t_junctions_off_their_edges_keep_the_true_cell_down_to_submicrometre_cells(offset_in_band):
+    """A box whose top's triangles are split, the sides' whole: the four T-junction vertices lie 0.9 of
+    ``ZIP_SHARE`` of the diagonal (1.1 micrometres) out from their sides, so the closed mesh's sides bulge out by
+    that beside them. A ball pressed into a side by the full bound just below such a vertex is then more than the
+    bound into the closed surface: with each tap's band widened by the surface offset the true cell survives to
+    cells of half of it; without (``offset_in_band`` false, the search of before) it is lost."""
+    box = trimesh.creation.box((0.1, 0.06, 0.04))
+    split = box.subdivide(face_index=np.flatnonzero(box.face_normals[:, 2] > 0.5))
+    new = np.arange(len(box.vertices), len(split.vertices))
+    on_sides = new[np.any(np.isclose(np.abs(split.vertices[new, :2]), [0.05, 0.03]), axis=1)]
+    outward = np.where(np.isclose(np.abs(split.vertices[on_sides, :2]), [0.05, 0.03]),
+                       np.sign(split.vertices[on_sides, :2]), 0.0)
+    lift_m = 0.9 * ZIP_SHARE * float(np.linalg.norm(split.extents))
+    vertices = np.asarray(split.vertices).copy()
+    vertices[on_sides, :2] += lift_m * outward
+    exported = trimesh.Trimesh(vertices, split.faces, process=False)
+    fixture = as_fixture("box", exported)
+    assert fixture.signed and fixture.surface_offset_m >= lift_m
+    ball_radius, bound = 0.0015, 0.0005
+    normals = np.hstack([outward, np.zeros((4, 1))])
+    pressed_in = split.vertices[on_sides] - [0.0, 0.0, 0.0005] + (ball_radius - bound) * normals
+    assert np.allclose(exact_distances_m(exported, pressed_in), ball_radius - bound, atol=1e-12)
+    rng = np.random.default_rng(3)
+    others, _ = touching_ball_contacts(exported, 8, ball_radius, rng)
+    cad_p_taps = np.vstack([pressed_in, others + bounded_noise(8, bound, rng)])
+    base_T_cad = make_transform(Rotation.from_rotvec([0.3, -0.2, 0.5]), [0.4, 0.1, 0.2])
+    oracle = fixture.oracle
+    oracle.surface_offset_m = fixture.surface_offset_m if offset_in_band else 0.0
+    problem = SearchProblem(oracle, fixture.radius_m, transform_points(base_T_cad, cad_p_taps), ball_radius, bound)
+    closed_distances = oracle.signed_distance_m(cad_p_taps[:4] - fixture.cad_p_center)
+    assert np.all(closed_distances < ball_radius - bound - 0.5 * lift_m)  # beyond the bound from the closed surface
+    lost_at = _level_losing_the_true_cell(problem, base_T_cad @ invert(fixture.fix_T_cad), 0.5 * lift_m)
+    assert (lost_at is None) is offset_in_band
 
 
 @pytest.mark.parametrize("seed", range(2))

@@ -11,7 +11,9 @@ import trimesh
 
 from fixwizard.errors import MeshError
 from fixwizard.fixture import load_fixture
-from shapes import SHAPES, as_fixture
+from fixwizard.mesh_hygiene import ZIP_SHARE
+from fixwizard.synthetic import exact_distances_m
+from shapes import SHAPES, as_fixture, moved, with_t_junctions
 
 
 def _codes(fixture) -> list[str]:
@@ -145,6 +147,88 @@ def test_a_non_manifold_closed_mesh_falls_back_to_the_unsigned_distance():
     fixture = as_fixture("box", trimesh.Trimesh(both.vertices, both.faces, process=False))
     assert not fixture.signed and not fixture.oracle.signed
     assert set(_codes(fixture)) & {"mesh_not_watertight", "mesh_orientation_unknown"}
+
+
+def _boxes_top_split() -> tuple[trimesh.Trimesh, np.ndarray]:
+    """A 10 x 6 x 4 cm box whose top's two triangles are split at their edges' midpoints, the sides left whole:
+    four T-junctions, one on each side's top edge (vertex indices returned)."""
+    box = trimesh.creation.box((0.1, 0.06, 0.04))
+    split = box.subdivide(face_index=np.flatnonzero(box.face_normals[:, 2] > 0.5))
+    new = np.arange(len(box.vertices), len(split.vertices))
+    on_sides = new[np.any(np.isclose(np.abs(split.vertices[new, :2]), [0.05, 0.03]), axis=1)]
+    assert len(on_sides) == 4 and not split.is_watertight
+    return split, on_sides
+
+
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("name", sorted(SHAPES))
+def test_t_junctions_are_closed_and_the_sign_kept(name, seed):
+    """Faces split at their edges' midpoints, their neighbours left whole (up to three T-junctions on an edge, on
+    several edges of a face): once taken as open (unsigned distance, looser bounds), now closed without moving the
+    surface, signed."""
+    truth = SHAPES[name]()
+    exported, _ = with_t_junctions(truth, np.random.default_rng(seed))
+    fixture = as_fixture(name, exported)
+    assert fixture.signed and fixture.mesh.is_watertight and _codes(fixture) == ["mesh_t_junctions_closed"]
+    assert "less than a nanometre" in dict(fixture.warnings)["mesh_t_junctions_closed"]
+    assert fixture.surface_offset_m < 1e-9
+    _sign_matches_the_true_solid(fixture, truth, seed)
+    points = truth.bounds[0] - 0.01 + np.random.default_rng(seed).random((200, 3)) * (truth.extents + 0.02)
+    assert np.allclose(np.abs(fixture.oracle.signed_distance_m(points - fixture.cad_p_center)),
+                       exact_distances_m(truth, points), rtol=0.0, atol=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("name", ["l_prism", "polytope", "cylinder"])
+def test_t_junction_vertices_off_their_edge_are_closed_within_the_offset_said(name, seed):
+    """An export's rounding leaves a T-junction's vertex off the edge: each new vertex moved up to 0.4 of
+    ``ZIP_SHARE`` of the mesh's diagonal (both ends of its edge may have moved too: up to 0.8 off it). The closed
+    surface then differs from the exported one; every point of either lies within ``surface_offset_m`` of the
+    other (checked on samples of both), which the warning says."""
+    rng = np.random.default_rng(seed)
+    split, new = with_t_junctions(SHAPES[name](), rng)
+    tolerance_m = ZIP_SHARE * float(np.linalg.norm(split.extents))
+    exported = moved(split, new, 0.4 * tolerance_m * (0.1 + 0.9 * rng.random()), rng)
+    fixture = as_fixture(name, exported)
+    assert fixture.signed and _codes(fixture) == ["mesh_t_junctions_closed"]
+    offset_m = fixture.surface_offset_m
+    assert 0.0 < offset_m <= 1.001 * tolerance_m
+    assert f"at most {offset_m * 1e6:.2g} micrometres" in dict(fixture.warnings)["mesh_t_junctions_closed"]
+    exported_samples = trimesh.sample.sample_surface(exported, 3000, seed=seed)[0]
+    closed_samples = trimesh.sample.sample_surface(fixture.mesh, 3000, seed=seed)[0]
+    assert np.max(exact_distances_m(fixture.mesh, exported_samples)) <= offset_m
+    assert np.max(exact_distances_m(exported, closed_samples)) <= offset_m
+    assert np.max(exact_distances_m(exported, closed_samples)) > 0.3 * offset_m  # the closed surface did move
+
+
+@pytest.mark.parametrize("off_edge_share, closed", [(0.5, True), (3.0, False)])
+def test_a_vertex_farther_off_its_edge_than_an_exports_rounding_is_a_gap(off_edge_share, closed):
+    """The box's four T-junction vertices lifted off their edges: by half ``ZIP_SHARE`` of the diagonal they are
+    rounding (closed, the lift said as the offset), by three times that the mesh has a gap (unsigned, as any
+    open mesh)."""
+    split, on_sides = _boxes_top_split()
+    lift_m = off_edge_share * ZIP_SHARE * float(np.linalg.norm(split.extents))
+    vertices = np.asarray(split.vertices).copy()
+    vertices[on_sides, 2] += lift_m
+    fixture = as_fixture("box", trimesh.Trimesh(vertices, split.faces, process=False))
+    assert fixture.signed is closed
+    if closed:
+        assert _codes(fixture) == ["mesh_t_junctions_closed"]
+        assert fixture.surface_offset_m == pytest.approx(lift_m, rel=1e-6)
+        assert fixture.oracle.surface_offset_m == fixture.surface_offset_m
+    else:
+        assert _codes(fixture) == ["mesh_not_watertight"] and fixture.surface_offset_m == 0.0
+
+
+def test_t_junctions_beside_a_hole_leave_the_mesh_open():
+    """Closing the T-junctions cannot close a missing face: the mesh stays open, unsigned, said as before, and the
+    faces are the exported ones."""
+    split, _ = _boxes_top_split()
+    bottom = np.flatnonzero(split.face_normals[:, 2] < -0.5)[0]
+    holed = trimesh.Trimesh(split.vertices, np.delete(split.faces, bottom, axis=0), process=False)
+    fixture = as_fixture("box", holed)
+    assert not fixture.signed and _codes(fixture) == ["mesh_not_watertight"]
+    assert len(fixture.mesh.faces) == len(holed.faces) and fixture.surface_offset_m == 0.0
 
 
 @pytest.mark.parametrize("suffix", [".stl", ".ply", ".obj"])

@@ -74,9 +74,15 @@ class SearchProblem:
     sample_bound_m: float
 
     @property
+    def tap_bound_m(self) -> float:
+        """How far a tap's ball centre may lie off ``ball_radius_m`` from the oracle's surface: the sample bound,
+        plus how far that surface may lie from the exported one (``DistanceOracle.surface_offset_m``)."""
+        return self.sample_bound_m + self.oracle.surface_offset_m
+
+    @property
     def lever_cap_m(self) -> float:
-        """Largest distance from the fixture centre to any tap: ``r + r_ball + b_s``."""
-        return self.fixture_radius_m + self.ball_radius_m + self.sample_bound_m
+        """Largest distance from the fixture centre to any tap: ``r + r_ball + b_s`` (``tap_bound_m``)."""
+        return self.fixture_radius_m + self.ball_radius_m + self.tap_bound_m
 
 
 @dataclass(frozen=True)
@@ -220,7 +226,7 @@ def _filter_chunk(problem: SearchProblem, frames: _Frames, first: int, count: in
     else:
         parent_arrays = (parents.frames.fix_R_base, parents.frames.rotation_index, parents.rotated_positions,
                          parents.low_m, parents.high_m, parents.faces)
-    band_figures = (problem.ball_radius_m, problem.sample_bound_m, frames.cells.position_bound_m, problem.lever_cap_m)
+    band_figures = (problem.ball_radius_m, problem.tap_bound_m, frames.cells.position_bound_m, problem.lever_cap_m)
     position_grid, position_level = frames.cells.position_grid, frames.cells.position_level
     cells = (frames.fix_R_base, rotation_index, frames.cells.position_cells[chunk], frames.chords,
              np.append(position_grid.corner_m, position_grid.cell_side_m(position_level)))
