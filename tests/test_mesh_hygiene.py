@@ -178,6 +178,23 @@ def test_t_junctions_are_closed_and_the_sign_kept(name, seed):
                        exact_distances_m(truth, points), rtol=0.0, atol=1e-9)
 
 
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("turned", ["a fifth of the faces", "every face"])
+def test_t_junctions_with_faces_turned_inside_out_are_closed_then_turned_back(turned, seed):
+    """Both faults of one export: closed first, then wound and oriented as any closed mesh; the sign is the true
+    solid's."""
+    rng = np.random.default_rng(seed)
+    truth = SHAPES[("l_prism", "polytope", "cylinder")[seed]]()
+    split, _ = with_t_junctions(truth, rng)
+    faces = np.asarray(split.faces).copy()
+    flipped = rng.random(len(faces)) < 0.2 if turned == "a fifth of the faces" else np.ones(len(faces), bool)
+    faces[flipped] = faces[flipped][:, ::-1]
+    fixture = as_fixture("part", trimesh.Trimesh(split.vertices, faces, process=False))
+    repaired = "mesh_winding_repaired" if turned == "a fifth of the faces" else "mesh_inverted_repaired"
+    assert fixture.signed and _codes(fixture) == ["mesh_t_junctions_closed", repaired]
+    _sign_matches_the_true_solid(fixture, truth, seed)
+
+
 @pytest.mark.parametrize("seed", range(4))
 @pytest.mark.parametrize("name", ["l_prism", "polytope", "cylinder"])
 def test_t_junction_vertices_off_their_edge_are_closed_within_the_offset_said(name, seed):
