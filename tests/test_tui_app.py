@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from textual.pilot import Pilot
-from textual.widgets import Button, Input, Select, Static
+from textual.widgets import Button, Input, OptionList, Select, Static
 
 from fixwizard.calibration.store import load_calibration, save_calibration
 from fixwizard.demo import DEMO_MESH, demo_fixture
@@ -150,6 +150,28 @@ def test_a_typed_path_that_is_no_mesh_is_refused_with_the_reason(tmp_path, monke
             await pilot.press("tab", "tab", *"notes.txt", "enter")
             await until(pilot, lambda: "notes.txt is not a mesh file fixwizard reads" in text_of(app, "#fixture-info"))
             assert start_fixture(app) is None
+    asyncio.run(run())
+
+
+@pytest.mark.parametrize("typed", ["bracket.stl", "~no-such-user-fixwizard/bracket.stl"])
+def test_a_typed_mesh_path_that_does_not_exist_is_refused_and_the_fixture_stays(tmp_path, monkeypatch, typed):
+    """It was added to the list of meshes, and stayed there (a ~user that does not exist was a traceback)."""
+    monkeypatch.chdir(tmp_path)
+
+    async def run():
+        app = FixwizardApp(wizard(tmp_path))
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            meshes = app.screen.query_one("#fixture", Select).query_one(OptionList)
+            listed = meshes.option_count
+            await pilot.press("tab", "tab", *typed, "enter")
+            await until(pilot, lambda: isinstance(app.screen, ErrorModal) and bool(app.screen.query("#dialog-message")))
+            assert text_of(app, "#dialog-message") == (f"There is no file '{typed}': check the path and type it "
+                                                       "again, or choose a mesh in the list")
+            await press_button(pilot, "#ok")
+            await until(pilot, lambda: isinstance(app.screen, StartScreen))
+            assert meshes.option_count == listed and start_fixture(app).path == DEMO_MESH
+            assert app.screen.query_one("#fixture-path", Input).value == typed  # to correct it
     asyncio.run(run())
 
 

@@ -4,6 +4,7 @@ chose (``NewSession``: the fixture and a stored tip calibration or none yet; or 
 decides what comes next. "Check a calibrated fixture" opens ``CheckScreen`` over it
 (with the chosen stored tip calibration); back from there is back here."""
 
+import os
 from collections.abc import Callable
 from pathlib import Path
 
@@ -13,7 +14,7 @@ from textual.screen import Screen
 from textual.widgets import Button, Input, Select, Static
 
 from fixwizard.demo import DEMO_MESH
-from fixwizard.errors import FixwizardError, MeshError, MeshUnitsError
+from fixwizard.errors import FixwizardError, MeshError, MeshUnitsError, quoted
 from fixwizard.fixture import Fixture, load_fixture
 from fixwizard.tui.cell import Cell, NewSession, Resumed, SavedCalibration, StartChoice
 from fixwizard.tui.check.screen import CheckScreen
@@ -159,7 +160,11 @@ class StartScreen(Screen[StartChoice]):
         if event.input.id == "robot-host":
             self._switch_robot(lambda cell: switch_to_ur_arm(cell, text))
             return
-        path = Path(text).expanduser()
+        path = Path(os.path.expanduser(text))  # an unknown ~user stays as typed (Path.expanduser raises)
+        if not os.path.exists(path):  # refused before it joins the list, as a mistyped robot address is
+            services(self).show_error(MeshError(f"there is no file {quoted(text)}: check the path and type it again, "
+                                                "or choose a mesh in the list"))
+            return
         fixture_select = self.query_one("#fixture", Select)
         if all(choice.path != path for choice in self._fixtures):
             options = [(choice.label, str(choice.path)) for choice in self._fixtures]
