@@ -12,6 +12,7 @@ import pkgutil
 import sys
 
 import pytest
+from textual.containers import Vertical, VerticalScroll
 from textual.pilot import Pilot
 from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Select, Static
@@ -29,7 +30,7 @@ from fixwizard.tui.tip_calibration.result import CalibrationResultScreen
 from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.help import HelpScreen
 from pilot_wait import until
-from test_tui_app import REPO, SIZE, at_start, calibrate_by_hand, press_button, rearm, status_of, wizard
+from test_tui_app import REPO, SIZE, at_start, calibrate_by_hand, pivot_by_hand, press_button, rearm, status_of, wizard
 from tui_cell import ScreenHost, record_spread_taps, wizard_context
 
 
@@ -300,7 +301,7 @@ async def assert_in_view(pilot: Pilot, *key_names: str) -> None:
     for name in key_names:
         assert name in shown, f"{name} not in the footer of {type(app.screen).__name__}"
         region = shown[name].region
-        assert region.width > 0 and region.right <= SIZE[0], f"{name} cut off on {type(app.screen).__name__}"
+        assert region.width > 0 and region.right <= app.size.width, f"{name} cut off on {type(app.screen).__name__}"
 
 
 def test_the_footer_keeps_esc_and_quit_in_view_at_80x24(tmp_path):
@@ -319,6 +320,40 @@ def test_the_footer_keeps_esc_and_quit_in_view_at_80x24(tmp_path):
             await until(pilot, lambda: isinstance(app.screen, PivotScreen) and not app.screen.busy)
             await pilot.pause()
             await assert_in_view(pilot, "escape", "ctrl+q", "question_mark")
+    asyncio.run(run())
+
+
+@pytest.mark.parametrize("size", [(60, 20), SIZE])
+def test_stop_stays_in_the_footer_and_the_help_fits_the_terminal(tmp_path, size):
+    """At 60x20 the footer of the table points lost F12 STOP to the keys before it and the help was cut; at 80x24
+    the help's close line was cut and the last line of the automatic taps' help scrolled."""
+    width, height = size
+
+    async def run():
+        app = FixwizardApp(wizard(tmp_path))
+        async with app.run_test(size=size) as pilot:
+            await at_start(pilot)
+            await pivot_by_hand(pilot)
+            await assert_in_view(pilot, "f12")
+            for _ in range(3):
+                await pilot.press(keys.HANDS.keys)
+                await until(pilot, lambda: not app.screen.busy)
+            await pilot.press("n")
+            await until(pilot, lambda: isinstance(app.screen, AutoTapsScreen))
+            await pilot.press("question_mark")
+            await until(pilot, lambda: isinstance(app.screen, HelpScreen) and bool(app.screen.query(VerticalScroll)))
+            await pilot.pause()
+            box = app.screen.query_one(Vertical)
+            assert "Esc closes this help" in str(box.border_subtitle)
+            # within the terminal, the status line above it and the footer (F12 STOP) below it in view
+            assert box.region.x >= 0 and box.region.right <= width and box.region.y == 1
+            assert box.region.bottom <= height - 1
+            text = app.screen.query_one(VerticalScroll)
+            if size == SIZE:
+                assert text.max_scroll_y == 0  # all of it in view
+            else:
+                await pilot.press("end")
+                await until(pilot, lambda: text.max_scroll_y > 0 and text.scroll_y == text.max_scroll_y)
     asyncio.run(run())
 
 

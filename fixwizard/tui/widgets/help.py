@@ -1,6 +1,7 @@
 """The help screen (``?`` on every screen): what to do on this step in one paragraph, the keys of this screen
 and the ones that work everywhere, each with what it does. Esc, n or ``?`` closes it."""
 
+from rich.text import Text
 from textual.app import ComposeResult
 from textual.containers import Vertical, VerticalScroll
 from textual.screen import ModalScreen
@@ -18,14 +19,15 @@ def key_lines(entries: list[tuple[keys.Key, bool]]) -> list[str]:
 
 
 def help_text(about: str, screen_keys: list[tuple[keys.Key, bool]], stopped: bool) -> str:
-    """The help screen's text: the step's paragraph, its keys, then the keys of every screen."""
+    """The help screen's text: the step's paragraph, its keys, then the keys of every screen (but ``?``, which the
+    reader has just pressed: a line less to fit at 80x24)."""
     lines = [about, ""]
     if stopped:
         lines += [f"STOPPED: the robot keys are refused until you re-arm ({keys.name(keys.REARM)}) once the cell "
                   "is checked and clear.", ""]
     if screen_keys:
         lines += ["Keys on this screen:", *key_lines(screen_keys), ""]
-    lines += ["Keys everywhere:", *key_lines([(key, True) for key in keys.GLOBAL_KEYS]),
+    lines += ["Keys everywhere:", *key_lines([(key, True) for key in keys.GLOBAL_KEYS if key != keys.HELP]),
               "  Tab     moves between fields; Enter opens a list or presses a button"]
     return "\n".join(lines)
 
@@ -40,11 +42,10 @@ class HelpScreen(ModalScreen[None]):
         self.title_text, self.text = title, text
 
     def compose(self) -> ComposeResult:
-        with Vertical():
-            yield Static(f" Help: {self.title_text} ", id="dialog-title", markup=False)
+        with Vertical() as box:  # the title and how to close it are in its border: every row left is the text's
+            box.border_title = Text(f" Help: {self.title_text} ")
+            box.border_subtitle = Text(f" {keys.name(keys.NO)} or Esc closes this help; Up/Down scroll it ")
             yield VerticalScroll(Static(self.text, id="help-text", markup=False))
-            yield Static(f"{keys.name(keys.NO)} or Esc closes this help; Up/Down scroll it.", id="help-close",
-                         markup=False)
 
     def action_no(self) -> None:
         self.dismiss(None)

@@ -1,15 +1,25 @@
-"""The footer of every screen: Textual's, except that when only which keys are enabled has changed (a robot call
-starting or ending disables and enables the robot keys) it dims and undims its keys in place. Textual's footer
-composes all its keys anew on every change, and mounting them held the event loop for up to a few hundred
-milliseconds, twice per robot call, while keys waited."""
+"""The footer of every screen: Textual's, with the STOP key first whatever the width (``wizard.tcss`` docks it
+left), and when only which keys are enabled has changed (a robot call starting or ending disables and enables the
+robot keys) it dims and undims its keys in place. Textual's footer composes all its keys anew on every change, and
+mounting them held the event loop for up to a few hundred milliseconds, twice per robot call, while keys waited."""
 
+from textual.app import ComposeResult
 from textual.screen import Screen
 from textual.widgets import Footer
 from textual.widgets._footer import FooterKey
 
+from fixwizard.tui import keys
+
 
 class KeyFooter(Footer):
-    """``Footer`` that updates the enabled state of the keys it shows in place when the keys themselves stay."""
+    """``Footer`` that marks the STOP key ``-stop`` and updates the enabled state of the keys it shows in place when
+    the keys themselves stay."""
+
+    def compose(self) -> ComposeResult:
+        for widget in super().compose():
+            if isinstance(widget, FooterKey) and widget.action == keys.STOP.action:
+                widget.add_class("-stop")
+            yield widget
 
     def bindings_changed(self, screen: Screen) -> None:
         if self.is_attached and screen is self.screen and self.app.app_focus and self._enable_in_place():
