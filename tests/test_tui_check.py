@@ -91,9 +91,11 @@ async def check(pilot, screen: CheckScreen) -> str:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("push_m, verdict", [(0.0, "consistent with the report"),
-                                             (0.004, "MOVED: no pose the report allows explains the 4 taps")])
-def test_four_suggested_taps_tell_whether_the_fixture_moved(tmp_path, calibrated, push_m, verdict):
+@pytest.mark.parametrize("push_m, verdict", [
+    (0.0, "consistent with the report: poses the report allows explain the 4 taps. Keep using the report's pose (no "
+          "new calibration needed)."),  # it named no next step
+    (0.004, "MOVED: no pose the report allows explains the 4 taps")], ids=["consistent", "moved"])
+def test_four_suggested_taps_tell_whether_the_fixture_moved_and_what_to_do_next(tmp_path, calibrated, push_m, verdict):
     cell, tip = context_for(tmp_path, calibrated, push_m)
 
     async def run():
@@ -127,6 +129,23 @@ def test_four_suggested_taps_tell_whether_the_fixture_moved(tmp_path, calibrated
     assert [record.get("kind") for record in records[1:]] == ["tap"] * 4 + ["undo", "tap", "closed"]
     assert records[-1]["verify"] == ("moved" if push_m else "consistent")
     assert records[0]["fixture"]["report"].endswith("demo_bracket-1.yaml")
+
+
+@pytest.mark.slow
+def test_two_taps_that_fit_are_too_few_and_the_verdict_says_to_tap_more(tmp_path, calibrated):
+    cell, tip = context_for(tmp_path, calibrated)
+
+    async def run():
+        app = CheckHost(lambda: CheckScreen(cell, tip))
+        async with app.run_test(size=SIZE) as pilot:
+            screen = app.screen
+            await tap_suggested(pilot, screen, 2)
+            assert (await check(pilot, screen)).startswith(
+                "consistent with the report: poses the report allows explain the 2 taps, too few to see a small move: "
+                "tap 3-5 points spread over the fixture, then check again.\n")
+        assert app.errors == []
+
+    asyncio.run(run())
 
 
 def test_the_start_screen_opens_the_check_with_a_stored_tip_calibration(tmp_path, calibrated):

@@ -161,7 +161,8 @@ def verify(loaded: report.Report, fixture: Fixture, base_p_taps: np.ndarray, bal
 
 
 def verdict_lines(result: VerifyResult) -> list[str]:
-    """The verdict in words, mm and s: moved (a proof) or consistent, how far the taps are off, what was tested."""
+    """The verdict in words, mm and s: moved (a proof) or consistent, with what to do next; how far the taps are
+    off, what was tested."""
     count = len(result.base_p_taps)
     taps = f"{count} tap{'s' if count != 1 else ''}"
     distances_mm = np.abs(result.distances_m) * 1e3
@@ -170,8 +171,13 @@ def verdict_lines(result: VerifyResult) -> list[str]:
     if result.moved:
         lines.append(f"MOVED: no pose the report allows explains the {taps} (this is a proof): the fixture has moved "
                      "since the report, or the taps are off (another fixture, the wrong tip). Calibrate it again.")
+    elif count < SUGGESTED_TAPS[0]:
+        lines.append(f"consistent with the report: poses the report allows explain the {taps}, too few to see a small "
+                     f"move: tap {SUGGESTED_TAPS[0]}-{SUGGESTED_TAPS[1]} points spread over the fixture, then check "
+                     "again.")
     else:
-        lines.append(f"consistent with the report: poses the report allows explain the {taps}.")
+        lines.append(f"consistent with the report: poses the report allows explain the {taps}. Keep using the "
+                     "report's pose (no new calibration needed).")
     lines.append(f"At the report's pose the taps lie up to {distances_mm[worst]:.2f} mm off the surface (tap "
                  f"{worst + 1}; RMS {float(np.sqrt(np.mean(distances_mm**2))):.2f} mm); sample bound "
                  f"{result.sample_bound_m * 1e3:.2f} mm.")
@@ -188,9 +194,6 @@ def verdict_lines(result: VerifyResult) -> list[str]:
               "against the report's bounds only (the new ball differs from the report's, so its taps could not "
               "join: a weaker test)")
     lines.append(f"Tested {tested}, to within {search.slack_m * 1e3:.2f} mm, in {search.elapsed_s:.1f} s.")
-    if not result.moved and count < SUGGESTED_TAPS[0]:
-        lines.append(f"Only {taps}: tap {SUGGESTED_TAPS[0]}-{SUGGESTED_TAPS[1]} points spread over the fixture for a "
-                     "check that can see a small move.")
     return lines
 
 
