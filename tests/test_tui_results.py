@@ -15,6 +15,7 @@ from fixwizard.solver.solve import Solution, solve
 from fixwizard.tui.results.screen import Done
 from pilot_wait import until
 from tui_cell import (
+    PausedSolver,
     ScreenHost,
     bounds_contain,
     cell_of,
@@ -99,6 +100,21 @@ async def test_cancel_stops_the_solve_and_goes_back(tapped):
         await pilot.press("escape")
         assert app.results == [None] and not screen.running
         assert screen.solver.pid not in (None, solving)  # the solving process ended, a fresh one waits
+
+
+async def test_a_key_of_another_step_during_the_solve_says_why_it_does_nothing(tapped):
+    """t and the other keys of sampling did nothing on the solve screen, and said nothing."""
+    app = ScreenHost(lambda: tapped.solve_screen(PausedSolver()))
+    async with app.run_test(size=SIZE, notifications=True) as pilot:
+        screen = app.screen
+        await until(pilot, lambda: screen.progress is not None)
+        await pilot.press("t", "g", "o")  # o is the solve screen's own key (Details)
+        await until(pilot, lambda: len(app._notifications) >= 2)
+        await pilot.pause()
+        assert [str(note.message) for note in app._notifications] == [
+            f"The solve is running, so {key} does nothing now: wait for the result, or press Esc to cancel it and go "
+            "back to sampling (the taps are kept)." for key in ("t (Tap)", "g (Go)")]
+        assert screen.running and app.results == [] and "Details: rotation level" in text_of(screen, "#figures")
 
 
 async def test_a_solve_input_problem_is_explained_and_esc_goes_back(tapped):

@@ -3,19 +3,23 @@ clock, the report folder and the solve time are pinned so that only the screens 
 
 import dataclasses
 import datetime as dt
-import threading
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from fixwizard.solver.search import SearchProgress
 from fixwizard.solver.solve import solve
 from fixwizard.tui.results.screen import ResultsScreen
 from fixwizard.tui.solve.screen import SolveScreen
-from fixwizard.workflow.solver_process import Progress
 from pilot_wait import until
-from tui_cell import ScreenHost, point_above_fixture_m, record_spread_taps, symmetric_cell, wizard_context
+from tui_cell import (
+    PausedSolver,
+    ScreenHost,
+    point_above_fixture_m,
+    record_spread_taps,
+    symmetric_cell,
+    wizard_context,
+)
 
 pytestmark = pytest.mark.slow  # solves behind the screens (20 s to set up), 15-30 s each
 
@@ -71,19 +75,6 @@ def test_sampling_screen_after_eight_taps(snap_compare, tmp_path):
 
 def test_solve_screen_during_the_search(snap_compare, tmp_path):
     context = demo_context(tmp_path, 3, 1e7, solved=False)
-
-    class PausedSolver:
-        """The solver process's side the screen uses, paused after one search level."""
-
-        latest_request = 1
-
-        def submit(self, request, on_event):  # answers come from another thread, as the reader's do
-            threading.Thread(target=on_event, args=(Progress(search=SearchProgress(
-                rotation_level=3, position_level=4, evaluated=663_552, survivors=41_317, elapsed_s=2.0)),)).start()
-            return self.latest_request
-
-        def stop(self):
-            self.latest_request = 0
 
     async def progress_shown(pilot) -> None:
         await until(pilot, lambda: pilot.app.screen.progress is not None)

@@ -1,9 +1,10 @@
 """Test helpers for the wizard's sampling, solve and results screens: the demo cell with its hidden truth, a
-tip calibration taken from that truth, what the wizard's flow would hand those screens, and a small app hosting
-one screen."""
+tip calibration taken from that truth, what the wizard's flow would hand those screens, a solver that stays solving,
+and a small app hosting one screen."""
 
 import dataclasses
 import datetime as dt
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +22,7 @@ from fixwizard.geometry.se3 import rotation_angle_rad, transform_points
 from fixwizard.report import Report
 from fixwizard.robot.sim import SimulatedCell
 from fixwizard.robot.sim_hands import SimulatedHands
+from fixwizard.solver.search import SearchProgress
 from fixwizard.solver.solve import Solution
 from fixwizard.tui.app import CSS_FILE
 from fixwizard.tui.cell import Cell, Sampling, SavedCalibration
@@ -29,7 +31,7 @@ from fixwizard.tui.sampling.screen import SamplingScreen
 from fixwizard.tui.solve.screen import SolveScreen
 from fixwizard.tui.start.screen import StartScreen
 from fixwizard.workflow.session import SamplingSession
-from fixwizard.workflow.solver_process import SolverProcess
+from fixwizard.workflow.solver_process import Progress, SolverProcess
 
 CELL_SEED = 0
 HANDS_SEED = 1
@@ -177,6 +179,20 @@ def bounds_contain(report: Report, cell: SimulatedCell, base_T_cad: np.ndarray) 
                 and np.degrees(rotation_angle_rad(centre[:3, :3].T @ base_T_cad[:3, :3]))
                 <= report.rotation_bound_deg + 1e-9
                 and displacement_m.max() <= report.max_point_displacement_m + 1e-9)
+
+
+class PausedSolver:
+    """The solver process's side the solve screen uses, paused after one search level: the solve runs on."""
+
+    latest_request = 1
+
+    def submit(self, request, on_event):  # answers come from another thread, as the reader's do
+        threading.Thread(target=on_event, args=(Progress(search=SearchProgress(
+            rotation_level=3, position_level=4, evaluated=663_552, survivors=41_317, elapsed_s=2.0)),)).start()
+        return self.latest_request
+
+    def stop(self):
+        self.latest_request = 0
 
 
 class ScreenHost(App):

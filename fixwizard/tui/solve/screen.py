@@ -1,12 +1,14 @@
 """The solve screen: the full solve of the session's taps in the fixture's solver process, with the candidate poses
 left, elapsed time and how far the search has got (its grid levels and cell budget on ``o``), then each phase of the
-estimates in words; Esc cancels (the process is stopped and a fresh one started). Dismisses with the ``Solution``,
-or None when cancelled or after an input problem."""
+estimates in words; Esc cancels (the process is stopped and a fresh one started), and a key of another step (``t``,
+``g``...) is answered with why it does nothing. Dismisses with the ``Solution``, or None when cancelled or after an
+input problem."""
 
 import time
 from collections.abc import Callable
 
 import numpy as np
+from textual import events
 from textual.app import ComposeResult
 from textual.screen import Screen
 from textual.widgets import ProgressBar, Static
@@ -78,6 +80,14 @@ class SolveScreen(Screen[Solution | None]):
     def on_unmount(self) -> None:
         if self.running:  # nobody is left to show the result
             self.solver.stop()
+
+    def on_key(self, event: events.Key) -> None:
+        """A key of another step (t, u, g, s...) does nothing here: while the solve runs, say so and what does."""
+        step_key = next((key for key in keys.SCREEN_KEYS if event.key in key.keys.split(",")), None)
+        if self.running and step_key is not None and event.key not in self.active_bindings:
+            self.notify(f"The solve is running, so {keys.name(step_key)} ({step_key.label}) does nothing now: wait for "
+                        f"the result, or press {keys.name(keys.BACK)} to cancel it and go back to sampling (the taps "
+                        "are kept).", severity="warning")
 
     def action_details(self) -> None:
         self._details = not self._details
