@@ -133,6 +133,10 @@ def with_checksum(record: dict) -> bytes:
     return (json.dumps(record, sort_keys=True, separators=(",", ":")) + "\n").encode()
 
 
+def unknown_users_home(path: Path) -> str:
+    return "~nosuchuser-fixwizard/gone.jsonl"  # Path.expanduser raises for it: a traceback before
+
+
 def no_unfinished_session(path: Path) -> str:
     with SamplingSession.open(path) as session:
         session.close(report="done.yaml")
@@ -141,6 +145,7 @@ def no_unfinished_session(path: Path) -> str:
 
 @pytest.mark.parametrize("spoil, reason", [
     (missing, "gone.jsonl does not exist; check the path"),
+    (unknown_users_home, "~nosuchuser-fixwizard/gone.jsonl does not exist; check the path"),
     (garbled_line, "line 3 of the session"),
     (checksum_mismatch, "is damaged (checksum or JSON)"),
     (deleted_calibration, "example_matlab_logo.yaml"),

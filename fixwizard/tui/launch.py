@@ -3,6 +3,7 @@ resume."""
 
 import contextlib
 import ipaddress
+import os
 import re
 from dataclasses import replace
 from pathlib import Path
@@ -66,7 +67,8 @@ def switch_to_ur_arm(cell: Cell, host: str) -> Cell:
 
 def session_to_resume(cell: Cell, requested: str) -> Path:
     """The session ``--resume`` asks for: the newest unfinished one (empty string) or the given path."""
-    return newest_unfinished(cell.sessions_dir) if requested == "" else Path(requested).expanduser()
+    # an unknown ~user stays as typed, to be said missing (Path.expanduser raises)
+    return newest_unfinished(cell.sessions_dir) if requested == "" else Path(os.path.expanduser(requested))
 
 
 def _simulated_cell(seed: int, pace_s: float) -> tuple[SimulatedCell, str, SimulatedHands]:
