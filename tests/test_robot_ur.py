@@ -34,11 +34,13 @@ from fixwizard.robot.ur_script import (
     KICK_REGISTER,
     freedrive_program,
     move_program,
+    setup_program,
     tap_program,
 )
 from fixwizard.robot.ur_state import ControllerState
 from ur_loopback import LoopbackProcess
 from ur_loopback.arm import SURFACE_STIFFNESS_N_M
+from ur_loopback.programs import unknown_functions
 
 
 def private_loopback_host() -> str:
@@ -178,6 +180,14 @@ def test_every_program_arms_its_watchdog_before_anything_else(program):
         assert motion not in program or program.index("rtde_set_watchdog") < program.index(motion)
 
 
+@pytest.mark.parametrize("program", [
+    tap_program(7, 2.0, 0.02, 0.01, 10.0), move_program(7, 2.0, [0.4, -0.1, 0.2, 3.14, 0.0, 0.0], 0.05),
+    freedrive_program(7, 2.0), setup_program(7, 2.0)])
+def test_every_program_calls_only_functions_urscript_has(program):
+    """A UR controller refuses to compile a program calling a function it lacks (the tap called max())."""
+    assert unknown_functions(program) == set()
+
+
 def test_every_motion_runs_on_a_program_whose_watchdog_is_armed(robot, controller):
     robot.tap(**FAST_TAP)
     robot.move_linear(flange_above_surface(0.02))
@@ -186,7 +196,7 @@ def test_every_motion_runs_on_a_program_whose_watchdog_is_armed(robot, controlle
     robot.freedrive(False)
     assert [name for name, _, _ in controller.programs()] == ["setup", "tap", "move", "freedrive"]
     assert {variable for _, _, variable in controller.programs()} == {f"input_int_register_{KICK_REGISTER}"}
-    assert controller.unsafe_programs() == []
+    assert controller.unsafe_programs() == [] and controller.compile_errors() == []
     assert len({run_id for _, run_id, _ in controller.programs()}) == 4
 
 

@@ -63,10 +63,17 @@ def tap_program(run_id: int, watchdog_hz: float, max_travel_m: float, speed_m_s:
   global limit = pose_trans(start, p[0, 0, max_travel_m, 0, 0, 0])
   global at_limit = False
   global back = False
-  global peak_n = 0
+  global peak_n = 0.0
   def force_n():
     wrench = get_tcp_force()
     return sqrt(wrench[0] * wrench[0] + wrench[1] * wrench[1] + wrench[2] * wrench[2])
+  end
+  def record_peak():
+    # URScript has no max()
+    force = force_n()
+    if force > peak_n:
+      peak_n = force
+    end
   end
   thread approach():
     movel(limit, a=acceleration_m_s2, v=speed_m_s)
@@ -93,7 +100,7 @@ def tap_program(run_id: int, watchdog_hz: float, max_travel_m: float, speed_m_s:
   # approach: the movel ends at the travel limit; the loop stops it at the force limit
   approaching = run approach()
   while force_n() < force_limit_n:
-    peak_n = max(peak_n, force_n())
+    record_peak()
     if requested(REQUEST_STOP):
       kill approaching
       stopl(STOP_DECELERATION_M_S2)
@@ -110,7 +117,7 @@ def tap_program(run_id: int, watchdog_hz: float, max_travel_m: float, speed_m_s:
   global still_s = 0
   global waited_s = 0
   while still_s < settle_window_s:
-    peak_n = max(peak_n, force_n())
+    record_peak()
     if requested(REQUEST_STOP):
       finish(PHASE_STOPPED)
     end

@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 from ur_loopback.arm import COLLISION_FORCE_N, SimulatedArm, transform
 from ur_loopback.dashboard_server import DASHBOARD_PORT, serve_dashboard
 from ur_loopback.listener import Listener
-from ur_loopback.programs import FixwizardProgram, Registers, parse
+from ur_loopback.programs import FixwizardProgram, Registers, parse, unknown_functions
 from ur_loopback.rtde_server import RTDE_PORT, RtdeSession
 from ur_loopback.rtde_wire import TYPE_FORMATS, field_type
 from ur_loopback.script_server import SCRIPT_PORT, serve_scripts
@@ -67,6 +67,7 @@ class LoopbackController:
         self._program: FixwizardProgram | None = None
         self._programs: list[FixwizardProgram] = []
         self._unsafe_programs: list[str] = []
+        self._compile_errors: list[str] = []
         self._uploaded_scripts: list[str] = []
         self._dashboard_commands: list[str] = []
         self._contact_poses: list[np.ndarray] = []
@@ -213,6 +214,11 @@ class LoopbackController:
         with self._lock:
             return list(self._unsafe_programs)
 
+    def compile_errors(self) -> list[str]:
+        """For every program refused because it calls functions URScript does not have: their names."""
+        with self._lock:
+            return list(self._compile_errors)
+
     def tap_travels(self) -> list[float]:
         """The deepest travel (m, along the tool z axis at the start) of every tap program run so far."""
         with self._lock:
@@ -296,6 +302,9 @@ class LoopbackController:
                 return
             if not self._remote_control or self._safety != "NORMAL" or self._robot_mode != "RUNNING":
                 return  # the controller does not start programs from outside in these states
+            if unknown := unknown_functions(text):
+                self._compile_errors.append(", ".join(sorted(unknown)))
+                return  # the controller does not compile it, so it never starts
             parsed = parse(text)
             if parsed is None:
                 return  # the loopback emulates only fixwizard's programs

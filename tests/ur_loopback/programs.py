@@ -17,6 +17,20 @@ PROGRAM_NAME = re.compile(r"^def fixwizard_(\w+)\(\):\n", re.MULTILINE)
 PARAMETER = re.compile(r"^  global (\w+) = (p\[[^\]]*\]|[-+0-9.e]+)$", re.MULTILINE)
 WATCHDOG = re.compile(r'^  rtde_set_watchdog\("(\w+)", ([-+0-9.e]+), "stop"\)$', re.MULTILINE)
 MOTION_STATEMENTS = ("movel(", "teach_mode(")
+# Functions a UR controller's URScript has (the Script Directory's motion, internals, urmath and interfaces
+# modules, CB3 3.x and e-Series 5.x). The controller compiles a program before it runs it and refuses one that
+# calls any other function it does not define itself: the program never starts (a compile error on the pendant).
+URSCRIPT_FUNCTIONS = frozenset({
+    "movej", "movel", "movep", "stopj", "stopl", "speedl", "teach_mode", "end_teach_mode", "freedrive_mode",
+    "end_freedrive_mode", "force_mode", "end_force_mode", "get_actual_tcp_pose", "get_actual_tcp_speed",
+    "get_tcp_force", "get_steptime", "set_tcp", "sync", "sleep", "textmsg", "popup", "acos", "asin", "atan",
+    "atan2", "ceil", "cos", "d2r", "floor", "interpolate_pose", "inv", "length", "log", "norm", "normalize",
+    "point_dist", "pose_add", "pose_dist", "pose_inv", "pose_sub", "pose_trans", "pow", "r2d", "random", "sin",
+    "size", "sqrt", "tan", "read_input_integer_register", "read_input_float_register",
+    "write_output_integer_register", "write_output_float_register", "rtde_set_watchdog", "zero_ftsensor"})
+CALL = re.compile(r"\b([A-Za-z_]\w*)\(")
+DEFINITION = re.compile(r"^\s*(?:def|thread)\s+(\w+)\(", re.MULTILINE)
+COMMENT = re.compile(r"#.*$", re.MULTILINE)
 
 RUN_REGISTER, PHASE_REGISTER, REQUEST_REGISTER = 18, 19, 19
 TRAVEL_REGISTER, PEAK_FORCE_REGISTER, SETTLE_REGISTER = 17, 18, 19
@@ -53,6 +67,12 @@ def parse(text: str) -> tuple[str, dict, tuple[str, float] | None, bool] | None:
     armed_first = watchdog is not None and all(watchdog.start() < index for index in motions)
     return name.group(1), parameters, None if watchdog is None else (watchdog.group(1), float(watchdog.group(2))), \
         armed_first
+
+
+def unknown_functions(text: str) -> set[str]:
+    """Functions a program calls that neither URScript nor the program defines (a compile error on a UR)."""
+    code = COMMENT.sub("", text)
+    return set(CALL.findall(code)) - set(DEFINITION.findall(code)) - URSCRIPT_FUNCTIONS
 
 
 class FixwizardProgram:
