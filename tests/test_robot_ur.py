@@ -361,6 +361,61 @@ def test_stop_from_another_thread_ends_a_tap_at_once(start_controller, connect):
     assert_arm_stands(controller)
 
 
+def test_stop_refuses_a_motion_asked_for_before_it_that_had_not_started(start_controller, connect):
+    """A move asked for from a second thread waits for the tap's lock; STOP ends the tap, and the move, asked
+    for before the STOP, must not start once the lock is free (it did: the link counted STOPs from when it got
+    the command)."""
+    controller = start_controller(base_T_flange=flange_above_surface(0.04))
+    robot = connect()
+    tap = TapInThread(robot, controller, max_travel_m=0.05, speed_m_s=0.01)
+    assert wait_until(lambda: robot.status().mode == "moving")
+    outcomes: list[object] = []
+
+    def move() -> None:
+        try:
+            outcomes.append(robot.move_linear(flange_above_surface(0.06)))
+        except RobotError as error:
+            outcomes.append(error)
+
+    queued = threading.Thread(target=move)
+    queued.start()
+    time.sleep(0.2)
+    robot.stop()
+    assert isinstance(tap.join(2.0), MotionStopped)
+    queued.join(3.0)
+    assert len(outcomes) == 1 and isinstance(outcomes[0], MotionStopped), outcomes
+    assert "the move was stopped on request" in str(outcomes[0])
+    assert [name for name, _, _ in controller.programs()] == ["setup", "tap"]
+    assert_arm_stands(controller)
+    robot.move_linear(flange_above_surface(0.06))  # asked for after the STOP: it runs
+
+
+def test_stop_before_the_controller_starts_a_sent_program_ends_it_before_it_moves(robot, controller):
+    """STOP after the link sent a move but before the controller started it (the dashboard's stop finds nothing
+    running): the link writes the stop request for that run, and the program ends before its movel starts
+    (before, its loop stopped the movel a cycle after it started)."""
+    controller.delay_programs(0.5)
+    before = controller.flange_pose()
+    outcomes: list[object] = []
+
+    def move() -> None:
+        try:
+            outcomes.append(robot.move_linear(flange_above_surface(0.06)))
+        except RobotError as error:
+            outcomes.append(error)
+
+    moving = threading.Thread(target=move)
+    moving.start()
+    assert wait_until(lambda: len(controller.uploaded_scripts()) == 2)  # the set-up program and the move
+    robot.stop()
+    script = controller.uploaded_scripts()[-1]
+    assert script.index("if requested(REQUEST_STOP):") < script.index("run motion()")  # before any motion
+    moving.join(4.0)
+    assert len(outcomes) == 1 and isinstance(outcomes[0], MotionStopped), outcomes
+    assert [name for name, _, _ in controller.programs()] == ["setup", "move"]  # it started, then ended
+    np.testing.assert_allclose(controller.flange_pose(), before, atol=1e-9)
+
+
 def test_stop_does_not_block_on_a_frozen_link(robot, controller):
     controller.freeze_link()
     started = time.monotonic()

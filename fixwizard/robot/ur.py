@@ -78,7 +78,6 @@ class _LinkProcess:
     process: BaseProcess
     conn: Connection
     shared: SharedState
-    stop_count: Synchronized
     started_at: float = field(default_factory=time.monotonic)
 
     def kill(self) -> None:
@@ -104,6 +103,9 @@ class URRobot:
         self._lock = threading.RLock()
         self._freedrive_run: int | None = None
         self._moving = threading.Event()
+        # STOP presses, shared with every link process: a motion refuses to start after one pressed since it
+        # was asked for (while it waited for the lock or for its program to start)
+        self._stop_count: Synchronized = self._context.Value("q", 0, lock=False)
 
     @property
     def link_pid(self) -> int | None:
@@ -119,14 +121,13 @@ class URRobot:
             self._end_link()
             self._freedrive_run = None
             shared = SharedState(self._context)
-            stop_count = self._context.Value("q", 0, lock=False)
             conn, child_conn = self._context.Pipe()
             process = self._context.Process(target=serve, name="fixwizard-ur-link", daemon=True,
-                                            args=(self.host, self.watchdog_hz, child_conn, shared, stop_count))
+                                            args=(self.host, self.watchdog_hz, child_conn, shared, self._stop_count))
             with real_stderr():
                 process.start()
             child_conn.close()
-            link = self._link = _LinkProcess(process, conn, shared, stop_count)
+            link = self._link = _LinkProcess(process, conn, shared)
             self._call(link, "connect", (), CONNECT_DEADLINE_S, " while connecting", watch_state=False)
 
     def close(self) -> None:
@@ -140,9 +141,10 @@ class URRobot:
 
     def freedrive(self, on: bool) -> None:
         """Let the operator move the arm by hand (teach mode, in a program with its watchdog) or hold it."""
+        stop_mark = self._stop_count.value
         with self._locked("switch freedrive"):
             link = self._live_link(" while switching freedrive")
-            self._freedrive_run = self._call(link, "freedrive", (on,), COMMAND_DEADLINE_S,
+            self._freedrive_run = self._call(link, "freedrive", (on, stop_mark), COMMAND_DEADLINE_S,
                                              " while switching freedrive")
 
     def tap(self, max_travel_m: float = 0.02, speed_m_s: float = 0.01, force_limit_n: float = 10.0) -> TapResult:
@@ -150,12 +152,13 @@ class URRobot:
         at most ``max_travel_m`` (m), every limit held by the controller; wait for the contact to settle,
         record the flange pose, retract to the start. See the class docstring for ``tap_result``."""
         check_tap_request(max_travel_m, speed_m_s, force_limit_n)
+        stop_mark = self._stop_count.value
         with self._locked("tap"), self._motion():
             link = self._live_link(" before the tap")
             self._refuse_in_freedrive()
             deadline_s = max_travel_m / speed_m_s + SETTLE_TIMEOUT_S + 2 * max_travel_m / RETRACT_SPEED_M_S
             try:
-                return self._call(link, "tap", (max_travel_m, speed_m_s, force_limit_n),
+                return self._call(link, "tap", (stop_mark, max_travel_m, speed_m_s, force_limit_n),
                                   deadline_s + MOTION_SLACK_S, " during the tap")
             except ConnectionLost as error:
                 raise _with_tap_note(error) from None
@@ -164,11 +167,12 @@ class URRobot:
         """Move the flange in a straight line to ``base_T_tcp`` (4x4, base frame, m) at ``speed_m_s`` (m/s)."""
         check_limit("linear speed", speed_m_s, MAX_LINEAR_SPEED_M_S, "mm/s", 1e3)
         target = _checked_target(base_T_tcp)
+        stop_mark = self._stop_count.value
         with self._locked("move"), self._motion():
             link = self._live_link(" before the move")
             self._refuse_in_freedrive()
             distance_m = float(np.linalg.norm(target[:3, 3] - self._live_state(link).base_T_tcp[:3, 3]))
-            self._call(link, "move_linear", ([float(value) for value in to_ur_pose(target)], speed_m_s),
+            self._call(link, "move_linear", (stop_mark, [float(value) for value in to_ur_pose(target)], speed_m_s),
                        distance_m / speed_m_s + MOTION_SLACK_S, " during the move")
 
     def status(self) -> RobotStatus:
@@ -183,11 +187,9 @@ class URRobot:
 
     def stop(self) -> None:
         """Stop any motion now, without waiting: the link asks fixwizard's program to stop (a running tap or
-        move then raises), and the dashboard's stop is sent from this process too, so the arm stops even if
-        the link process is frozen."""
-        link = self._link
-        if link is not None:
-            link.stop_count.value += 1
+        move then raises, and so does one asked for before this STOP that has not started yet), and the
+        dashboard's stop is sent from this process too, so the arm stops even if the link process is frozen."""
+        self._stop_count.value += 1
         threading.Thread(target=_dashboard_stop, args=(self.host,), name="ur-dashboard-stop", daemon=True).start()
 
     # --- beyond the protocol ---

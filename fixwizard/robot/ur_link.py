@@ -126,7 +126,7 @@ class Link:
         self._lost: str | None = None  # why the link is down
         self._next_run = random.randrange(1, 1 << 24)
         self._current_run: int | None = None
-        self._stop_mark = stop_count.value  # the wizard's STOP count when the current motion began
+        self._stop_mark = stop_count.value  # the wizard's STOP count when the current motion was asked for
 
     # --- commands ---
 
@@ -167,19 +167,22 @@ class Link:
             self._wait(lambda sample: not sample.program_running, PROGRAM_END_TIMEOUT_S, " while connecting")
         if state.ready_to_move:
             self._step(f"fixwizard's set-up program to start (port {SCRIPT_PORT})")
-            run_id = self._start(lambda run: setup_program(run, self.watchdog_hz), " while connecting")
+            self._stop_mark = self._stop_count.value
+            run_id = self._start(lambda run: setup_program(run, self.watchdog_hz), " while connecting",
+                                 "set-up program")
             self._until_ended(run_id, PROGRAM_START_TIMEOUT_S, " while connecting", "the set-up program")
 
-    def tap(self, max_travel_m: float, speed_m_s: float, force_limit_n: float) -> TapResult:
-        """Run ``ur_script.tap_program``; the contact is sent as soon as it is recorded."""
+    def tap(self, stop_mark: int, max_travel_m: float, speed_m_s: float, force_limit_n: float) -> TapResult:
+        """Run ``ur_script.tap_program`` unless STOP was pressed since the wizard's STOP count was ``stop_mark``;
+        the contact is sent as soon as it is recorded."""
         context = " during the tap"
-        self._stop_mark = self._stop_count.value
+        self._stop_mark = stop_mark
         start = self._ready_state(" before the tap")
         if start.force_n > TOUCHING_FORCE_FRACTION * force_limit_n:
             raise RobotError(f"the tool already pushes on something ({start.force_n:.1f} N) before the tap: "
                              "move it a few millimetres away from the surface, then retry")
         run_id = self._start(lambda run: tap_program(run, self.watchdog_hz, max_travel_m, speed_m_s,
-                                                     force_limit_n), context)
+                                                     force_limit_n), context, "tap")
         deadline = time.monotonic() + max_travel_m / speed_m_s + SETTLE_TIMEOUT_S \
             + 2.0 * max_travel_m / RETRACT_SPEED_M_S + 3.0
         result: TapResult | None = None
@@ -203,13 +206,14 @@ class Link:
                 error.tap_result = result
             raise
 
-    def move_linear(self, target: list[float], speed_m_s: float) -> None:
-        """Run ``ur_script.move_program`` to the UR pose ``target`` and check that the flange got there."""
+    def move_linear(self, stop_mark: int, target: list[float], speed_m_s: float) -> None:
+        """Run ``ur_script.move_program`` to the UR pose ``target`` unless STOP was pressed since the wizard's
+        STOP count was ``stop_mark``; check that the flange got there."""
         context = " during the move"
-        self._stop_mark = self._stop_count.value
+        self._stop_mark = stop_mark
         start = self._ready_state(" before the move")
         distance_m = float(np.linalg.norm(np.asarray(target[:3]) - start.base_T_tcp[:3, 3]))
-        run_id = self._start(lambda run: move_program(run, self.watchdog_hz, target, speed_m_s), context)
+        run_id = self._start(lambda run: move_program(run, self.watchdog_hz, target, speed_m_s), context, "move")
         state = self._until_ended(run_id, distance_m / speed_m_s + 3.0, context, "the move")
         if state.phase == PHASE_STOPPED or self._stop_requested():
             raise MotionStopped("move")
@@ -220,15 +224,17 @@ class Link:
             raise RobotError(f"the move ended {remaining_m * 1e3:.1f} mm short of its target: check that the path "
                              "is free, then retry")
 
-    def freedrive(self, on: bool) -> int | None:
-        """Start ``ur_script.freedrive_program`` (its run id) or end it (None)."""
+    def freedrive(self, on: bool, stop_mark: int) -> int | None:
+        """Start ``ur_script.freedrive_program`` (its run id) unless STOP was pressed since the wizard's STOP count
+        was ``stop_mark``, or end it (None)."""
         if on:
             state = self._fresh_state("")
             if state.program_running and self._current_run is not None and state.run_id == self._current_run:
                 return self._current_run
-            self._stop_mark = self._stop_count.value
+            self._stop_mark = stop_mark
             self._ready_state(" while switching freedrive on")
-            return self._start(lambda run: freedrive_program(run, self.watchdog_hz), " while switching freedrive on")
+            return self._start(lambda run: freedrive_program(run, self.watchdog_hz), " while switching freedrive on",
+                               "freedrive")
         if self._current_run is not None:
             self._end_run(self._current_run, " while switching freedrive off")
         return None
@@ -251,14 +257,19 @@ class Link:
 
     # --- programs ---
 
-    def _start(self, program_for: Callable[[int], str], context: str) -> int:
-        """Send the program for a new run id and wait until it runs (its watchdog is armed by then)."""
+    def _start(self, program_for: Callable[[int], str], context: str, what: str) -> int:
+        """Send the program for a new run id and wait until it runs (its watchdog is armed by then); ``MotionStopped``
+        (``what`` was stopped) if STOP was pressed since ``_stop_mark``. A STOP pressed later reaches the run
+        through ``_stop_loop``, which the program heeds before it moves."""
         if not self._open(DASHBOARD, self._dashboard.isInRemoteControl):
             raise NotInRemoteControl()
         run_id = self._next_run
         self._next_run = self._next_run % (1 << 24) + 1
         self._request(run_id, 0)
         self._current_run = run_id
+        if self._stop_requested():
+            self._current_run = None
+            raise MotionStopped(what)
         try:
             assert self._script is not None, "connect opens the script port first"
             self._script.sendall(program_for(run_id).encode())

@@ -189,7 +189,8 @@ def setup_program(run_id: int, watchdog_hz: float) -> str:
 
 def _program(name: str, run_id: int, watchdog_hz: float, parameters: dict[str, float | str], body: str) -> str:
     """One program: its parameters as globals, the watchdog armed before anything else, then the run id,
-    zero TCP offset, the shared helpers and ``body`` (two-space indented URScript)."""
+    zero TCP offset, the shared helpers, an end if a stop was requested before it ran, and ``body`` (two-space
+    indented URScript)."""
     constants = {"acceleration_m_s2": ACCELERATION_M_S2, "STOP_DECELERATION_M_S2": STOP_DECELERATION_M_S2,
                  "REQUEST_STOP": REQUEST_STOP, "REQUEST_RETRACT": REQUEST_RETRACT, "PHASE_REGISTER": PHASE_REGISTER,
                  "TRAVEL_REGISTER": TRAVEL_REGISTER, "PEAK_FORCE_REGISTER": PEAK_FORCE_REGISTER,
@@ -210,6 +211,9 @@ def _program(name: str, run_id: int, watchdog_hz: float, parameters: dict[str, f
              "  def finish(phase):",
              f"    write_output_integer_register({PHASE_REGISTER}, phase)",
              "    halt",
+             "  end",
+             "  if requested(REQUEST_STOP):",  # STOP pressed before the program started: end before any motion
+             "    finish(PHASE_STOPPED)",
              "  end"]
     return "\n".join(lines) + "\n" + body + "end\n"
 

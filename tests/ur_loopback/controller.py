@@ -49,8 +49,8 @@ class LoopbackController:
     Stand-ins for the cell and its operator: ``when`` (a fault on an event), ``protective_stop``,
     ``unlock_on_pendant``, ``emergency_stop``, ``safeguard_stop``, ``release_emergency_stop``, ``power_on``,
     ``set_remote_control``, ``move_by_hand``; for the network: ``go_offline``, ``go_online``,
-    ``drop_connections``, ``freeze_link``, ``thaw_link``, ``silence``. Queries return copies of what the
-    controller saw and did.
+    ``drop_connections``, ``freeze_link``, ``thaw_link``, ``silence``, ``delay_programs``. Queries return copies of
+    what the controller saw and did.
     """
 
     def __init__(self, base_T_flange: np.ndarray | None = None, surface_z_m: float = 0.0,
@@ -82,6 +82,7 @@ class LoopbackController:
         self._input_written_at: dict[str, float] = {}
         self._program_started_at = 0.0
         self._silent: set[str] = set()
+        self._program_delay_s = 0.0
         self._frozen = threading.Event()
         self._was_in_contact = False
         self._triggers: dict[str, list[tuple[str, tuple]]] = {}
@@ -129,6 +130,12 @@ class LoopbackController:
         but never answered (the RTDE and dashboard ports) or never acted on (the script port)."""
         with self._lock:
             self._silent.add(port)
+
+    def delay_programs(self, delay_s: float) -> None:
+        """From now on a program sent to the script port starts ``delay_s`` after it arrived (a busy controller
+        compiling it, or a network that delivers it late while the RTDE data still flows)."""
+        with self._lock:
+            self._program_delay_s = delay_s
 
     # --- the cell and its operator ---
 
@@ -300,6 +307,13 @@ class LoopbackController:
             self._uploaded_scripts.append(text)
             if "script" in self._silent:
                 return
+            if self._program_delay_s > 0.0:
+                threading.Timer(self._program_delay_s, self._start_program, (text,)).start()
+                return
+            self._start_program(text)
+
+    def _start_program(self, text: str) -> None:
+        with self._lock:
             if not self._remote_control or self._safety != "NORMAL" or self._robot_mode != "RUNNING":
                 return  # the controller does not start programs from outside in these states
             if unknown := unknown_functions(text):

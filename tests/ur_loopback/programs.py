@@ -94,7 +94,7 @@ class FixwizardProgram:
         arm.flange_T_tcp = np.eye(4)
         self.max_travel_m = 0.0  # a tap's deepest travel along the start's tool z axis, for the tests
         self._dt = 0.0
-        self._steps = getattr(self, f"_{name}")()
+        self._steps = self._started(getattr(self, f"_{name}")())
 
     def step(self, dt: float) -> None:
         """One cycle; the program ends when its twin returns."""
@@ -126,6 +126,12 @@ class FixwizardProgram:
         self.on_event("movel")
 
     # --- the programs ---
+
+    def _started(self, body: Iterator[None]) -> Iterator[None]:
+        """The scripts' common start after the helpers: a stop requested before the program ran ends it at once."""
+        if self._requested(REQUEST_STOP):
+            return self._finish(PHASE_STOPPED)
+        yield from body
 
     def _tap(self) -> Iterator[None]:
         arm, p = self.arm, self.parameters
