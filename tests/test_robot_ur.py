@@ -30,6 +30,7 @@ from fixwizard.robot import (
     RobotError,
 )
 from fixwizard.robot.ur import URRobot
+from fixwizard.robot.ur_link import PROGRAM_START_TIMEOUT_S
 from fixwizard.robot.ur_script import (
     KICK_REGISTER,
     freedrive_program,
@@ -260,6 +261,19 @@ def test_connect_to_a_silent_script_port_says_the_program_did_not_start(start_co
     with pytest.raises(RobotError, match="took fixwizard's program on port 30003 but did not start it"):
         URRobot(HOST).connect()
     assert time.monotonic() - started < 10.0
+
+
+@pytest.mark.slow
+def test_a_program_the_controller_starts_after_the_link_gave_up_on_it_ends_before_it_moves(robot, controller):
+    """The controller starts the move after the link's start deadline (a busy controller, a late network): the
+    error was shown, so the program must not move the arm (it did: the link kept kicking its watchdog)."""
+    controller.delay_programs(PROGRAM_START_TIMEOUT_S + 0.5)
+    before = controller.flange_pose()
+    with pytest.raises(RobotError, match="took fixwizard's program on port 30003 but did not start it"):
+        robot.move_linear(flange_above_surface(0.06))
+    assert wait_until(lambda: [name for name, _, _ in controller.programs()] == ["setup", "move"])
+    assert wait_until(lambda: not controller.program_running())
+    np.testing.assert_allclose(controller.flange_pose(), before, atol=1e-9)
 
 
 # --- freedrive ---

@@ -280,6 +280,7 @@ class Link:
         while (state := self._fresh_state(context)).run_id != run_id:
             if time.monotonic() > deadline:
                 self._current_run = None
+                self._request(run_id, REQUEST_STOP)  # should the controller start it after all, it ends at once
                 if state.ready_to_move:
                     raise RobotError(f"the controller took fixwizard's program on port {SCRIPT_PORT} but did not "
                                      f"start it within {PROGRAM_START_TIMEOUT_S:g} s{context}: check the teach "
