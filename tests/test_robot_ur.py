@@ -10,6 +10,7 @@ import contextlib
 import os
 import random
 import signal
+import socket
 import sys
 import threading
 import time
@@ -33,6 +34,7 @@ from fixwizard.robot.ur import URRobot
 from fixwizard.robot.ur_link import PROGRAM_START_TIMEOUT_S
 from fixwizard.robot.ur_script import (
     KICK_REGISTER,
+    MAX_MOVE_TRAVEL_M,
     freedrive_program,
     move_program,
     setup_program,
@@ -345,6 +347,37 @@ def test_move_linear_moves_the_flange_to_the_target(robot, controller):
     np.testing.assert_allclose(robot.base_T_tcp(), target, atol=1e-6)
     with pytest.raises(RobotError, match="linear speed of 1000 mm/s is outside the safe range"):
         robot.move_linear(target, speed_m_s=1.0)
+
+
+def test_move_linear_refuses_a_target_beyond_one_move_s_travel(robot, controller):
+    """A target 0.6 m off, or a pose in mm taken for m, is refused before anything is sent (the arm went there)."""
+    far = flange_above_surface(0.02)
+    far[0, 3] += 0.6
+    in_mm = flange_above_surface(0.02)
+    in_mm[:3, 3] *= 1e3
+    for target, shown in ((far, "600"), (in_mm, "4[0-9]{5}")):
+        started = time.monotonic()
+        with pytest.raises(RobotError, match=f"^the move's target is {shown} mm from the flange, farther than the "
+                                             "500 mm one move may go, so the robot did not move: bring the arm"):
+            robot.move_linear(target)
+        assert time.monotonic() - started < 0.1
+    assert [name for name, _, _ in controller.programs()] == ["setup"]
+    assert_arm_stands(controller, 0.05)
+
+
+def test_the_move_program_holds_its_travel_bound_on_the_controller(robot, controller):
+    """The bound is the program's own, measured from where the flange stands when it runs: a move program
+    with a far target (whatever the PC computed) ends without moving."""
+    far = flange_above_surface(0.02)
+    far[0, 3] += MAX_MOVE_TRAVEL_M + 0.01
+    program = move_program(5, robot.watchdog_hz, [*far[:3, 3], np.pi, 0.0, 0.0], 0.25)
+    assert program.index("point_dist(get_actual_tcp_pose(), target) > max_travel_m") < program.index("run motion()")
+    before = controller.flange_pose()
+    with socket.create_connection((HOST, 30003)) as script_port:
+        script_port.sendall(program.encode())
+        assert wait_until(lambda: [name for name, _, _ in controller.programs()] == ["setup", "move"])
+        assert wait_until(lambda: not controller.program_running())
+    np.testing.assert_allclose(controller.flange_pose(), before, atol=1e-9)
 
 
 @pytest.mark.parametrize("spoil", [lambda pose: pose.__setitem__((0, 3), np.nan),

@@ -6,7 +6,8 @@ watchdog is not armed; only then does it publish its run id, which is how the li
 travel, speed and force limits live in the program: the approach is a ``movel`` whose target *is* the travel
 limit (the controller's trajectory cannot pass it, at the requested speed), stopped by the program the cycle
 the contact force reaches the limit. A PC that stalls or dies cannot take the tap further; it only stops
-feeding the watchdog, and the controller ends the program.
+feeding the watchdog, and the controller ends the program. A move refuses, on the controller, a target farther
+than ``MAX_MOVE_TRAVEL_M`` from where the flange stands.
 
 Registers (integers unless told; the RTDE I/O interface's range 18-22, ur_rtde's receive range 12-19 for doubles):
   input 18   kick counter the link rewrites every ``KICK_PERIOD_S``; the programs' watchdog variable
@@ -36,7 +37,8 @@ PHASE_DONE = 3
 PHASE_NO_CONTACT = 4  # tap: the travel limit reached without contact; retracted
 PHASE_STOPPED = 5  # stopped on request
 PHASE_NOT_SETTLED = 6  # tap: the contact did not settle in time; the arm stands in contact
-FINAL_PHASES = {PHASE_DONE, PHASE_NO_CONTACT, PHASE_STOPPED, PHASE_NOT_SETTLED}
+PHASE_TOO_FAR = 7  # move: the target is farther than MAX_MOVE_TRAVEL_M from the flange; nothing moved
+FINAL_PHASES = {PHASE_DONE, PHASE_NO_CONTACT, PHASE_STOPPED, PHASE_NOT_SETTLED, PHASE_TOO_FAR}
 
 ACCELERATION_M_S2 = 0.5
 STOP_DECELERATION_M_S2 = 10.0
@@ -44,6 +46,7 @@ RETRACT_SPEED_M_S = 0.05
 SETTLE_SPEED_M_S = 0.0005  # settled: the flange slower than this ...
 SETTLE_WINDOW_S = 0.1  # ... for this long
 SETTLE_TIMEOUT_S = 2.0
+MAX_MOVE_TRAVEL_M = 0.5  # the farthest a move's target may be from where the flange stands when it starts
 
 
 def request_value(run_id: int, request: int) -> int:
@@ -149,8 +152,14 @@ def tap_program(run_id: int, watchdog_hz: float, max_travel_m: float, speed_m_s:
 
 
 def move_program(run_id: int, watchdog_hz: float, target: Sequence[float], speed_m_s: float) -> str:
-    """A straight-line move of the flange to the UR pose ``target`` at ``speed_m_s``."""
-    return _program("move", run_id, watchdog_hz, {"target": _pose(target), "speed_m_s": speed_m_s}, """\
+    """A straight-line move of the flange to the UR pose ``target`` at ``speed_m_s``; none at all if ``target``
+    is farther than ``MAX_MOVE_TRAVEL_M`` from the flange (a wrong calibration or units: the controller holds
+    the bound, whatever the PC computed)."""
+    return _program("move", run_id, watchdog_hz, {"target": _pose(target), "speed_m_s": speed_m_s,
+                                                  "max_travel_m": MAX_MOVE_TRAVEL_M}, """\
+  if point_dist(get_actual_tcp_pose(), target) > max_travel_m:
+    finish(PHASE_TOO_FAR)
+  end
   global arrived = False
   thread motion():
     movel(target, a=acceleration_m_s2, v=speed_m_s)
@@ -196,7 +205,7 @@ def _program(name: str, run_id: int, watchdog_hz: float, parameters: dict[str, f
                  "TRAVEL_REGISTER": TRAVEL_REGISTER, "PEAK_FORCE_REGISTER": PEAK_FORCE_REGISTER,
                  "SETTLE_REGISTER": SETTLE_REGISTER, "PHASE_SETTLED": PHASE_SETTLED, "PHASE_DONE": PHASE_DONE,
                  "PHASE_NO_CONTACT": PHASE_NO_CONTACT, "PHASE_STOPPED": PHASE_STOPPED,
-                 "PHASE_NOT_SETTLED": PHASE_NOT_SETTLED}
+                 "PHASE_NOT_SETTLED": PHASE_NOT_SETTLED, "PHASE_TOO_FAR": PHASE_TOO_FAR}
     lines = [f"def fixwizard_{name}():", f"  # fixwizard {name}, run {run_id}: see fixwizard/robot/ur_script.py",
              f"  rtde_set_watchdog(\"input_int_register_{KICK_REGISTER}\", {_number(watchdog_hz)}, \"stop\")",
              f"  global run_id = {run_id}",

@@ -36,6 +36,7 @@ RUN_REGISTER, PHASE_REGISTER, REQUEST_REGISTER = 18, 19, 19
 TRAVEL_REGISTER, PEAK_FORCE_REGISTER, SETTLE_REGISTER = 17, 18, 19
 REQUEST_STOP, REQUEST_RETRACT = 1, 2
 PHASE_RUNNING, PHASE_SETTLED, PHASE_DONE, PHASE_NO_CONTACT, PHASE_STOPPED, PHASE_NOT_SETTLED = 1, 2, 3, 4, 5, 6
+PHASE_TOO_FAR = 7
 
 
 class Registers:
@@ -190,7 +191,10 @@ class FixwizardProgram:
         self._finish(phase)
 
     def _move(self) -> Iterator[None]:
-        self._linear(transform(self.parameters["target"]), self.parameters["speed_m_s"])
+        base_T_target = transform(self.parameters["target"])
+        if np.linalg.norm(base_T_target[:3, 3] - self.arm.base_T_flange[:3, 3]) > self.parameters["max_travel_m"]:
+            return self._finish(PHASE_TOO_FAR)
+        self._linear(base_T_target, self.parameters["speed_m_s"])
         while self.arm.moving():
             if self._requested(REQUEST_STOP):
                 self.arm.halt()
