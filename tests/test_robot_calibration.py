@@ -138,6 +138,29 @@ def test_cancel_stops_between_taps_and_running_again_continues(ready):
     assert len(workflow.poses("table")) == 16
 
 
+def test_a_stop_as_a_move_ends_lets_no_tap_start(ready):
+    """STOP (which sets the cancel request) pressed just as a move to a hover pose ends: the tap after it must
+    not start (it did: cancel was looked at only before each move)."""
+    cell, workflow = ready
+    cancel = threading.Event()
+    taps: list[float] = []
+
+    class StopAsTheMoveEnds(MoveLog):
+        def move_linear(self, base_T_tcp: np.ndarray, speed_m_s: float = 0.05) -> None:
+            super().move_linear(base_T_tcp, speed_m_s)
+            if len(self.targets) == 3:  # the lift, then two hover poses
+                cancel.set()
+
+        def tap(self, max_travel_m: float = 0.02, speed_m_s: float = 0.01, force_limit_n: float = 10.0):
+            taps.append(max_travel_m)
+            return self.cell.tap(max_travel_m, speed_m_s, force_limit_n)
+
+    workflow.robot = StopAsTheMoveEnds(cell)
+    with pytest.raises(Cancelled, match="table taps were cancelled after 1 of 16 taps"):
+        workflow.run_table_taps(None, cancel)
+    assert len(taps) == 1 and len(workflow.poses("table")) == 1
+
+
 def test_protective_stop_names_the_step_and_keeps_the_recorded_taps(ready):
     cell, workflow = ready
 

@@ -6,7 +6,8 @@ itself, first at one orientation over a grid, then at the planned tilts. The aut
 sideways below the approach height: from wherever the flange is, they first move straight up along the
 table normal to it, then to each hover pose (ball centre ``approach_height_m`` above the plane of the
 ball centres at contact); ``tap()`` does the rest and returns there. Between two taps they report
-progress and honour a cancel request. Every recorded pose stays available (``poses``) after a cancel or
+progress; a cancel request (the wizard's STOP sets one) is honoured before every motion, so a STOP pressed as
+a move ends does not let the tap after it start. Every recorded pose stays available (``poses``) after a cancel or
 a robot error, and running a step again continues where it stopped.
 
 Not thread safe: drive one instance from one worker thread at a time.
@@ -156,13 +157,19 @@ class RobotTipCalibration:
         base_n_up = self._coarse_frame(None)[:3, 2]
         tip = self.pivot_fit().tcp_p_tip_m
         base_p_hover = ball_centres_m(plan, tip)
-        for index in range(first, total):
+
+        def unless_cancelled() -> None:
             if cancel is not None and cancel.is_set():
                 raise Cancelled(step, len(recorded), total)
+
+        for index in range(first, total):
             where = f"{STEP_TITLES[step]}, tap {index + 1} of {total}"
             if index == first:
+                unless_cancelled()
                 _call(where, self._lift, tip, base_n_up, base_p_hover[index])
+            unless_cancelled()
             _call(where, self.robot.move_linear, plan[index])
+            unless_cancelled()
             result = _call(where, self.robot.tap, max_travel_m=self._tap_travel_m)
             recorded.append(result.base_T_tcp_contact)
             if progress is not None:
