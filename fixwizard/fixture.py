@@ -42,7 +42,7 @@ class Fixture:
     outside can be told apart (closed, consistently oriented). ``cad_p_center``: minimum enclosing ball centre
     in the CAD frame (m). ``radius_m``: that ball's radius. ``warnings``: (code, message) pairs to pass on.
     ``meeting_faces``: the faces of bodies that cut through or touch another (``CleanMesh.meeting_faces``;
-    None: none). ``surface_offset_m``: how far ``mesh``'s surface may lie from the file's (closed T-junctions,
+    None: none). ``surface_offset_m``: how far ``mesh``'s surface may lie from the file's (closed cracks,
     ``CleanMesh.surface_offset_m``).
     """
 

@@ -9,10 +9,11 @@ so the signed distance is used only where the mesh is closed and consistently or
   closed mesh keeps its sign); a mesh of such faces only: refused (it has no surface to tap);
 - faces that repeat another (the same three corners, wound either way): dropped (a copy adds no surface, and
   leaves the edges around it with four faces, so the mesh would look open);
-- open only at T-junctions (a vertex of some faces lies on an edge of their neighbour, which is not split there,
-  as many STL exporters leave it): the neighbour is split at such vertices, which closes the mesh; a vertex may lie
-  off the edge by rounding (up to ``ZIP_SHARE`` of the mesh's size), so the closed surface lies up to that far from
-  the exported one (``CleanMesh.surface_offset_m``), and the search widens every tap's band by it;
+- open only at cracks, as STL exporters leave them: vertices of open edges within rounding of one another (two
+  patches whose shared vertices were written apart) are merged, and T-junctions (a vertex of some faces on an
+  edge of their neighbour, which was not split there) are split, which closes the mesh; a vertex may lie off by
+  rounding (up to ``ZIP_SHARE`` of the mesh's size), so the closed surface lies up to that far from the exported
+  one (``CleanMesh.surface_offset_m``), and the search widens every tap's band by it;
 - open (not watertight) otherwise: unsigned distance;
 - faces wound against their neighbours: re-wound to agree with their neighbours, face by face outward from one
   face of each body (what ``trimesh.repair.fix_winding`` does, without its networkx walk), which is unambiguous on
@@ -43,12 +44,12 @@ from fixwizard.geometry.mesh_distance import MeshDistance
 NESTING_SAMPLE = 64
 TOUCH_M = 1e-7  # a vertex this near another body's surface (m) counts as meeting it
 MAX_COORDINATE = 1e9  # in the file's units: a million kilometres in metres, a thousand in millimetres
-# A vertex this near an open edge (a share of the mesh's bounding-box diagonal) lies on it: a T-junction. An ASCII STL
-# of six significant digits puts such a vertex up to about 2e-6 of the size off the edge; 1e-5 of a 300 mm fixture is
-# 3 micrometres, which the bounds carry (``surface_offset_m``).
+# A vertex of an open edge this near another vertex or open edge (a share of the mesh's bounding-box diagonal) is
+# that place written apart by rounding: a crack or a T-junction. An ASCII STL of six significant digits puts it up to
+# about 2e-6 of the size off; 1e-5 of a 300 mm fixture is 3 micrometres, which the bounds carry (``surface_offset_m``).
 ZIP_SHARE = 1e-5
-# float64 rounding of a vertex's distance off an edge (a difference, a projection and a norm of coordinates) and of a
-# face's centroid, as a share of the largest coordinate: a few ulps each, taken generously.
+# float64 rounding of a vertex's distance from another vertex or off an edge (a difference, a projection and a norm of
+# coordinates) and of a face's centroid, as a share of the largest coordinate: a few ulps each, taken generously.
 ZIP_ROUNDING = 16.0 * float(np.finfo(np.float64).eps)
 
 
@@ -58,7 +59,7 @@ class CleanMesh:
     belong to a body that meets another (``meeting_faces``, one per face): a point nearest to one of them may lie
     inside the other body, so such a face's plane does not tell inside from outside), and how far the mesh's
     surface may lie from the exported one (m: every point of either within that of the other; zero unless
-    T-junctions were closed)."""
+    cracks were closed)."""
 
     mesh: trimesh.Trimesh
     signed: bool
@@ -223,27 +224,71 @@ def _drop_repeated(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, l
 
 
 @dataclass(frozen=True)
-class Zipped:
-    """A mesh whose T-junctions were split (m), how many vertices lay on an open edge, and the farthest of them
-    from its edge (m): the Hausdorff distance between the split surface and the exported one is at most that."""
+class Closed:
+    """A mesh closed at its cracks (m): how many vertices of its open edges were merged into another within
+    rounding, how many T-junctions were split, and how far its surface may lie from the exported one (m: every
+    point of either within that of the other)."""
 
     mesh: trimesh.Trimesh
+    merged: int
     junctions: int
     offset_m: float
 
 
-def _on_open_edges(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The T-junctions of a mesh: for each, the row of ``mesh.edges`` (face ``row // 3``, from its corner
-    ``row % 3`` to the next) of the open edge it lies on, the vertex, its place along the edge (0 to 1, in the
-    face's direction) and its distance off the edge (m). A vertex counts where it lies on an open edge's inner
-    part within ``ZIP_SHARE`` of the mesh's diagonal and is no corner of that edge's face."""
-    faces, vertices = np.asarray(mesh.faces), np.asarray(mesh.vertices)
+def _open_edges(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray, float]:
+    """The rows of ``mesh.edges`` (face ``row // 3``, from its corner ``row % 3`` to the next) that no other face
+    shares, the vertices on them, and how near two places must be to count as one: ``ZIP_SHARE`` of the mesh's
+    diagonal (m)."""
     edges = np.asarray(mesh.edges)
     open_rows = trimesh.grouping.group_rows(np.sort(edges, axis=1), require_count=1)
-    rim = np.unique(edges[open_rows])
-    tolerance = ZIP_SHARE * float(np.linalg.norm(np.ptp(vertices, axis=0)))
+    tolerance_m = ZIP_SHARE * float(np.linalg.norm(np.ptp(np.asarray(mesh.vertices), axis=0)))
+    return open_rows, np.unique(edges[open_rows]), tolerance_m
+
+
+def _facing_as_before(vertices: np.ndarray, faces: np.ndarray, replaced_normals: np.ndarray) -> bool:
+    """Whether each face (corners in ``vertices``) has area and faces as the face it replaces."""
+    corners = vertices[faces]
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    return bool(np.all(np.einsum("ij,ij->i", normals, replaced_normals) > 0.0))
+
+
+def _merge_near_rim_vertices(mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, int, float] | None:
+    """The mesh with the vertices of its open edges that lie within ``_open_edges``'s tolerance of one another
+    merged into one of them (a crack between two patches whose shared vertices were written apart by rounding),
+    how many were merged into another, and the farthest any moved (m). Two corners of one face are never merged
+    (a T-junction near a corner is split instead). Unchanged when none lie so near; None when merging would
+    collapse or turn a face."""
+    _, rim, tolerance_m = _open_edges(mesh)
+    vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    pairs = cKDTree(vertices[rim]).query_pairs(tolerance_m, output_type="ndarray")
+    count = len(vertices)
+    edge_keys = np.unique(np.sort(np.asarray(mesh.edges), axis=1) @ [count, 1])
+    pairs = pairs[~np.isin(np.sort(rim[pairs], axis=1) @ [count, 1], edge_keys)]  # two corners of a face stay two
+    if len(pairs) == 0:
+        return mesh, 0, 0.0
+    groups = connected_components(coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])),
+                                             shape=(len(rim), len(rim))), directed=False)[1]
+    first_of_group = np.unique(groups, return_index=True)[1]
+    kept = np.arange(len(vertices))
+    kept[rim] = rim[first_of_group[groups]]
+    merged_faces = kept[faces]
+    changed = np.any(merged_faces != faces, axis=1)
+    if not _facing_as_before(vertices, merged_faces[changed], np.asarray(mesh.face_normals)[changed]):
+        return None
+    merged = trimesh.Trimesh(vertices, merged_faces, process=False)
+    merged.remove_unreferenced_vertices()
+    moved_m = float(np.max(np.linalg.norm(vertices[rim] - vertices[kept[rim]], axis=1)))
+    return merged, int(np.count_nonzero(kept[rim] != rim)), moved_m
+
+
+def _t_junctions(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The T-junctions of a mesh: for each, the row of ``mesh.edges`` of the open edge it lies on, the vertex, its
+    place along the edge (0 to 1, in the face's direction) and its distance off the edge (m). A vertex counts where
+    it lies on an open edge's inner part within ``_open_edges``'s tolerance and is no corner of that edge's face."""
+    open_rows, rim, tolerance_m = _open_edges(mesh)
+    faces, vertices, edges = np.asarray(mesh.faces), np.asarray(mesh.vertices), np.asarray(mesh.edges)
     starts, ends = vertices[edges[open_rows, 0]], vertices[edges[open_rows, 1]]
-    reach = 0.5 * np.linalg.norm(ends - starts, axis=1) + tolerance
+    reach = 0.5 * np.linalg.norm(ends - starts, axis=1) + tolerance_m
     near = cKDTree(vertices[rim]).query_ball_point(0.5 * (starts + ends), reach)
     rows = np.repeat(open_rows, np.fromiter(map(len, near), np.int64, len(near)))
     candidates = rim[np.fromiter(itertools.chain.from_iterable(near), np.int64, len(rows))]
@@ -251,18 +296,18 @@ def _on_open_edges(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray, np.nd
     places = np.einsum("ij,ij->i", vertices[candidates] - start, along) / np.einsum("ij,ij->i", along, along)
     off_m = np.linalg.norm(vertices[candidates] - start - places[:, None] * along, axis=1)
     own_corner = np.any(faces[rows // 3] == candidates[:, None], axis=1)
-    junction = ~own_corner & (places > 0.0) & (places < 1.0) & (off_m <= tolerance)
+    junction = ~own_corner & (places > 0.0) & (places < 1.0) & (off_m <= tolerance_m)
     return rows[junction], candidates[junction], places[junction], off_m[junction]
 
 
-def _zip_t_junctions(mesh: trimesh.Trimesh) -> Zipped | None:
-    """The mesh with every face that has T-junctions on its open edges split there: a fan from the face's centroid
-    through its corners and those vertices, in the face's winding. None when there is no T-junction, the mesh is
-    still open after the split, or a new face would not face as the face it replaces (a vertex off its edge by
-    more than the face is wide)."""
-    rows, junction_vertices, places, off_m = _on_open_edges(mesh)
+def _split_t_junctions(mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, int, float] | None:
+    """The mesh with every face that has T-junctions on its open edges split there (a fan from the face's centroid
+    through its corners and those vertices, in the face's winding), how many there were, and the farthest of them
+    off its edge (m). Unchanged when there is none; None when a new face would not face as the face it replaces
+    (a vertex off its edge by more than the face is wide)."""
+    rows, junction_vertices, places, off_m = _t_junctions(mesh)
     if len(rows) == 0:
-        return None
+        return mesh, 0, 0.0
     faces, vertices = np.asarray(mesh.faces), np.asarray(mesh.vertices)
     split, face_of_junction = np.unique(rows // 3, return_inverse=True)
     # each split face's outline: corner k (place -1 on edge k), then the junctions on edge k by their place
@@ -275,16 +320,31 @@ def _zip_t_junctions(mesh: trimesh.Trimesh) -> Zipped | None:
     ends = following == np.searchsorted(face_of, face_of, side="right")
     following[ends] = np.searchsorted(face_of, face_of[ends], side="left")
     fan_faces = np.stack([outline, outline[following], len(vertices) + face_of], axis=1)
-    zipped_faces = np.vstack([np.delete(faces, split, axis=0), fan_faces])
-    zipped_vertices = np.vstack([vertices, vertices[faces[split]].mean(axis=1)])
-    fan_normals = np.cross(zipped_vertices[fan_faces[:, 1]] - zipped_vertices[fan_faces[:, 0]],
-                           zipped_vertices[fan_faces[:, 2]] - zipped_vertices[fan_faces[:, 0]])
-    replaced = np.asarray(mesh.face_normals)[split][face_of]
-    zipped = trimesh.Trimesh(zipped_vertices, zipped_faces, process=False)
-    if not zipped.is_watertight or np.any(np.einsum("ij,ij->i", fan_normals, replaced) <= 0.0):
+    split_vertices = np.vstack([vertices, vertices[faces[split]].mean(axis=1)])
+    if not _facing_as_before(split_vertices, fan_faces, np.asarray(mesh.face_normals)[split][face_of]):
         return None
-    rounding_m = ZIP_ROUNDING * float(np.max(np.abs(vertices)))  # of the distances off the edges and the centroids
-    return Zipped(zipped, len(rows), float(np.max(off_m)) + rounding_m)
+    split_mesh = trimesh.Trimesh(split_vertices, np.vstack([np.delete(faces, split, axis=0), fan_faces]),
+                                 process=False)
+    return split_mesh, len(rows), float(np.max(off_m))
+
+
+def _close_cracks(mesh: trimesh.Trimesh) -> Closed | None:
+    """An open mesh closed where it is open only by rounding and T-junctions: near vertices of open edges merged
+    (``_merge_near_rim_vertices``), then T-junctions split (``_split_t_junctions``); the surface offsets of the two
+    steps add up. None when that leaves it open, changes nothing, or would collapse or turn a face."""
+    merged = _merge_near_rim_vertices(mesh)
+    if merged is None:
+        return None
+    merged_mesh, merged_count, moved_m = merged
+    split = _split_t_junctions(merged_mesh)
+    if split is None:
+        return None
+    closed, junctions, off_m = split
+    if merged_count + junctions == 0 or not closed.is_watertight:
+        return None
+    rounding_m = ZIP_ROUNDING * float(np.max(np.abs(np.asarray(closed.vertices))))
+    offset_m = moved_m + off_m + rounding_m
+    return Closed(closed, merged_count, junctions, offset_m)
 
 
 def _orient(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, bool, list[tuple[str, str]], np.ndarray]:
@@ -337,6 +397,17 @@ def _orient(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, bool, li
     return mesh, True, warnings, meeting_faces
 
 
+def _cracks_closed_message(name: str, closed: Closed) -> str:
+    """The warning of a mesh closed at its cracks: what was found, and how far that moves its surface."""
+    found = [f"{closed.merged} vertices of open edges within rounding of another (merged)" if closed.merged else "",
+             f"{closed.junctions} T-junctions (a vertex of some faces on an edge of their neighbour, which was not "
+             "split there; split now)" if closed.junctions else ""]
+    moved = (f"at most {closed.offset_m * 1e6:.2g} micrometres" if closed.offset_m >= 1e-9
+             else "less than a nanometre")
+    return (f"{name} was open only at cracks: {' and '.join(part for part in found if part)}; fixwizard closed "
+            f"them, which moves its surface by {moved} (the bounds include that).")
+
+
 def clean_mesh(mesh: trimesh.Trimesh, name: str) -> CleanMesh:
     """Check and repair a mesh (see the module doc); ``name`` names it in messages. Raises ``MeshError`` for
     vertices that are not finite numbers or lie absurdly far."""
@@ -346,18 +417,12 @@ def clean_mesh(mesh: trimesh.Trimesh, name: str) -> CleanMesh:
     mesh, repeated = _drop_repeated(mesh, name)
     warnings += repeated
     if not mesh.is_watertight:
-        zipped = _zip_t_junctions(mesh)
-        if zipped is not None:
-            oriented, signed, orient_warnings, meeting_faces = _orient(zipped.mesh, name)
+        closed = _close_cracks(mesh)
+        if closed is not None:
+            oriented, signed, orient_warnings, meeting_faces = _orient(closed.mesh, name)
             if signed:
-                moved = (f"at most {zipped.offset_m * 1e6:.2g} micrometres" if zipped.offset_m >= 1e-9
-                         else "less than a nanometre")
-                warnings.append(("mesh_t_junctions_closed",
-                                 f"{name} was open only at {zipped.junctions} T-junctions (a vertex of some faces on "
-                                 "an edge of their neighbour, which was not split there); fixwizard split those "
-                                 f"faces to close the mesh, which moves its surface by {moved} (the bounds include "
-                                 "that)."))
-                return CleanMesh(oriented, True, tuple(warnings + orient_warnings), meeting_faces, zipped.offset_m)
+                warnings.append(("mesh_cracks_closed", _cracks_closed_message(name, closed)))
+                return CleanMesh(oriented, True, tuple(warnings + orient_warnings), meeting_faces, closed.offset_m)
         warnings.append(("mesh_not_watertight",
                          f"{name} is not watertight (it has holes or open edges), so fixwizard cannot tell inside "
                          "from outside and uses the unsigned distance: the bounds stay guaranteed but may be "

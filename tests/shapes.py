@@ -88,6 +88,23 @@ def moved(mesh: trimesh.Trimesh, vertices: np.ndarray, length_m: float, rng: np.
     return trimesh.Trimesh(shifted, mesh.faces, process=False)
 
 
+def cracked(mesh: trimesh.Trimesh, rng: np.random.Generator, length_m: float,
+            share: float = 0.3) -> trimesh.Trimesh:
+    """The mesh with a random ``share`` of its faces (one at least) given their own copies of their corners, each
+    moved up to ``length_m`` in a random direction: a patch whose shared vertices an exporter wrote apart, a crack
+    along its rim."""
+    faces, vertices = np.asarray(mesh.faces).copy(), np.asarray(mesh.vertices)
+    patch = rng.random(len(faces)) < share
+    patch[rng.integers(len(faces))] = True
+    corners = np.unique(faces[patch])
+    directions = rng.normal(size=(len(corners), 3))
+    directions *= length_m * rng.random((len(corners), 1)) / np.linalg.norm(directions, axis=1, keepdims=True)
+    copy_of = np.arange(len(vertices))
+    copy_of[corners] = len(vertices) + np.arange(len(corners))
+    faces[patch] = copy_of[faces[patch]]
+    return trimesh.Trimesh(np.vstack([vertices, vertices[corners] + directions]), faces, process=False)
+
+
 SHAPES = {"l_prism": l_prism, "polytope": lambda: random_polytope(7), "cube": cube, "brick": brick,
           "triangular_prism": triangular_prism, "cylinder": cylinder, "cone": cone}
 

@@ -1,8 +1,8 @@
 """The guarantee on meshes as CAD tools export them: taps made on the true solid, solved with a mesh that has
 facets turned inside out (many, or a single one), is inside out as a whole, holds two bodies (one inside out),
 holds two bodies that overlap (an assembly exported without a union), repeats facets (some of the copies turned),
-is open, has T-junctions (on their edges, or off them by rounding), or is a metre-long bar or rail of long thin
-facets (aspect up to 400). Noise up to the bound, 30 % of
+is open, has T-junctions (on their edges, or off them by rounding) or cracks (a patch's corners written apart by
+rounding), or is a metre-long bar or rail of long thin facets (aspect up to 400). Noise up to the bound, 30 % of
 the taps exactly at the bound along the normal. Zero misses and zero false "inconsistent" allowed."""
 
 import numpy as np
@@ -17,7 +17,7 @@ from fixwizard.solver.cells import root_cells
 from fixwizard.solver.search import SearchProblem, filter_cells, rotation_splits_first, start_position_grid
 from fixwizard.solver.solve import solve
 from fixwizard.synthetic import bounded_noise, exact_distances_m, touching_ball_contacts
-from shapes import SHAPES, as_fixture, moved, with_t_junctions
+from shapes import SHAPES, as_fixture, cracked, moved, with_t_junctions
 
 SEEDS = range(3)
 BALL_DIAMETERS_M = (0.0, 0.003, 0.006)
@@ -82,6 +82,9 @@ def messy_case(kind: str, seed: int):
         split, new = with_t_junctions(truth, rng)  # moved 0.4 of the tolerance, with their edges' ends: 0.8 off them
         exported = moved(split, new, 0.4 * ZIP_SHARE * float(np.linalg.norm(split.extents)), rng)
         return exported, exported, np.ones(len(exported.faces), bool)
+    if kind == "cracks":  # a patch's corners written apart: the exported surface is the true one
+        exported = cracked(truth, rng, 0.4 * ZIP_SHARE * float(np.linalg.norm(truth.extents)))
+        return exported, exported, np.ones(len(exported.faces), bool)
     if kind == "slivers":
         long_one = _rail() if seed % 2 == 0 else _bar()
         return long_one, _flipped(long_one, rng, 0.1), np.ones(len(long_one.faces), bool)
@@ -89,7 +92,8 @@ def messy_case(kind: str, seed: int):
 
 
 KINDS = ("flipped facets", "one flipped facet", "inside out", "two bodies, one inside out", "two overlapping bodies",
-         "repeated facets, some copies turned", "open", "T-junctions", "T-junctions off their edges", "slivers")
+         "repeated facets, some copies turned", "open", "T-junctions", "T-junctions off their edges", "cracks",
+         "slivers")
 
 
 def _outside_every_body(truth: trimesh.Trimesh, centres: np.ndarray, ball_radius_m: float) -> np.ndarray:
