@@ -21,6 +21,8 @@ from fixwizard.tui.cell import Cell, SavedCalibration
 from fixwizard.tui.check.screen import CheckScreen
 from fixwizard.tui.launch import simulated_cell
 from fixwizard.tui.start.screen import StartScreen
+from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF
+from fixwizard.tui.widgets.errors import error_message
 from pilot_wait import until
 from tui_cell import SAMPLE_BOUND_M, ScreenHost, spread_taps, start_fixture, truth_calibration
 
@@ -88,6 +90,30 @@ async def check(pilot, screen: CheckScreen) -> str:
     await pilot.press("c")
     await until(pilot, lambda: screen.result is not None)
     return text_of(screen, "#check-verdict")
+
+
+@pytest.mark.parametrize("fault, freedrive_after", [("no_surface", True), ("protective_stop_during_tap", False)])
+def test_freedrive_comes_back_after_a_check_tap_only_when_it_ended_as_planned(tmp_path, calibrated, fault,
+                                                                             freedrive_after):
+    """As on the sampling screen: after a tap that touched nothing freedrive is on again; after a protective stop
+    it stays off (before, it came back on by itself after the error), and the error says how to turn it on."""
+    cell, tip = context_for(tmp_path, calibrated)
+
+    async def run():
+        app = CheckHost(lambda: CheckScreen(cell, tip))
+        async with app.run_test(size=SIZE) as pilot:
+            screen = app.screen
+            await until(pilot, lambda: screen.fixture is not None and not screen.busy
+                        and cell.robot.status().mode == "freedrive")
+            cell.robot.inject_fault(fault)
+            await pilot.press("t")
+            await until(pilot, lambda: not screen.busy and app.errors)
+            if fault == "protective_stop_during_tap":
+                cell.robot.unlock()
+            assert (cell.robot.status().mode == "freedrive") is freedrive_after
+            assert (FREEDRIVE_STAYS_OFF in error_message(app.errors[0])) is not freedrive_after
+
+    asyncio.run(run())
 
 
 @pytest.mark.slow

@@ -17,9 +17,12 @@ from fixwizard.geometry.se3 import rotation_angle_rad
 from fixwizard.tui import keys
 from fixwizard.tui.sampling.screen import SamplingScreen
 from fixwizard.tui.sampling.text import live_text
+from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF
 from fixwizard.tui.widgets.confirm import Confirm, ConfirmMove
 from fixwizard.tui.widgets.dialog import Dialog
 from fixwizard.tui.widgets.doing import seconds_text
+from fixwizard.workflow.advice import TapAdvice
+from fixwizard.workflow.hover import HoverPlan
 from fixwizard.workflow.live import LiveView, quick_check
 from fixwizard.workflow.solver_process import NextTap
 from pilot_wait import until
@@ -225,6 +228,67 @@ async def test_once_the_pose_is_pinned_down_the_screen_suggests_a_tap_and_moves_
         assert len(context.session.taps) == taps_before + 1
         contact = context.session.base_p_taps[-1]
         assert np.linalg.norm(contact - target) < 0.006  # the ball touched the fixture at the suggested point
+
+
+async def test_a_stop_between_the_moves_above_a_point_lets_no_further_move_start_and_freedrive_stays_off(context):
+    """The way above a suggested point is three moves; STOP as the first one ends (it set the screen's cancel, as
+    the wizard's STOP does, and the robot's stop found no motion to halt) let the other two start, and freedrive
+    came back on after the error."""
+    app = ScreenHost(lambda: context.sampling_screen())
+    cell = cell_of(context)
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        await until(pilot, lambda: not screen.busy and cell.status().mode == "freedrive")
+        base_p_ball = cell.base_T_tcp()[:3, 3] + cell.base_T_tcp()[:3, :3] @ context.calibration.tcp_p_tip_m
+        point = base_p_ball + [0.03, 0.0, -0.01]
+        advice = TapAdvice(point, point, np.array([0.0, 0.0, 1.0]), 0.002)
+        screen.advice, screen.hover_plan = advice, HoverPlan(advice, 0.01, point + [0.0, 0.0, 0.01], point[2] + 0.02)
+        moves, move_linear = [], cell.move_linear
+
+        def stopped_after_the_first(base_T_tcp, speed_m_s):
+            move_linear(base_T_tcp, speed_m_s)
+            moves.append(base_T_tcp)
+            for cancel in app.motion_cancels:  # STOP pressed as the move ends
+                cancel.set()
+            cell.stop()
+
+        cell.move_linear = stopped_after_the_first
+        await pilot.press("g")
+        await until(pilot, lambda: isinstance(app.screen, ConfirmMove))
+        await pilot.press("y")
+        await until(pilot, lambda: app.screen is screen and not screen.busy and "stopped on request"
+                    in text_of(screen, "#problem"))
+        assert len(moves) == 1 and not app.motion_cancels
+        assert cell.status().mode == "idle"
+        assert FREEDRIVE_STAYS_OFF in text_of(screen, "#problem")
+        await pilot.press("f")
+        await until(pilot, lambda: cell.status().mode == "freedrive")
+
+
+@pytest.mark.parametrize("fault, freedrive_after", [("no_surface", True), ("protective_stop_during_tap", False),
+                                                    ("stop", False)])
+async def test_freedrive_comes_back_after_a_tap_only_when_it_ended_as_planned(context, fault, freedrive_after):
+    """A tap that touched nothing within its travel ends as planned: freedrive on again, to bring the ball nearer.
+    After a stop (STOP, a protective stop) freedrive stays off until the operator turns it on: before, it came
+    back on by itself after the error."""
+    app = ScreenHost(lambda: context.sampling_screen())
+    cell = cell_of(context)
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        await until(pilot, lambda: not screen.busy and cell.status().mode == "freedrive")
+        if fault == "stop":
+            cell.pace_s = 5.0
+        else:
+            cell.inject_fault(fault)
+        await pilot.press("t")
+        if fault == "stop":
+            await until(pilot, lambda: cell.status().mode == "moving")
+            cell.stop()
+        await until(pilot, lambda: not screen.busy and text_of(screen, "#problem"))
+        if fault == "protective_stop_during_tap":
+            cell.unlock()
+        assert (cell.status().mode == "freedrive") is freedrive_after
+        assert (FREEDRIVE_STAYS_OFF in text_of(screen, "#problem")) is not freedrive_after
 
 
 @pytest.mark.slow

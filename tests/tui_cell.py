@@ -206,6 +206,13 @@ class ScreenHost(App):
         super().__init__()
         self.make_screen = make_screen
         self.results: list = []
+        self.motion_cancels: set[threading.Event] = set()  # what STOP would set (``cancel_on_stop``)
+
+    def cancel_on_stop(self, cancel: threading.Event) -> None:
+        self.motion_cancels.add(cancel)
+
+    def forget_cancel(self, cancel: threading.Event) -> None:
+        self.motion_cancels.discard(cancel)
 
     def on_mount(self) -> None:
         self.push_screen(self.make_screen(), self.results.append)

@@ -23,10 +23,11 @@ from textual.widgets import Select, Static
 from fixwizard import report
 from fixwizard.errors import FixwizardError
 from fixwizard.fixture import Fixture
-from fixwizard.robot.base import RobotError, TapResult
+from fixwizard.robot.base import TapResult
 from fixwizard.solver.search import SearchCancelled
 from fixwizard.tui import keys
 from fixwizard.tui.cell import Cell, SavedCalibration
+from fixwizard.tui.tapping import tap_and_record
 from fixwizard.tui.widgets.errors import error_message
 from fixwizard.tui.widgets.key_footer import KeyFooter
 from fixwizard.tui.widgets.taps_table import TapsTable
@@ -254,25 +255,7 @@ class CheckScreen(Screen[None]):
                   lambda error: finish(on_failed or (lambda _: self._show_taps()), error), modal=on_failed is None)
 
     def _tap_and_record(self) -> None:
-        """Freedrive off, tap, journal the tap, freedrive on again (also after a failed tap)."""
-        robot = self.cell.robot
-        try:
-            robot.freedrive(False)
-            try:
-                result = robot.tap()
-            except RobotError as error:
-                recorded = getattr(error, "tap_result", None)
-                if recorded is None:
-                    raise
-                self._record(recorded)  # the contact was recorded before the fault: keep it
-                error.add_note(f"The contact was saved as tap {len(self._taps())}.")
-                raise
-            self._record(result)
-        finally:
-            try:
-                robot.freedrive(True)
-            except RobotError:
-                pass  # the tap's own error (or the next robot call) tells the operator
+        tap_and_record(self.cell.robot, self._record, lambda: len(self._taps()))
 
     def _record(self, result: TapResult) -> None:
         self._journal().record_tap(result.base_T_tcp_contact, force={

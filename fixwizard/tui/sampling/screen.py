@@ -8,6 +8,7 @@ processes (``workflow.solver_process``), whose answers and progress arrive on th
 journaled (fsynced) by the session before the table shows it, so an error never loses a recorded tap.
 """
 
+import threading
 import time
 from collections.abc import Callable
 from typing import Any, TypeVar
@@ -22,7 +23,7 @@ from textual.widgets import Static
 
 from fixwizard.errors import FixwizardError
 from fixwizard.plots.taps_view import taps_view
-from fixwizard.robot.base import NoContact, ProtectiveStop, RobotError, TapResult
+from fixwizard.robot.base import MotionStopped, NoContact, ProtectiveStop, RobotError, TapResult
 from fixwizard.solver.solve import MIN_TAPS
 from fixwizard.tui import keys
 from fixwizard.tui.cell import Cell, Sampling
@@ -37,6 +38,7 @@ from fixwizard.tui.sampling.text import (
 )
 from fixwizard.tui.solve.progress_text import progress_words
 from fixwizard.tui.start.choices import FixtureChoice, fixture_choices
+from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF, freedrive_again, tap_and_record
 from fixwizard.tui.widgets.confirm import Confirm, ConfirmMove
 from fixwizard.tui.widgets.dialog import Dialog
 from fixwizard.tui.widgets.doing import TICK_S, Doing, seconds_text
@@ -211,9 +213,20 @@ class SamplingScreen(Screen[bool]):
             if move and getattr(self.app, "stopped", False):
                 services(self).refuse_motion()
             elif move:
-                self._run_robot(lambda: self._move_above(plan), lambda _: self._say(
-                    "The ball hovers above the suggested point (freedrive is on again): press "
-                    f"{keys.name(keys.TAP)} to tap it."), doing="Moving above the suggested point")
+                cancel = threading.Event()  # STOP sets it: no move of the three starts after a STOP
+                services(self).cancel_on_stop(cancel)
+
+                def hovering(_: None) -> None:
+                    services(self).forget_cancel(cancel)
+                    self._say("The ball hovers above the suggested point (freedrive is on again): press "
+                              f"{keys.name(keys.TAP)} to tap it.")
+
+                def failed(error: ShownError) -> None:
+                    services(self).forget_cancel(cancel)
+                    self._robot_failed(error)
+
+                self._run_robot(lambda: self._move_above(plan, cancel), hovering, failed,
+                                doing="Moving above the suggested point")
 
         self.app.push_screen(ConfirmMove("Move the robot?", hover_question(plan, self.cell.simulated)), answered)
 
@@ -303,45 +316,27 @@ class SamplingScreen(Screen[bool]):
             callback(result)
 
     def _tap_and_record(self) -> Tap:
-        """Freedrive off, tap, journal the tap, freedrive on again (also after a failed tap)."""
-        robot = self.cell.robot
-        try:
-            robot.freedrive(False)
-            try:
-                result: TapResult = robot.tap()
-            except RobotError as error:
-                recorded = getattr(error, "tap_result", None)
-                if recorded is None:
-                    raise
-                # the contact was recorded before the fault (while retracting, or the link went down): keep it
-                tap = self._record(recorded)
-                error.add_note(f"The contact was saved as tap {len(self.session.taps)}.")
-                error.recorded_tap = tap  # type: ignore[attr-defined]  # _robot_failed shows the table with it
-                raise
-            return self._record(result)
-        finally:
-            try:
-                robot.freedrive(True)
-            except RobotError:
-                pass  # the tap's own error (or the next robot call) tells the operator
+        return tap_and_record(self.cell.robot, self._record, lambda: len(self.session.taps))
 
     def _record(self, result: TapResult) -> Tap:
         return self.session.record_tap(
             result.base_T_tcp_contact,
             force={"peak_n": result.peak_force_n, "travel_m": result.travel_m, "settle_s": result.settle_s})
 
-    def _move_above(self, plan: HoverPlan) -> None:
-        """Freedrive off, the three moves of ``hover_path``, freedrive on again (also after a failed move)."""
+    def _move_above(self, plan: HoverPlan, cancel: threading.Event) -> None:
+        """Freedrive off, the three moves of ``hover_path`` (none after ``cancel`` is set), freedrive on again;
+        after a stop or a fault freedrive stays off."""
         robot, calibration = self.cell.robot, self.calibration
+        robot.freedrive(False)
         try:
-            robot.freedrive(False)
             for base_T_tcp in hover_path(plan, calibration.tcp_p_tip_m, robot.base_T_tcp()):
+                if cancel.is_set():
+                    raise MotionStopped("move above the suggested point")
                 robot.move_linear(base_T_tcp, HOVER_SPEED_M_S)
-        finally:
-            try:
-                robot.freedrive(True)
-            except RobotError:
-                pass  # the move's own error (or the next robot call) tells the operator
+        except RobotError as error:
+            error.add_note(FREEDRIVE_STAYS_OFF)
+            raise
+        freedrive_again(robot)
 
     def _tap_recorded(self, tap: Tap) -> None:
         self._stopped = False

@@ -1,0 +1,43 @@
+"""A tap as the sampling and check screens make it: freedrive off, tap, record the contact; freedrive on again
+only after a tap that ended as planned (a contact, or none within its travel). After a stop or a fault the arm
+holds still: freedrive stays off until the operator turns it on, and the error says so."""
+
+from collections.abc import Callable
+from typing import TypeVar
+
+from fixwizard.robot.base import NoContact, Robot, RobotError, TapResult
+from fixwizard.tui import keys
+
+T = TypeVar("T")
+FREEDRIVE_STAYS_OFF = (f"Freedrive stays off after this: press {keys.name(keys.FREEDRIVE)} to guide the arm by hand "
+                       "again once the cell is safe (after a STOP, re-arming turns it on).")
+
+
+def freedrive_again(robot: Robot) -> None:
+    """Freedrive on; a robot that refuses leaves it to the next robot call to tell the operator."""
+    try:
+        robot.freedrive(True)
+    except RobotError:
+        pass
+
+
+def tap_and_record(robot: Robot, record: Callable[[TapResult], T], tap_count: Callable[[], int]) -> T:
+    """Tap and ``record`` the contact; a contact the robot recorded before a fault is recorded too (the error then
+    holds it as ``recorded_tap`` and says it was saved as tap ``tap_count()``). Raises the robot's error."""
+    robot.freedrive(False)
+    try:
+        result = robot.tap()
+    except NoContact:
+        freedrive_again(robot)
+        raise
+    except RobotError as error:
+        recorded = getattr(error, "tap_result", None)
+        if recorded is not None:  # the contact came before the fault (while retracting, or the link went down)
+            error.recorded_tap = record(recorded)  # type: ignore[attr-defined]
+            error.add_note(f"The contact was saved as tap {tap_count()}.")
+        error.add_note(FREEDRIVE_STAYS_OFF)
+        raise
+    try:
+        return record(result)
+    finally:
+        freedrive_again(robot)
