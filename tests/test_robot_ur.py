@@ -9,6 +9,7 @@ controller's fixed ports at a loopback address of this run's own, so parallel ru
 import contextlib
 import os
 import random
+import re
 import signal
 import socket
 import sys
@@ -189,6 +190,17 @@ def test_every_program_arms_its_watchdog_before_anything_else(program):
 def test_every_program_calls_only_functions_urscript_has(program):
     """A UR controller refuses to compile a program calling a function it lacks (the tap called max())."""
     assert unknown_functions(program) == set()
+
+
+def test_numbers_in_programs_are_written_without_exponents_and_read_back_equal():
+    """Python writes a rotation vector's 1e-17 or a slow tap's 5e-05 with an exponent, for which URScript's manual
+    has no form; every float is written positionally, the same value to the last bit."""
+    target = [0.4, -1.2e-17, 0.2, 3.14, 2.5e-300, -0.0]
+    programs = (tap_program(7, 2.0, 0.02, 5e-05, 10.0), move_program(7, 2.0, target, 1e-5))
+    assert all(re.search(r"\d[eE][-+]?\d", program) is None for program in programs)
+    written = re.search(r"global target = p\[(.*)\]", programs[1]).group(1).split(", ")
+    assert [float(number) for number in written] == target
+    assert "global speed_m_s = 0.00005" in programs[0]
 
 
 def test_every_motion_runs_on_a_program_whose_watchdog_is_armed(robot, controller):

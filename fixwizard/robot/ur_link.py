@@ -194,7 +194,7 @@ class Link:
                 if state.phase == PHASE_SETTLED and result is None:
                     result = TapResult(state.base_T_tcp, state.travel_m, state.peak_force_n, state.settle_s)
                     self._conn.send(("contact", result))
-                    self._request(run_id, REQUEST_RETRACT)
+                    self._request(run_id, REQUEST_RETRACT, unless_stopped=True)
                 if not state.program_running:
                     self._current_run = None
                     return self._tap_outcome(state, start, result, max_travel_m)
@@ -475,10 +475,13 @@ class Link:
         """Whether the wizard pressed STOP since the current motion began."""
         return self._stop_count.value != self._stop_mark
 
-    def _request(self, run_id: int, request: int) -> None:
+    def _request(self, run_id: int, request: int, unless_stopped: bool = False) -> None:
+        """Write ``request`` for the run; ``unless_stopped``: not when the wizard pressed STOP since the motion
+        began, checked under the lock the STOP's own request is written with, so it never overwrites a STOP."""
         try:
             with self._io_lock:
-                self._io.setInputIntRegister(REQUEST_REGISTER, request_value(run_id, request))
+                if not (unless_stopped and self._stop_requested()):
+                    self._io.setInputIntRegister(REQUEST_REGISTER, request_value(run_id, request))
         except RuntimeError as error:
             raise self._link_lost("", f"writing to the controller failed ({error})") from error
 

@@ -21,6 +21,7 @@ in the base frame: m and rad. Speeds m/s, accelerations m/s^2, forces N, times s
 """
 
 from collections.abc import Sequence
+from decimal import Decimal
 
 KICK_REGISTER = 18
 REQUEST_REGISTER = 19
@@ -228,8 +229,10 @@ def _program(name: str, run_id: int, watchdog_hz: float, parameters: dict[str, f
 
 
 def _number(value: float) -> str:
-    return repr(float(value)) if isinstance(value, float) else str(value)
+    """A URScript literal: an integer as it is, a float with the digits of its shortest repr in positional
+    notation (Python writes 1e-05 and 1.2e-17, which URScript's manual gives no form for)."""
+    return format(Decimal(repr(value)), "f") if isinstance(value, float) else str(value)
 
 
 def _pose(pose: Sequence[float]) -> str:
-    return "p[" + ", ".join(repr(float(value)) for value in pose) + "]"
+    return "p[" + ", ".join(_number(float(value)) for value in pose) + "]"
