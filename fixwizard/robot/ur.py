@@ -95,9 +95,9 @@ class URRobot:
     whether the tap was recorded.
     """
 
-    def __init__(self, host: str, watchdog_hz: float = WATCHDOG_HZ) -> None:
+    def __init__(self, host: str) -> None:
         self.host = host
-        self.watchdog_hz = watchdog_hz
+        self.watchdog_hz = WATCHDOG_HZ  # no parameter: a slower watchdog would let the arm run on longer
         self._context = multiprocessing.get_context("spawn")
         self._link: _LinkProcess | None = None
         self._lock = threading.RLock()
