@@ -2,6 +2,7 @@
 errors with a way out, and the taps it records calibrate the fixture."""
 
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -137,6 +138,20 @@ def test_tap_pointing_away_finds_no_contact(cell):
     cell.move_linear(make_transform(np.eye(3), [0.3, 0.0, 0.3]))  # tool z points up, into free space
     with pytest.raises(NoContact, match="no surface within 20 mm: move the tool closer"):
         cell.tap()
+
+
+@pytest.mark.parametrize("target_m", [[0.3, 0.0, 0.81], [300.0, 0.0, 300.0]], ids=["0.51 m away", "mm as m"])
+def test_a_move_farther_than_a_ur_move_may_go_is_refused_and_nothing_moves(fixture, target_m):
+    """As a UR's move program: the demo meets the same 0.5 m bound as the arm."""
+    cell = SimulatedCell.with_fixture(fixture, seed=3, pace_s=1.0)
+    cell.connect()
+    cell.move_linear(make_transform(np.eye(3), [0.3, 0.0, 0.3]), 0.25)
+    before = cell.base_T_tcp()
+    started = time.monotonic()
+    with pytest.raises(RobotError, match="farther than the 500 mm one move may go, so the robot did not move"):
+        cell.move_linear(make_transform(np.eye(3), target_m), 0.25)
+    assert time.monotonic() - started < 0.5  # refused before the motion's time, never shown as moving
+    np.testing.assert_allclose(cell.base_T_tcp()[:3, 3], before[:3, 3], atol=1e-3)  # readings carry FK noise
 
 
 def test_a_move_into_the_fixture_stops_short_of_it_with_a_protective_stop_until_unlocked(fixture):

@@ -16,6 +16,7 @@ MAX_TAP_TRAVEL_M = 0.05
 MAX_TAP_SPEED_M_S = 0.05
 MAX_TAP_FORCE_N = 50.0
 MAX_LINEAR_SPEED_M_S = 0.25
+MAX_MOVE_TRAVEL_M = 0.5  # the farthest a move's target may be from where the flange stands when it starts
 
 
 class RobotError(FixwizardError):
@@ -138,3 +139,13 @@ def check_limit(name: str, value: float, limit: float, unit: str, scale: float) 
     if not 0.0 < value <= limit:
         raise RobotError(f"the {name} of {value * scale:g} {unit} is outside the safe range (0, {limit * scale:g}] "
                          f"{unit}: choose a value in that range")
+
+
+def check_move_travel(distance_m: float) -> None:
+    """Raise ``RobotError`` when a move's target is ``distance_m`` (m) from the flange, beyond
+    ``MAX_MOVE_TRAVEL_M``: nothing moves."""
+    if distance_m > MAX_MOVE_TRAVEL_M:
+        raise RobotError(f"the move's target is {distance_m * 1e3:.0f} mm from the flange, farther than the "
+                         f"{MAX_MOVE_TRAVEL_M * 1e3:.0f} mm one move may go, so the robot did not move: bring the "
+                         "arm nearer by hand (freedrive) and retry; if the target is far off, check the tip "
+                         "calibration and the fixture's units")

@@ -25,6 +25,7 @@ from fixwizard.robot.base import (
     RobotStatus,
     TapResult,
     check_limit,
+    check_move_travel,
     check_tap_request,
 )
 from fixwizard.synthetic import touching_ball_centres
@@ -160,6 +161,8 @@ class SimulatedCell:
         """Move the flange straight to ``base_T_tcp``; if the ball would hit the fixture or the table on the
         way, stop just before and make a protective stop, as a real controller's collision detection does."""
         check_limit("linear speed", speed_m_s, MAX_LINEAR_SPEED_M_S, "mm/s", 1e3)
+        with self._lock:  # as a UR's move program: a target too far is refused before anything moves
+            check_move_travel(float(np.linalg.norm(np.asarray(base_T_tcp, float)[:3, 3] - self._base_T_tcp[:3, 3])))
         self._move_for_pace("move")
         with self._lock:
             self._require_ready()

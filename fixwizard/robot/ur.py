@@ -44,11 +44,12 @@ from fixwizard.robot.base import (
     RobotStatus,
     TapResult,
     check_limit,
+    check_move_travel,
     check_tap_request,
 )
 from fixwizard.robot.ur_errors import LinkLost, unpack_error
-from fixwizard.robot.ur_link import DASHBOARD_PORT, move_too_far, serve
-from fixwizard.robot.ur_script import MAX_MOVE_TRAVEL_M, RETRACT_SPEED_M_S, SETTLE_TIMEOUT_S
+from fixwizard.robot.ur_link import DASHBOARD_PORT, serve
+from fixwizard.robot.ur_script import RETRACT_SPEED_M_S, SETTLE_TIMEOUT_S
 from fixwizard.robot.ur_state import (
     ROBOT_MODE_RUNNING,
     ROBOT_MODE_TEXT,
@@ -165,7 +166,7 @@ class URRobot:
 
     def move_linear(self, base_T_tcp: np.ndarray, speed_m_s: float = 0.05) -> None:
         """Move the flange in a straight line to ``base_T_tcp`` (4x4, base frame, m) at ``speed_m_s`` (m/s), at most
-        ``ur_script.MAX_MOVE_TRAVEL_M`` (m) from where it stands."""
+        ``base.MAX_MOVE_TRAVEL_M`` (m) from where it stands."""
         check_limit("linear speed", speed_m_s, MAX_LINEAR_SPEED_M_S, "mm/s", 1e3)
         target = _checked_target(base_T_tcp)
         stop_mark = self._stop_count.value
@@ -173,8 +174,7 @@ class URRobot:
             link = self._live_link(" before the move")
             self._refuse_in_freedrive()
             distance_m = float(np.linalg.norm(target[:3, 3] - self._live_state(link).base_T_tcp[:3, 3]))
-            if distance_m > MAX_MOVE_TRAVEL_M:  # the program holds it too; refused here without sending it
-                raise move_too_far(distance_m)
+            check_move_travel(distance_m)  # the program holds it too; refused here without sending it
             self._call(link, "move_linear", (stop_mark, [float(value) for value in to_ur_pose(target)], speed_m_s),
                        distance_m / speed_m_s + MOTION_SLACK_S, " during the move")
 

@@ -33,12 +33,12 @@ from fixwizard.robot.base import (
     NotInRemoteControl,
     RobotError,
     TapResult,
+    check_move_travel,
 )
 from fixwizard.robot.ur_errors import LinkLost, URProtectiveStop, pack_error
 from fixwizard.robot.ur_script import (
     FINAL_PHASES,
     KICK_REGISTER,
-    MAX_MOVE_TRAVEL_M,
     PEAK_FORCE_REGISTER,
     PHASE_DONE,
     PHASE_NO_CONTACT,
@@ -220,7 +220,7 @@ class Link:
         if state.phase == PHASE_STOPPED or self._stop_requested():
             raise MotionStopped("move")
         if state.phase == PHASE_TOO_FAR:
-            raise move_too_far(distance_m)
+            check_move_travel(distance_m)
         if state.phase != PHASE_DONE:
             raise self._diagnose(context, state)
         remaining_m = float(np.linalg.norm(np.asarray(target[:3]) - state.base_T_tcp[:3, 3]))
@@ -509,13 +509,6 @@ class Link:
     def _step(self, what: str) -> None:
         self._conn.send(("step", what))
 
-
-def move_too_far(distance_m: float) -> RobotError:
-    """The error for a move whose target is ``distance_m`` (m) from the flange, beyond ``MAX_MOVE_TRAVEL_M``."""
-    return RobotError(f"the move's target is {distance_m * 1e3:.0f} mm from the flange, farther than the "
-                      f"{MAX_MOVE_TRAVEL_M * 1e3:.0f} mm one move may go, so the robot did not move: bring the arm "
-                      "nearer by hand (freedrive) and retry; if the target is far off, check the tip calibration "
-                      "and the fixture's units")
 
 
 def _exit_with(parent_pid: int) -> None:

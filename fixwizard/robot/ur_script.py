@@ -23,6 +23,8 @@ in the base frame: m and rad. Speeds m/s, accelerations m/s^2, forces N, times s
 from collections.abc import Sequence
 from decimal import Decimal
 
+from fixwizard.robot.base import MAX_MOVE_TRAVEL_M
+
 KICK_REGISTER = 18
 REQUEST_REGISTER = 19
 RUN_REGISTER = 18
@@ -47,7 +49,6 @@ RETRACT_SPEED_M_S = 0.05
 SETTLE_SPEED_M_S = 0.0005  # settled: the flange slower than this ...
 SETTLE_WINDOW_S = 0.1  # ... for this long
 SETTLE_TIMEOUT_S = 2.0
-MAX_MOVE_TRAVEL_M = 0.5  # the farthest a move's target may be from where the flange stands when it starts
 
 
 def request_value(run_id: int, request: int) -> int:
