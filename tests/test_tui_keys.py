@@ -28,6 +28,7 @@ from fixwizard.tui.tip_calibration.auto import AutoTapsScreen
 from fixwizard.tui.tip_calibration.hands import PivotScreen, TablePointsScreen
 from fixwizard.tui.tip_calibration.result import CalibrationResultScreen
 from fixwizard.tui.widgets.confirm import Confirm
+from fixwizard.tui.widgets.dialog import Dialog
 from fixwizard.tui.widgets.help import HelpScreen
 from pilot_wait import until
 from test_tui_app import REPO, SIZE, at_start, calibrate_by_hand, pivot_by_hand, press_button, rearm, status_of, wizard
@@ -355,6 +356,27 @@ def test_stop_stays_in_the_footer_and_the_help_fits_the_terminal(tmp_path, size)
                 await pilot.press("end")
                 await until(pilot, lambda: text.max_scroll_y > 0 and text.scroll_y == text.max_scroll_y)
     asyncio.run(run())
+
+
+@pytest.mark.asyncio
+@pytest.mark.parametrize("size", [(60, 20), SIZE])
+async def test_a_long_message_in_a_dialog_scrolls_with_the_keys_while_a_button_keeps_the_focus(size):
+    """A robot error with its notes can be longer than a small terminal: the message scrolled only with a mouse."""
+    message = "\n".join(f"line {number} of what happened and what to do next" for number in range(1, 41))
+    app = ScreenHost(lambda: Dialog("Robot problem", message))
+    async with app.run_test(size=size) as pilot:
+        await until(pilot, lambda: bool(app.screen.query("#dialog-scroll")))
+        text = app.screen.query_one("#dialog-scroll", VerticalScroll)
+        await until(pilot, lambda: text.max_scroll_y > 0)
+        await pilot.press("down", "down")
+        await until(pilot, lambda: text.scroll_y == 2)
+        await pilot.press("pagedown", "pagedown", "pagedown", "pagedown")
+        await until(pilot, lambda: text.scroll_y == text.max_scroll_y)
+        await pilot.press("up", "pageup")
+        await until(pilot, lambda: text.scroll_y == text.max_scroll_y - 11)
+        assert app.screen.focused is app.screen.query_one("#ok")
+        await pilot.press("enter")
+        await until(pilot, lambda: app.results == ["ok"])
 
 
 @pytest.mark.asyncio

@@ -1,5 +1,5 @@
-"""A modal dialog: a title, a message (scrolls when it is longer than the screen) and a row of buttons;
-subclasses choose the buttons and the result. n or Esc closes it as its first button would."""
+"""A modal dialog: a title, a message (scrolls when it is longer than the screen, by Up/Down and PgUp/PgDn) and a
+row of buttons; subclasses choose the buttons and the result. n or Esc closes it as its first button would."""
 
 from collections.abc import Iterable
 from typing import TypeVar, cast
@@ -17,10 +17,13 @@ ResultType = TypeVar("ResultType")
 class Dialog(ModalScreen[ResultType]):
     """Title in reverse video, the message, then ``buttons()``; the button with id ``focused_id`` has focus."""
 
-    BINDINGS = [keys.binding(keys.NO, "Close")]
+    BINDINGS = [keys.binding(keys.NO, "Close"),
+                *(keys.binding(key, show=False) for key in (keys.SCROLL_DOWN, keys.SCROLL_UP, keys.PAGE_DOWN,
+                                                             keys.PAGE_UP))]
     focused_id = "ok"
     HELP_TITLE = "a message"
-    HELP_ABOUT = "Read the message; Enter presses the focused button, Tab moves between the buttons."
+    HELP_ABOUT = ("Read the message (Up/Down and PgUp/PgDn scroll a long one); Enter presses the focused button, Tab "
+                  "moves between the buttons.")
 
     def __init__(self, title: str, message: str) -> None:
         super().__init__()
@@ -52,3 +55,7 @@ class Dialog(ModalScreen[ResultType]):
 
     def action_no(self) -> None:
         self.dismiss(cast(ResultType, "ok"))
+
+    def action_scroll_summary(self, lines: int) -> None:
+        """Scroll the message by ``lines`` (the focus stays on a button, so the keys scroll it from here)."""
+        self.query_one("#dialog-scroll", VerticalScroll).scroll_relative(y=lines, animate=False)
