@@ -86,7 +86,7 @@ def import_poses_command(args: argparse.Namespace) -> int:
     fix = "give another POINTS path with -o, e.g. -o points.yaml"
     check_output(args.output, [("tip file", args.tip), *(("recorded pose file", path) for path in pose_files)], fix)
     check_not_read_later(args.output, [args.directory], ".pose", "a recorded pose", fix)
-    paths, base_p_taps = import_pose_dir(args.directory, load_tip(args.tip))
+    paths, base_p_taps = import_pose_dir(args.directory, load_tip(args.tip), args.tip)
     write_points(args.output, base_p_taps, source=[path.name for path in paths], tip=str(args.tip))
     print(f"{len(base_p_taps)} ball centres written to {args.output}")
     return EXIT_OK

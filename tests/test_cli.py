@@ -151,6 +151,33 @@ def test_import_poses_turns_flange_poses_into_ball_centres(tmp_path, capsys):
     assert np.array(points["points_m"]) == pytest.approx(np.array([[0.4, 0.0, 0.15], [0.5, 0.1, 0.15]]), abs=1e-5)
 
 
+def _write_poses(folder: Path, poses: list[list[float]]) -> None:
+    folder.mkdir(exist_ok=True)
+    for index, pose in enumerate(poses):
+        (folder / f"base_t_tcp_{index}.pose").write_text("\n".join(str(value) for value in pose))
+
+
+def test_import_poses_takes_the_tip_file_in_the_folder_for_no_tap(tmp_path, capsys):
+    """The tip's .pose kept beside the tapped poses was read as one more tap (3 ball centres for 2 taps)."""
+    _write_poses(tmp_path, [[0.4, 0.0, 0.2, 0.0, 3.14159, 0.0], [0.5, 0.1, 0.2, 0.0, 3.14159, 0.0]])
+    (tmp_path / "tip.pose").write_text("0\n0\n0.05\n0\n0\n0\n")
+    assert main(["import-poses", str(tmp_path), "--tip", str(tmp_path / "tip.pose"), "-o",
+                 str(tmp_path / "p.yaml")]) == 0
+    assert capsys.readouterr().out.startswith("2 ball centres written")
+    points = yaml.safe_load((tmp_path / "p.yaml").read_text())
+    assert points["source"] == ["base_t_tcp_0.pose", "base_t_tcp_1.pose"]
+
+
+def test_import_poses_refuses_poses_in_millimetres(tmp_path, capsys):
+    """.pose files hold metres; poses written in millimetres made ball centres 400 m from the base, silently."""
+    _write_poses(tmp_path / "poses", [[412.0, -95.0, 151.0, 2.1, -2.2, 0.1], [420.0, -90.0, 152.0, 2.1, -2.2, 0.1]])
+    (tmp_path / "tip.pose").write_text("0\n0\n0.05\n0\n0\n0\n")
+    assert main(["import-poses", str(tmp_path / "poses"), "--tip", str(tmp_path / "tip.pose"), "-o",
+                 str(tmp_path / "p.yaml")]) == 1
+    assert "beyond any robot's reach: .pose files hold metres and radians" in capsys.readouterr().err
+    assert not (tmp_path / "p.yaml").exists()
+
+
 def test_import_poses_reads_a_tip_calibration(tmp_path, real_data):
     output = tmp_path / "points.yaml"
     calibration = REPO / "calibrations" / "example_matlab_logo.yaml"

@@ -57,6 +57,7 @@ from fixwizard.solver.verdict import (
     status_of,
     undetermined_message,
 )
+from fixwizard.units import MAX_REACH_M
 
 DEFAULT_MAX_CELLS = 1e7
 # Refining the hull of the set (the cells that decide the bounds) may evaluate HULL_SHARE of the cell budget: 1/10
@@ -68,7 +69,6 @@ DIAGNOSIS_MAX_CELLS = 1e6
 DEFAULT_MAX_SAMPLES = 40_000
 MIN_TAPS = 3
 MAX_TAPS = 1000  # more is a point cloud, not taps: this search keeps an interval per cell and tap
-MAX_TAP_DISTANCE_M = 20.0  # no robot arm reaches farther from its base: millimetres read as metres
 MAX_SAMPLE_BOUND_M = 0.02  # larger bounds are a unit mistake (1 for 1 mm), not a robot
 MAX_BALL_DIAMETER_M = 0.05
 
@@ -173,7 +173,7 @@ def validate_inputs(base_p_taps: np.ndarray, ball_diameter_m: float, sample_boun
         raise InputError(f"tap {bad[0] + 1} has a coordinate that is not a finite number; fix or remove it")
     largest = np.max(np.abs(base_p_taps), axis=1, keepdims=True)  # scaled first: 1e300 m squared overflows
     distances = largest[:, 0] * np.linalg.norm(base_p_taps / np.where(largest > 0.0, largest, 1.0), axis=1)
-    far = np.flatnonzero(distances > MAX_TAP_DISTANCE_M)
+    far = np.flatnonzero(distances > MAX_REACH_M)
     if len(far):
         raise InputError(f"tap {far[0] + 1} lies {distances[far[0]]:.3g} m from the robot base, "
                          "beyond any robot arm's reach: the points must be in metres (millimetres read as metres?)")

@@ -9,6 +9,7 @@ from fixwizard.calibration.store import load_calibration
 from fixwizard.calibration.taps import ball_centres_m
 from fixwizard.errors import InputError
 from fixwizard.geometry.se3 import read_pose_dir, read_pose_file
+from fixwizard.units import MAX_REACH_M
 
 
 @dataclass(frozen=True)
@@ -32,7 +33,21 @@ def load_tip(path: str | Path) -> Tip:
     raise InputError(f"{path} is neither a .pose file nor a tip calibration (.yaml); give one of those")
 
 
-def import_pose_dir(directory: str | Path, tip: Tip) -> tuple[list[Path], np.ndarray]:
-    """Pose files of a folder (natural order) and their ball centres (N, 3) in metres."""
+def import_pose_dir(directory: str | Path, tip: Tip,
+                    tip_path: str | Path | None = None) -> tuple[list[Path], np.ndarray]:
+    """Pose files of a folder (natural order) and their ball centres (N, 3) in metres; ``tip_path``, the tip's own
+    .pose file, is no tap when it lies in the folder. ``InputError`` for a flange farther from the base than any
+    robot reaches (poses in millimetres: .pose files are in metres)."""
     paths, base_T_tcp = read_pose_dir(directory)
+    if tip_path is not None:
+        taps = np.array([path.resolve() != Path(tip_path).resolve() for path in paths])
+        if not np.any(taps):
+            raise InputError(f"the only *.pose file in {directory} is the tip's; give the folder of the tapped poses")
+        paths, base_T_tcp = [path for path, tap in zip(paths, taps, strict=True) if tap], base_T_tcp[taps]
+    reach_m = np.linalg.norm(base_T_tcp[:, :3, 3], axis=1)
+    if np.any(reach_m > MAX_REACH_M):
+        far = int(np.argmax(reach_m))
+        raise InputError(f"{paths[far].name} puts the flange {reach_m[far]:.3g} m from the robot base, beyond any "
+                         "robot's reach: .pose files hold metres and radians (as UR writes them); these look like "
+                         "millimetres, so divide their x y z by 1000")
     return paths, ball_centres_m(base_T_tcp, tip.tcp_p_tip_m)
