@@ -137,26 +137,33 @@ def assert_arm_stands(controller, for_s: float = 0.3) -> None:
     np.testing.assert_allclose(controller.flange_pose(), before, atol=1e-9)
 
 
-class TapInThread:
-    """A tap in a worker thread, as the wizard runs it; ``outcome`` is its TapResult or RobotError and
+class MotionInThread:
+    """A robot call in a worker thread, as the wizard runs it; ``outcome`` is what it returned or its RobotError and
     ``pose_at_outcome`` the controller's flange pose the moment it came back."""
 
-    def __init__(self, robot: URRobot, controller, **tap) -> None:
+    def __init__(self, motion, controller) -> None:
         self.outcome = self.pose_at_outcome = None
-        self._thread = threading.Thread(target=self._run, args=(robot, controller, tap))
+        self._thread = threading.Thread(target=self._run, args=(motion, controller))
         self._thread.start()
 
-    def _run(self, robot, controller, tap) -> None:
+    def _run(self, motion, controller) -> None:
         try:
-            self.outcome = robot.tap(**tap)
+            self.outcome = motion()
         except RobotError as error:
             self.outcome = error
         self.pose_at_outcome = controller.flange_pose()
 
     def join(self, timeout_s: float):
         self._thread.join(timeout_s)
-        assert not self._thread.is_alive(), f"the tap did not come back within {timeout_s} s"
+        assert not self._thread.is_alive(), f"the motion did not come back within {timeout_s} s"
         return self.outcome
+
+
+class TapInThread(MotionInThread):
+    """``robot.tap(**tap)`` in a worker thread."""
+
+    def __init__(self, robot: URRobot, controller, **tap) -> None:
+        super().__init__(lambda: robot.tap(**tap), controller)
 
 
 # --- the process boundary and the programs ---
@@ -428,22 +435,12 @@ def test_stop_refuses_a_motion_asked_for_before_it_that_had_not_started(start_co
     robot = connect()
     tap = TapInThread(robot, controller, max_travel_m=0.05, speed_m_s=0.01)
     assert wait_until(lambda: robot.status().mode == "moving")
-    outcomes: list[object] = []
-
-    def move() -> None:
-        try:
-            outcomes.append(robot.move_linear(flange_above_surface(0.06)))
-        except RobotError as error:
-            outcomes.append(error)
-
-    queued = threading.Thread(target=move)
-    queued.start()
+    queued = MotionInThread(lambda: robot.move_linear(flange_above_surface(0.06)), controller)
     time.sleep(0.2)
     robot.stop()
     assert isinstance(tap.join(2.0), MotionStopped)
-    queued.join(3.0)
-    assert len(outcomes) == 1 and isinstance(outcomes[0], MotionStopped), outcomes
-    assert "the move was stopped on request" in str(outcomes[0])
+    outcome = queued.join(3.0)
+    assert isinstance(outcome, MotionStopped) and "the move was stopped on request" in str(outcome), outcome
     assert [name for name, _, _ in controller.programs()] == ["setup", "tap"]
     assert_arm_stands(controller)
     robot.move_linear(flange_above_surface(0.06))  # asked for after the STOP: it runs
@@ -455,22 +452,12 @@ def test_stop_before_the_controller_starts_a_sent_program_ends_it_before_it_move
     (before, its loop stopped the movel a cycle after it started)."""
     controller.delay_programs(0.5)
     before = controller.flange_pose()
-    outcomes: list[object] = []
-
-    def move() -> None:
-        try:
-            outcomes.append(robot.move_linear(flange_above_surface(0.06)))
-        except RobotError as error:
-            outcomes.append(error)
-
-    moving = threading.Thread(target=move)
-    moving.start()
+    moving = MotionInThread(lambda: robot.move_linear(flange_above_surface(0.06)), controller)
     assert wait_until(lambda: len(controller.uploaded_scripts()) == 2)  # the set-up program and the move
     robot.stop()
     script = controller.uploaded_scripts()[-1]
     assert script.index("if requested(REQUEST_STOP):") < script.index("run motion()")  # before any motion
-    moving.join(4.0)
-    assert len(outcomes) == 1 and isinstance(outcomes[0], MotionStopped), outcomes
+    assert isinstance(moving.join(4.0), MotionStopped)
     assert [name for name, _, _ in controller.programs()] == ["setup", "move"]  # it started, then ended
     np.testing.assert_allclose(controller.flange_pose(), before, atol=1e-9)
 

@@ -142,10 +142,16 @@ def check_limit(name: str, value: float, limit: float, unit: str, scale: float) 
 
 
 def check_move_travel(distance_m: float) -> None:
-    """Raise ``RobotError`` when a move's target is ``distance_m`` (m) from the flange, beyond
+    """Raise ``move_too_far`` when a move's target is ``distance_m`` (m) from the flange, beyond
     ``MAX_MOVE_TRAVEL_M``: nothing moves."""
     if distance_m > MAX_MOVE_TRAVEL_M:
-        raise RobotError(f"the move's target is {distance_m * 1e3:.0f} mm from the flange, farther than the "
-                         f"{MAX_MOVE_TRAVEL_M * 1e3:.0f} mm one move may go, so the robot did not move: bring the "
-                         "arm nearer by hand (freedrive) and retry; if the target is far off, check the tip "
-                         "calibration and the fixture's units")
+        raise move_too_far(distance_m)
+
+
+def move_too_far(distance_m: float) -> RobotError:
+    """The error of a move refused for its target's distance (m) from the flange; at least ``MAX_MOVE_TRAVEL_M`` is
+    said (the controller, which refused it, may have measured from where the flange stood a moment later)."""
+    return RobotError(f"the move's target is {max(distance_m, MAX_MOVE_TRAVEL_M) * 1e3:.0f} mm from the flange, "
+                      f"farther than the {MAX_MOVE_TRAVEL_M * 1e3:.0f} mm one move may go, so the robot did not "
+                      "move: bring the arm nearer by hand (freedrive) and retry; if the target is far off, check the "
+                      "tip calibration and the fixture's units")

@@ -33,7 +33,7 @@ from fixwizard.robot.base import (
     NotInRemoteControl,
     RobotError,
     TapResult,
-    check_move_travel,
+    move_too_far,
 )
 from fixwizard.robot.ur_errors import LinkLost, URProtectiveStop, pack_error
 from fixwizard.robot.ur_script import (
@@ -219,8 +219,8 @@ class Link:
         state = self._until_ended(run_id, distance_m / speed_m_s + 3.0, context, "the move")
         if state.phase == PHASE_STOPPED or self._stop_requested():
             raise MotionStopped("move")
-        if state.phase == PHASE_TOO_FAR:
-            check_move_travel(distance_m)
+        if state.phase == PHASE_TOO_FAR:  # the program refused it on the controller
+            raise move_too_far(distance_m)
         if state.phase != PHASE_DONE:
             raise self._diagnose(context, state)
         remaining_m = float(np.linalg.norm(np.asarray(target[:3]) - state.base_T_tcp[:3, 3]))
@@ -508,7 +508,6 @@ class Link:
 
     def _step(self, what: str) -> None:
         self._conn.send(("step", what))
-
 
 
 def _exit_with(parent_pid: int) -> None:

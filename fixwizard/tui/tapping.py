@@ -2,6 +2,7 @@
 only after a tap that ended as planned (a contact, or none within its travel). After a stop or a fault the arm
 holds still: freedrive stays off until the operator turns it on, and the error says so."""
 
+import contextlib
 from collections.abc import Callable
 from typing import TypeVar
 
@@ -15,10 +16,8 @@ FREEDRIVE_STAYS_OFF = (f"Freedrive stays off after this: press {keys.name(keys.F
 
 def freedrive_again(robot: Robot) -> None:
     """Freedrive on; a robot that refuses leaves it to the next robot call to tell the operator."""
-    try:
+    with contextlib.suppress(RobotError):
         robot.freedrive(True)
-    except RobotError:
-        pass
 
 
 def tap_and_record(robot: Robot, record: Callable[[TapResult], T], tap_count: Callable[[], int]) -> T:

@@ -176,8 +176,8 @@ def verdict_lines(result: VerifyResult) -> list[str]:
                      f"move: tap {SUGGESTED_TAPS[0]}-{SUGGESTED_TAPS[1]} points spread over the fixture, then check "
                      "again.")
     else:
-        lines.append(f"consistent with the report: poses the report allows explain the {taps}. Keep using the "
-                     "report's pose (no new calibration needed).")
+        lines.append(f"consistent with the report: poses the report allows explain the {taps}, so they show no move "
+                     "beyond the report's bounds. Keep using the report's pose.")
     lines.append(f"At the report's pose the taps lie up to {distances_mm[worst]:.2f} mm off the surface (tap "
                  f"{worst + 1}; RMS {float(np.sqrt(np.mean(distances_mm**2))):.2f} mm); sample bound "
                  f"{result.sample_bound_m * 1e3:.2f} mm.")
