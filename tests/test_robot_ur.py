@@ -25,12 +25,14 @@ from fixwizard.robot import (
     ConnectionLost,
     EmergencyStop,
     MotionStopped,
+    MoveBlocked,
     NoContact,
     NotInRemoteControl,
     ProtectiveStop,
     Robot,
     RobotError,
 )
+from fixwizard.robot.base import MOVE_FORCE_LIMIT_N
 from fixwizard.robot.ur import URRobot
 from fixwizard.robot.ur_link import PROGRAM_START_TIMEOUT_S
 from fixwizard.robot.ur_script import (
@@ -43,7 +45,7 @@ from fixwizard.robot.ur_script import (
 )
 from fixwizard.robot.ur_state import ControllerState
 from ur_loopback import LoopbackProcess
-from ur_loopback.arm import SURFACE_STIFFNESS_N_M
+from ur_loopback.arm import COLLISION_FORCE_N, SURFACE_STIFFNESS_N_M
 from ur_loopback.programs import unknown_functions
 
 
@@ -135,6 +137,15 @@ def assert_arm_stands(controller, for_s: float = 0.3) -> None:
     assert not controller.program_running()
     time.sleep(for_s)
     np.testing.assert_allclose(controller.flange_pose(), before, atol=1e-9)
+
+
+def stall_link(robot: URRobot, stall_s: float) -> None:
+    """Freeze the link process (SIGSTOP) for ``stall_s``, as a stalled PC does, then let it go on."""
+    pid = robot.link_pid
+    os.kill(pid, signal.SIGSTOP)
+    time.sleep(stall_s)
+    with contextlib.suppress(ProcessLookupError):  # the wizard's process killed the stalled link meanwhile
+        os.kill(pid, signal.SIGCONT)
 
 
 class MotionInThread:
@@ -399,6 +410,39 @@ def test_the_move_program_holds_its_travel_bound_on_the_controller(robot, contro
     np.testing.assert_allclose(controller.flange_pose(), before, atol=1e-9)
 
 
+def test_a_move_into_something_stops_at_its_force_limit_and_goes_back(start_controller, connect):
+    """The tip 20 mm into the surface as the target: the move program stops where the contact force reaches its
+    limit, far below the controller's protective stop, and takes the arm back to where the move began."""
+    controller = start_controller(base_T_flange=flange_above_surface(0.01))
+    robot = connect()
+    before = controller.flange_pose()
+    with pytest.raises(MoveBlocked, match=r"^the arm met something on its way \((5[0-9]|6[0-9]) N\), stopped and went "
+                                          "back to where the move began: clear the path"):
+        robot.move_linear(flange_above_surface(-0.02), speed_m_s=0.05)
+    assert MOVE_FORCE_LIMIT_N <= controller.peak_contact_force_n() < COLLISION_FORCE_N
+    np.testing.assert_allclose(controller.flange_pose(), before, atol=1e-6)
+    assert robot.status().mode == "ready"
+    assert_arm_stands(controller)
+    robot.move_linear(flange_above_surface(0.02), speed_m_s=0.05)  # nothing to unlock: the next move runs
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("stall_s", [0.3, 1.0])
+def test_the_move_force_limit_holds_on_the_controller_when_the_pc_stalls(start_controller, connect, stall_s):
+    """The link process is frozen (SIGSTOP) while a move heads 20 mm into the surface: the program alone stops it
+    at its force limit (or the watchdog stops the arm first); the surface never pushes back with the force of a
+    protective stop."""
+    controller = start_controller(base_T_flange=flange_above_surface(0.005))
+    robot = connect()
+    move = MotionInThread(lambda: robot.move_linear(flange_above_surface(-0.02), speed_m_s=0.05), controller)
+    assert wait_until(lambda: robot.status().mode == "moving")
+    stall_link(robot, stall_s)
+    outcome = move.join(10.0)
+    assert isinstance(outcome, (MoveBlocked, ConnectionLost)), outcome
+    assert controller.peak_contact_force_n() < COLLISION_FORCE_N
+    assert_arm_stands(controller)
+
+
 @pytest.mark.parametrize("spoil", [lambda pose: pose.__setitem__((0, 3), np.nan),
                                    lambda pose: pose.__setitem__((1, 1), np.inf),
                                    lambda pose: pose.__setitem__((slice(0, 3), slice(0, 3)), 2 * pose[:3, :3]),
@@ -626,11 +670,7 @@ def test_the_tap_travel_holds_on_the_controller_when_the_pc_stalls(start_control
     tap = TapInThread(robot, controller, max_travel_m=0.02, speed_m_s=0.05)
     assert wait_until(lambda: robot.status().mode == "moving")
     time.sleep(random.uniform(0.0, 0.3))
-    pid = robot.link_pid
-    os.kill(pid, signal.SIGSTOP)
-    time.sleep(stall_s)
-    with contextlib.suppress(ProcessLookupError):  # the wizard's process killed the stalled link meanwhile
-        os.kill(pid, signal.SIGCONT)
+    stall_link(robot, stall_s)
     outcome = tap.join(5.0)
     assert max(controller.tap_travels()) <= 0.02 + TRAVEL_SLACK_M
     assert isinstance(outcome, (NoContact, ConnectionLost))

@@ -4,6 +4,7 @@ from fixwizard.robot.base import (
                                   ConnectionLost,
                                   EmergencyStop,
                                   MotionStopped,
+                                  MoveBlocked,
                                   NoContact,
                                   NotInRemoteControl,
                                   ProtectiveStop,
@@ -13,5 +14,6 @@ from fixwizard.robot.base import (
                                   TapResult,
 )
 
-__all__ = ["ConnectionLost", "EmergencyStop", "MotionStopped", "NoContact", "NotInRemoteControl", "ProtectiveStop",
+__all__ = ["ConnectionLost", "EmergencyStop", "MotionStopped", "MoveBlocked",
+           "NoContact", "NotInRemoteControl", "ProtectiveStop",
            "Robot", "RobotError", "RobotStatus", "TapResult"]

@@ -17,6 +17,10 @@ MAX_TAP_SPEED_M_S = 0.05
 MAX_TAP_FORCE_N = 50.0
 MAX_LINEAR_SPEED_M_S = 0.25
 MAX_MOVE_TRAVEL_M = 0.5  # the farthest a move's target may be from where the flange stands when it starts
+# A move stops when the force on the tool has grown by this (N) since it began, and goes back there: well above
+# the force estimate's noise while the arm accelerates (a CB3 estimates it from joint currents), well below the
+# 150 N at which a UR's default safety configuration protective-stops, so nothing is pressed harder or longer.
+MOVE_FORCE_LIMIT_N = 50.0
 
 
 class RobotError(FixwizardError):
@@ -64,6 +68,14 @@ class MotionStopped(RobotError):
     def __init__(self, motion: str) -> None:
         super().__init__(f"the {motion} was stopped on request; nothing was recorded from it: check the cell, "
                          "then retry")
+
+
+class MoveBlocked(RobotError):
+    """A move met something on its way: it stopped at ``MOVE_FORCE_LIMIT_N`` and went back to where it began."""
+
+    def __init__(self, peak_force_n: float) -> None:
+        super().__init__(f"the arm met something on its way ({peak_force_n:.0f} N), stopped and went back to where "
+                         "the move began: clear the path (a hand, a cable, the fixture in the way), then retry")
 
 
 class NotInRemoteControl(RobotError):

@@ -17,8 +17,10 @@ from fixwizard.fixture import Fixture
 from fixwizard.geometry.se3 import invert, make_transform, rotation_angle_rad, transform_points
 from fixwizard.robot.base import (
     MAX_LINEAR_SPEED_M_S,
+    MOVE_FORCE_LIMIT_N,
     ConnectionLost,
     MotionStopped,
+    MoveBlocked,
     NoContact,
     ProtectiveStop,
     RobotError,
@@ -37,7 +39,7 @@ Fault = Literal["protective_stop_during_tap", "connection_loss", "no_surface"]
 CONTACT_TOLERANCE_M = 1e-6
 SETTLE_S = 0.2
 # move_linear: the ball's path is checked every MOVE_STEP_M (m); dipping deeper than COLLISION_DEPTH_M (m) into
-# the fixture or the table is a collision (a step can pass a corner by up to about MOVE_STEP_M / 2 unseen).
+# the fixture or the table blocks the move (a step can pass a corner by up to about MOVE_STEP_M / 2 unseen).
 MOVE_STEP_M = 0.0005
 COLLISION_DEPTH_M = 0.0002
 # place_tip_near: hover height range (m), largest tilt of the tool z axis from the inward normal (rad),
@@ -159,7 +161,8 @@ class SimulatedCell:
 
     def move_linear(self, base_T_tcp: np.ndarray, speed_m_s: float = 0.05) -> None:
         """Move the flange straight to ``base_T_tcp``; if the ball would hit the fixture or the table on the
-        way, stop just before and make a protective stop, as a real controller's collision detection does."""
+        way, go back to the start and raise ``MoveBlocked``, as fixwizard's move program on a UR does when the
+        contact force reaches ``MOVE_FORCE_LIMIT_N``."""
         check_limit("linear speed", speed_m_s, MAX_LINEAR_SPEED_M_S, "mm/s", 1e3)
         with self._lock:  # as a UR's move program: a target too far is refused before anything moves
             check_move_travel(float(np.linalg.norm(np.asarray(base_T_tcp, float)[:3, 3] - self._base_T_tcp[:3, 3])))
@@ -171,9 +174,7 @@ class SimulatedCell:
             if hit is None:
                 self._base_T_tcp = np.array(base_T_tcp, float)
                 return
-            self._base_T_tcp = path[hit - 1]
-            self._protective_stop = True
-            raise ProtectiveStop(" because the ball hit the fixture or the table during a move")
+            raise MoveBlocked(MOVE_FORCE_LIMIT_N)
 
     def status(self) -> RobotStatus:
         with self._lock:

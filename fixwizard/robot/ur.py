@@ -7,8 +7,9 @@ cannot freeze or kill the wizard: every command has a deadline, and a link proce
 misses its deadline is killed and reported as ``LinkLost``.
 
 Safety lives on the controller (``fixwizard.robot.ur_script``): every motion is a program whose first
-statement arms the RTDE watchdog, and a tap's travel, speed and force limits are the program's own, so a PC
-that stalls, crashes or loses the link cannot take a tap past its travel limit, and the arm stops
+statement arms the RTDE watchdog, and a tap's travel, speed and force limits (a move's travel and force) are
+the program's own, so a PC that stalls, crashes or loses the link cannot take a tap past its travel limit or
+press harder than a limit, and the arm stops
 ``1 / watchdog_hz`` s after the link's last message. An error about a lost link is raised only once that time
 (plus ``WATCHDOG_MARGIN_S``) has passed since the link process's last watchdog kick, so nothing moves after
 the operator sees it.
@@ -166,7 +167,8 @@ class URRobot:
 
     def move_linear(self, base_T_tcp: np.ndarray, speed_m_s: float = 0.05) -> None:
         """Move the flange in a straight line to ``base_T_tcp`` (4x4, base frame, m) at ``speed_m_s`` (m/s), at most
-        ``base.MAX_MOVE_TRAVEL_M`` (m) from where it stands."""
+        ``base.MAX_MOVE_TRAVEL_M`` (m) from where it stands; ``MoveBlocked`` (the arm back where it began) if the
+        contact force reaches ``base.MOVE_FORCE_LIMIT_N`` on the way. Both limits are held by the controller."""
         check_limit("linear speed", speed_m_s, MAX_LINEAR_SPEED_M_S, "mm/s", 1e3)
         target = _checked_target(base_T_tcp)
         stop_mark = self._stop_count.value
@@ -176,7 +178,7 @@ class URRobot:
             distance_m = float(np.linalg.norm(target[:3, 3] - self._live_state(link).base_T_tcp[:3, 3]))
             check_move_travel(distance_m)  # the program holds it too; refused here without sending it
             self._call(link, "move_linear", (stop_mark, [float(value) for value in to_ur_pose(target)], speed_m_s),
-                       distance_m / speed_m_s + MOTION_SLACK_S, " during the move")
+                       distance_m / speed_m_s + distance_m / RETRACT_SPEED_M_S + MOTION_SLACK_S, " during the move")
 
     def status(self) -> RobotStatus:
         """Controller state from the link's latest sample; ``connected=False`` once the link is down or its

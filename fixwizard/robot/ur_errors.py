@@ -6,6 +6,7 @@ from fixwizard.robot.base import (
     ConnectionLost,
     EmergencyStop,
     MotionStopped,
+    MoveBlocked,
     NoContact,
     NotInRemoteControl,
     ProtectiveStop,
@@ -31,7 +32,7 @@ class LinkLost(ConnectionLost):
 
 _KINDS: dict[str, type[RobotError]] = {kind.__name__: kind for kind in (
     RobotError, ConnectionLost, LinkLost, ProtectiveStop, URProtectiveStop, EmergencyStop, NoContact,
-    MotionStopped, NotInRemoteControl)}
+    MotionStopped, MoveBlocked, NotInRemoteControl)}
 
 
 def pack_error(error: RobotError) -> tuple[str, str, Any]:

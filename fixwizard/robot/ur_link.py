@@ -29,6 +29,7 @@ import numpy as np
 from fixwizard.robot.base import (
     EmergencyStop,
     MotionStopped,
+    MoveBlocked,
     NoContact,
     NotInRemoteControl,
     RobotError,
@@ -40,6 +41,7 @@ from fixwizard.robot.ur_script import (
     FINAL_PHASES,
     KICK_REGISTER,
     PEAK_FORCE_REGISTER,
+    PHASE_BLOCKED,
     PHASE_DONE,
     PHASE_NO_CONTACT,
     PHASE_NOT_SETTLED,
@@ -216,11 +218,15 @@ class Link:
         start = self._ready_state(" before the move")
         distance_m = float(np.linalg.norm(np.asarray(target[:3]) - start.base_T_tcp[:3, 3]))
         run_id = self._start(lambda run: move_program(run, self.watchdog_hz, target, speed_m_s), context, "move")
-        state = self._until_ended(run_id, distance_m / speed_m_s + 3.0, context, "the move")
+        # there, or partway and back (blocked)
+        duration_s = distance_m / speed_m_s + distance_m / RETRACT_SPEED_M_S
+        state = self._until_ended(run_id, duration_s + 3.0, context, "the move")
         if state.phase == PHASE_STOPPED or self._stop_requested():
             raise MotionStopped("move")
         if state.phase == PHASE_TOO_FAR:  # the program refused it on the controller
             raise move_too_far(distance_m)
+        if state.phase == PHASE_BLOCKED:
+            raise MoveBlocked(state.peak_force_n)
         if state.phase != PHASE_DONE:
             raise self._diagnose(context, state)
         remaining_m = float(np.linalg.norm(np.asarray(target[:3]) - state.base_T_tcp[:3, 3]))

@@ -7,14 +7,16 @@ travel, speed and force limits live in the program: the approach is a ``movel`` 
 limit (the controller's trajectory cannot pass it, at the requested speed), stopped by the program the cycle
 the contact force reaches the limit. A PC that stalls or dies cannot take the tap further; it only stops
 feeding the watchdog, and the controller ends the program. A move refuses, on the controller, a target farther
-than ``MAX_MOVE_TRAVEL_M`` from where the flange stands.
+than ``MAX_MOVE_TRAVEL_M`` from where the flange stands, and stops and goes back where the force on the tool
+has grown by ``MOVE_FORCE_LIMIT_N`` on its way.
 
 Registers (integers unless told; the RTDE I/O interface's range 18-22, ur_rtde's receive range 12-19 for doubles):
   input 18   kick counter the link rewrites every ``KICK_PERIOD_S``; the programs' watchdog variable
   input 19   request: ``run_id * 8 + REQUEST_*`` (a stale request of an earlier run matches nothing)
   output 18  run id of the program that runs or ran last
   output 19  its phase: ``PHASE_*``
-  output double 17, 18, 19  tap: travel to contact (m, along the tool z axis), peak force (N), settle time (s)
+  output double 17, 18, 19  tap: travel to contact (m, along the tool z axis), peak force (N), settle time (s);
+                            a blocked move: the force's growth it stopped at (N) in 18
 
 Poses are UR pose vectors ``[x, y, z, rx, ry, rz]`` of the flange (each program sets the TCP offset to zero)
 in the base frame: m and rad. Speeds m/s, accelerations m/s^2, forces N, times s.
@@ -23,7 +25,7 @@ in the base frame: m and rad. Speeds m/s, accelerations m/s^2, forces N, times s
 from collections.abc import Sequence
 from decimal import Decimal
 
-from fixwizard.robot.base import MAX_MOVE_TRAVEL_M
+from fixwizard.robot.base import MAX_MOVE_TRAVEL_M, MOVE_FORCE_LIMIT_N
 
 KICK_REGISTER = 18
 REQUEST_REGISTER = 19
@@ -41,7 +43,8 @@ PHASE_NO_CONTACT = 4  # tap: the travel limit reached without contact; retracted
 PHASE_STOPPED = 5  # stopped on request
 PHASE_NOT_SETTLED = 6  # tap: the contact did not settle in time; the arm stands in contact
 PHASE_TOO_FAR = 7  # move: the target is farther than MAX_MOVE_TRAVEL_M from the flange; nothing moved
-FINAL_PHASES = {PHASE_DONE, PHASE_NO_CONTACT, PHASE_STOPPED, PHASE_NOT_SETTLED, PHASE_TOO_FAR}
+PHASE_BLOCKED = 8  # move: the force grew by MOVE_FORCE_LIMIT_N on the way; back where it began
+FINAL_PHASES = {PHASE_DONE, PHASE_NO_CONTACT, PHASE_STOPPED, PHASE_NOT_SETTLED, PHASE_TOO_FAR, PHASE_BLOCKED}
 
 ACCELERATION_M_S2 = 0.5
 STOP_DECELERATION_M_S2 = 10.0
@@ -51,39 +54,11 @@ SETTLE_WINDOW_S = 0.1  # ... for this long
 SETTLE_TIMEOUT_S = 2.0
 
 
-def request_value(run_id: int, request: int) -> int:
-    """What the link writes to the request register to ask run ``run_id`` for ``request``."""
-    return run_id * 8 + request
-
-
-def tap_program(run_id: int, watchdog_hz: float, max_travel_m: float, speed_m_s: float,
-                force_limit_n: float) -> str:
-    """Approach along the tool z axis at ``speed_m_s`` until the contact force reaches ``force_limit_n``, at
-    most ``max_travel_m``; wait for the contact to settle, report it (``PHASE_SETTLED``), retract on request."""
-    return _program("tap", run_id, watchdog_hz, {
-        "max_travel_m": max_travel_m, "speed_m_s": speed_m_s, "force_limit_n": force_limit_n,
-        "settle_speed_m_s": SETTLE_SPEED_M_S, "settle_window_s": SETTLE_WINDOW_S,
-        "settle_timeout_s": SETTLE_TIMEOUT_S, "retract_speed_m_s": RETRACT_SPEED_M_S}, """\
+# A tap's and a move's way back: ``retract_and_finish(phase)`` moves the flange back to where the program began
+# (a STOP on the way stops it there) and ends the program with ``phase``.
+_RETURN_TO_START = """\
   global start = get_actual_tcp_pose()
-  global limit = pose_trans(start, p[0, 0, max_travel_m, 0, 0, 0])
-  global at_limit = False
   global back = False
-  global peak_n = 0.0
-  def force_n():
-    wrench = get_tcp_force()
-    return sqrt(wrench[0] * wrench[0] + wrench[1] * wrench[1] + wrench[2] * wrench[2])
-  end
-  def record_peak():
-    # URScript has no max()
-    force = force_n()
-    if force > peak_n:
-      peak_n = force
-    end
-  end
-  thread approach():
-    movel(limit, a=acceleration_m_s2, v=speed_m_s)
-    at_limit = True
-  end
   thread retract():
     movel(start, a=acceleration_m_s2, v=retract_speed_m_s)
     back = True
@@ -99,6 +74,40 @@ def tap_program(run_id: int, watchdog_hz: float, max_travel_m: float, speed_m_s:
       sync()
     end
     finish(phase)
+  end
+"""
+
+
+def request_value(run_id: int, request: int) -> int:
+    """What the link writes to the request register to ask run ``run_id`` for ``request``."""
+    return run_id * 8 + request
+
+
+def tap_program(run_id: int, watchdog_hz: float, max_travel_m: float, speed_m_s: float,
+                force_limit_n: float) -> str:
+    """Approach along the tool z axis at ``speed_m_s`` until the contact force reaches ``force_limit_n``, at
+    most ``max_travel_m``; wait for the contact to settle, report it (``PHASE_SETTLED``), retract on request."""
+    return _program("tap", run_id, watchdog_hz, {
+        "max_travel_m": max_travel_m, "speed_m_s": speed_m_s, "force_limit_n": force_limit_n,
+        "settle_speed_m_s": SETTLE_SPEED_M_S, "settle_window_s": SETTLE_WINDOW_S,
+        "settle_timeout_s": SETTLE_TIMEOUT_S, "retract_speed_m_s": RETRACT_SPEED_M_S}, _RETURN_TO_START + """\
+  global limit = pose_trans(start, p[0, 0, max_travel_m, 0, 0, 0])
+  global at_limit = False
+  global peak_n = 0.0
+  def force_n():
+    wrench = get_tcp_force()
+    return sqrt(wrench[0] * wrench[0] + wrench[1] * wrench[1] + wrench[2] * wrench[2])
+  end
+  def record_peak():
+    # URScript has no max()
+    force = force_n()
+    if force > peak_n:
+      peak_n = force
+    end
+  end
+  thread approach():
+    movel(limit, a=acceleration_m_s2, v=speed_m_s)
+    at_limit = True
   end
   zero_ftsensor()
   sync()
@@ -156,13 +165,26 @@ def tap_program(run_id: int, watchdog_hz: float, max_travel_m: float, speed_m_s:
 def move_program(run_id: int, watchdog_hz: float, target: Sequence[float], speed_m_s: float) -> str:
     """A straight-line move of the flange to the UR pose ``target`` at ``speed_m_s``; none at all if ``target``
     is farther than ``MAX_MOVE_TRAVEL_M`` from the flange (a wrong calibration or units: the controller holds
-    the bound, whatever the PC computed)."""
+    the bound, whatever the PC computed). Where the force on the tool has grown by ``MOVE_FORCE_LIMIT_N`` since
+    the start, the move stops, reports that change and goes back to where it began (``PHASE_BLOCKED``)."""
     return _program("move", run_id, watchdog_hz, {"target": _pose(target), "speed_m_s": speed_m_s,
-                                                  "max_travel_m": MAX_MOVE_TRAVEL_M}, """\
+                                                  "max_travel_m": MAX_MOVE_TRAVEL_M,
+                                                  "force_limit_n": MOVE_FORCE_LIMIT_N,
+                                                  "retract_speed_m_s": RETRACT_SPEED_M_S}, """\
   if point_dist(get_actual_tcp_pose(), target) > max_travel_m:
     finish(PHASE_TOO_FAR)
   end
+""" + _RETURN_TO_START + """\
   global arrived = False
+  # the force sensor is not zeroed (a tap checks its reading before zeroing): the change since the start counts
+  global force_at_start = get_tcp_force()
+  def force_change_n():
+    wrench = get_tcp_force()
+    x = wrench[0] - force_at_start[0]
+    y = wrench[1] - force_at_start[1]
+    z = wrench[2] - force_at_start[2]
+    return sqrt(x * x + y * y + z * z)
+  end
   thread motion():
     movel(target, a=acceleration_m_s2, v=speed_m_s)
     arrived = True
@@ -173,6 +195,12 @@ def move_program(run_id: int, watchdog_hz: float, target: Sequence[float], speed
       kill moving
       stopl(STOP_DECELERATION_M_S2)
       finish(PHASE_STOPPED)
+    end
+    if force_change_n() >= force_limit_n:
+      kill moving
+      stopl(STOP_DECELERATION_M_S2)
+      write_output_float_register(PEAK_FORCE_REGISTER, force_change_n())
+      retract_and_finish(PHASE_BLOCKED)
     end
     sync()
   end
@@ -207,7 +235,8 @@ def _program(name: str, run_id: int, watchdog_hz: float, parameters: dict[str, f
                  "TRAVEL_REGISTER": TRAVEL_REGISTER, "PEAK_FORCE_REGISTER": PEAK_FORCE_REGISTER,
                  "SETTLE_REGISTER": SETTLE_REGISTER, "PHASE_SETTLED": PHASE_SETTLED, "PHASE_DONE": PHASE_DONE,
                  "PHASE_NO_CONTACT": PHASE_NO_CONTACT, "PHASE_STOPPED": PHASE_STOPPED,
-                 "PHASE_NOT_SETTLED": PHASE_NOT_SETTLED, "PHASE_TOO_FAR": PHASE_TOO_FAR}
+                 "PHASE_NOT_SETTLED": PHASE_NOT_SETTLED, "PHASE_TOO_FAR": PHASE_TOO_FAR,
+                 "PHASE_BLOCKED": PHASE_BLOCKED}
     lines = [f"def fixwizard_{name}():", f"  # fixwizard {name}, run {run_id}: see fixwizard/robot/ur_script.py",
              f"  rtde_set_watchdog(\"input_int_register_{KICK_REGISTER}\", {_number(watchdog_hz)}, \"stop\")",
              f"  global run_id = {run_id}",

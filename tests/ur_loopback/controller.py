@@ -85,6 +85,7 @@ class LoopbackController:
         self._program_delay_s = 0.0
         self._frozen = threading.Event()
         self._was_in_contact = False
+        self._peak_contact_force_n = 0.0
         self._triggers: dict[str, list[tuple[str, tuple]]] = {}
         self._input_owners: dict[str, object] = {}
         self._running = threading.Event()
@@ -248,6 +249,11 @@ class LoopbackController:
         with self._lock:
             return [pose.copy() for pose in self._contact_poses]
 
+    def peak_contact_force_n(self) -> float:
+        """The largest force (N) the surface has pushed on the tool with so far."""
+        with self._lock:
+            return self._peak_contact_force_n
+
     def zeroed_in_contact(self) -> bool:
         """Whether the force sensor was ever zeroed while the tool touched the surface."""
         with self._lock:
@@ -287,7 +293,9 @@ class LoopbackController:
         if in_contact and not self._was_in_contact:
             self._fire("contact")
         self._was_in_contact = in_contact
-        if self._arm.force_mode is None and np.linalg.norm(self._arm.contact_force_n()) > COLLISION_FORCE_N:
+        contact_force_n = float(np.linalg.norm(self._arm.contact_force_n()))
+        self._peak_contact_force_n = max(self._peak_contact_force_n, contact_force_n)
+        if self._arm.force_mode is None and contact_force_n > COLLISION_FORCE_N:
             self.protective_stop()
         program = self._program
         if program is None or not program.running:

@@ -36,7 +36,7 @@ RUN_REGISTER, PHASE_REGISTER, REQUEST_REGISTER = 18, 19, 19
 TRAVEL_REGISTER, PEAK_FORCE_REGISTER, SETTLE_REGISTER = 17, 18, 19
 REQUEST_STOP, REQUEST_RETRACT = 1, 2
 PHASE_RUNNING, PHASE_SETTLED, PHASE_DONE, PHASE_NO_CONTACT, PHASE_STOPPED, PHASE_NOT_SETTLED = 1, 2, 3, 4, 5, 6
-PHASE_TOO_FAR = 7
+PHASE_TOO_FAR, PHASE_BLOCKED = 7, 8
 
 
 class Registers:
@@ -191,14 +191,27 @@ class FixwizardProgram:
         self._finish(phase)
 
     def _move(self) -> Iterator[None]:
-        base_T_target = transform(self.parameters["target"])
-        if np.linalg.norm(base_T_target[:3, 3] - self.arm.base_T_flange[:3, 3]) > self.parameters["max_travel_m"]:
+        arm, p = self.arm, self.parameters
+        base_T_target = transform(p["target"])
+        if np.linalg.norm(base_T_target[:3, 3] - arm.base_T_flange[:3, 3]) > p["max_travel_m"]:
             return self._finish(PHASE_TOO_FAR)
-        self._linear(base_T_target, self.parameters["speed_m_s"])
-        while self.arm.moving():
+        start = arm.base_T_flange.copy()
+        force_at_start = np.array(arm.tcp_force()[:3])
+
+        def force_change_n() -> float:
+            return float(np.linalg.norm(np.array(arm.tcp_force()[:3]) - force_at_start))
+
+        self._linear(base_T_target, p["speed_m_s"])
+        while arm.moving():
             if self._requested(REQUEST_STOP):
-                self.arm.halt()
+                arm.halt()
                 return self._finish(PHASE_STOPPED)
+            if force_change_n() >= p["force_limit_n"]:
+                arm.halt()
+                self.registers.write_double(PEAK_FORCE_REGISTER, force_change_n())
+                self.on_event("blocked")
+                yield from self._retract(start, PHASE_BLOCKED)
+                return
             yield
         self._finish(PHASE_DONE)
 
