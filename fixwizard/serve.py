@@ -16,7 +16,9 @@ fixture's name (``fixture.name`` in the report, see ``workflow/cell_reports.py``
 without a report, a report that is not ``unique``, one from the simulated cell, one older than ``max_age_s`` or
 dated in the future (a wrong clock): a URScript program stops on a fault, so a bad pose is never used as if good.
 Before every call the folder is looked at (names, sizes, times): a new, replaced or removed report is served from
-the next call on. Every call is logged with the caller's address, what it asked and what it got.
+the next call on; a folder that is gone or cannot be read is a fault saying so. Every call is logged with the
+caller's address, what it asked and what it got; so is a request that is no call of these functions (another
+function, no XML-RPC, over ``MAX_REQUEST_BYTES``), answered with a fault too.
 
 The log goes to stderr and, with ``--log FILE``, is appended to FILE. FILE must not be an input (``check_log``),
 and a FILE that cannot be written while serving (a full disk) is said once on stderr and then left alone: serving
@@ -47,9 +49,12 @@ from fixwizard.workflow.cell_reports import SUFFIXES, CellReports, folder_state,
 from fixwizard.workflow.verify import age_text
 
 REQUEST_TIMEOUT_S = 10.0  # a client that stops sending mid-request is dropped after this
+MAX_REQUEST_BYTES = 1 << 20  # a call takes under 1 kB; a larger request is discarded as it arrives, unparsed
+_DISCARD_CHUNK_BYTES = 1 << 16
 LOG = logging.getLogger("fixwizard.serve")
 # Fault codes a program can tell apart (the text says the same in words).
-NO_SUCH_FIXTURE, NOT_UNIQUE, SIMULATED, TOO_OLD, FROM_THE_FUTURE, BAD_CALL, INTERNAL = 1, 2, 3, 4, 5, 6, 9
+NO_SUCH_FIXTURE, NOT_UNIQUE, SIMULATED, TOO_OLD, FROM_THE_FUTURE, BAD_CALL, NO_REPORTS_FOLDER, INTERNAL = (
+    1, 2, 3, 4, 5, 6, 7, 9)
 # A log line starts with its time (``LogFormatter``): 2026-12-06 05:59:00,123
 _LOG_LINE = re.compile(rb"\d{4}-\d{2}-\d{2} \d{2}:\d{2}:\d{2},\d{3} ")
 _CONTROL = re.compile(r"[\x00-\x1f\x7f]")  # written escaped in a log line
@@ -100,9 +105,18 @@ class FixtureService:
     # --- the reports ---
 
     def reports(self) -> CellReports:
-        """The newest report of each name, read again when the folder changed since the last call."""
+        """The newest report of each name, read again when the folder changed since the last call; Refused when
+        the folder is gone or cannot be read."""
         with self._lock:
-            state = folder_state(self.folder)
+            try:
+                self.folder.stat()  # folder_state takes a missing folder for an empty one
+                state = folder_state(self.folder)
+            except FileNotFoundError:
+                raise Refused(NO_REPORTS_FOLDER, f"fixwizard: the reports folder {self.folder} is gone (moved or "
+                              "deleted?): put it back, or restart serve with --reports DIR of the reports") from None
+            except OSError as error:
+                raise Refused(NO_REPORTS_FOLDER, f"fixwizard: cannot read the reports folder {self.folder}: "
+                              f"{file_problem(error, self.folder)}") from None
             if state != self._state:
                 first = self._state is None
                 self._reports, self._state = scan(self.folder), state
@@ -115,7 +129,8 @@ class FixtureService:
     def judge(self, name: object) -> Judgement:
         """The newest report of fixture ``name`` and whether it may be served; Refused for an unknown name."""
         if not isinstance(name, str):
-            raise Refused(BAD_CALL, f"fixwizard: give the fixture's name as text, e.g. \"bracket\", not {name!r}")
+            raise Refused(BAD_CALL, f"fixwizard: give the fixture's name as text, e.g. \"bracket\", not "
+                          f"{quoted(name)}")
         reports = self.reports()
         loaded = reports.newest.get(name)
         if loaded is None:
@@ -188,21 +203,69 @@ _CALLER = threading.local()
 
 
 class _Handler(SimpleXMLRPCRequestHandler):
-    """Requests on ``/`` (as ``rpc_factory`` sends them) or ``/RPC2``; a stalled client is dropped."""
+    """Requests on ``/`` (as ``rpc_factory`` sends them) or ``/RPC2``; a stalled client is dropped. What the HTTP
+    server itself says (a request that is no HTTP, on another path) goes to the log, a line of its own."""
 
     rpc_paths = ("/", "/RPC2")
     timeout = REQUEST_TIMEOUT_S
 
+    def log_message(self, format: str, *args: Any) -> None:
+        LOG.info("%s %s", self.client_address[0], format % args)
+
     def do_POST(self) -> None:
         _CALLER.address = self.client_address[0]
-        super().do_POST()
+        length = self.headers.get("content-length", "")
+        if length.isdigit() and int(length) > MAX_REQUEST_BYTES:
+            self._refuse_unread(int(length))
+        else:
+            super().do_POST()
+
+    def _refuse_unread(self, length: int) -> None:
+        """Answer a request of ``length`` bytes, over ``MAX_REQUEST_BYTES``, with a fault: its body is read and
+        dropped piece by piece (memory stays small), so that the client, which sends it all before it reads the
+        answer, gets the fault."""
+        while length > 0:
+            piece = self.rfile.read(min(length, _DISCARD_CHUNK_BYTES))
+            if not piece:
+                return  # the client left
+            length -= len(piece)
+        response = _refused(BAD_CALL, f"fixwizard: the request holds {self.headers['content-length']} bytes, more "
+                            f"than the {MAX_REQUEST_BYTES} a call of fixwizard takes; send the fixture's name only, "
+                            "e.g. get_pose(\"bracket\")", f"sent {self.headers['content-length']} bytes")
+        self.send_response(200)
+        self.send_header("Content-type", "text/xml")
+        self.send_header("Content-length", str(len(response)))
+        self.end_headers()
+        self.wfile.write(response)
+
+
+def _refused(code: int, text: str, what: str) -> bytes:
+    """The XML-RPC answer of a fault ``code`` with ``text`` to a request that is no call of the service's
+    functions (``what`` it was, for the log), logged as refused."""
+    LOG.info("%s %s -> refused (%d): %s", getattr(_CALLER, "address", "?"), what, code, text)
+    return xmlrpc.client.dumps(xmlrpc.client.Fault(code, text), methodresponse=True).encode()
 
 
 class FixtureServer(socketserver.ThreadingMixIn, SimpleXMLRPCServer):
-    """The XML-RPC server: one thread per request, so a slow client never holds up the robot's calls."""
+    """The XML-RPC server: one thread per request, so a slow client never holds up the robot's calls. A request
+    that is no XML-RPC call, or calls a function it does not offer, gets a fault in plain words (logged)."""
 
     daemon_threads = True
     allow_reuse_address = True
+
+    def _marshaled_dispatch(self, data: Any, dispatch_method: Any = None, path: Any = None) -> Any:
+        """The answer (bytes; Any as typeshed's base, which calls it str) to the request's body ``data``."""
+        try:
+            _, method = xmlrpc.client.loads(data)
+        except Exception as error:  # the parser's errors: expat's, ValueError, TypeError, RecursionError...
+            return _refused(BAD_CALL, "fixwizard: the request is no XML-RPC call; call the functions as "
+                            "rpc_factory(\"xmlrpc\", \"http://PC:50000\") does, e.g. get_pose(\"bracket\")",
+                            f"sent no XML-RPC call ({quoted(str(error))})")
+        if method not in self.funcs:
+            offered = ", ".join(FixtureService.FUNCTIONS)
+            return _refused(BAD_CALL, f"fixwizard: there is no function {quoted(method)}; the functions are {offered}",
+                            f"called {quoted(method)}")
+        return super()._marshaled_dispatch(data, dispatch_method, path)
 
 
 def _logged(service: FixtureService, function: str) -> Callable[..., Any]:
@@ -357,7 +420,11 @@ def _serve(service: FixtureService, host: str, port: int) -> None:
         raise InputError(f"cannot serve on {host}:{port}: {problem} (another fixwizard "
                          "serve? give another --port, or --host an address of this PC)") from None
     bound_host, bound_port = str(server.server_address[0]), int(server.server_address[1])
-    names = service.list_fixtures()
+    try:
+        names = service.list_fixtures()
+    except Refused as refused:
+        server.server_close()
+        raise InputError(refused.faultString.removeprefix("fixwizard: ")) from None
     print(f"fixwizard serve: {len(names)} fixture{'s' if len(names) != 1 else ''} ({', '.join(names) or 'none yet'}) "
           f"from {service.folder} on http://{bound_host}:{bound_port} (reports older than "
           f"{age_text(service.max_age_s)} refused); Ctrl+C stops", flush=True)

@@ -4,6 +4,7 @@ line per call, a stalled client that holds nothing up, and the command itself: a
 is refused, and a log file that cannot be written (a full disk) stops neither serving nor the log on stderr."""
 
 import datetime as dt
+import errno
 import logging
 import os
 import re
@@ -152,8 +153,80 @@ def test_bad_calls_are_faults_in_plain_words(running):
     assert "takes the fixture's name" in fault_of(lambda: fw.get_pose()).faultString
     assert "takes the fixture's name" in fault_of(lambda: fw.get_pose("a", "b")).faultString
     assert "as text" in fault_of(lambda: fw.get_pose(3)).faultString
-    assert "not supported" in fault_of(lambda: fw.launch_missiles()).faultString
+    assert fault_of(lambda: fw.launch_missiles()).faultString == (
+        "fixwizard: there is no function 'launch_missiles'; the functions are get_pose, get_bounds, get_status, "
+        "is_usable, get_status_text, list_fixtures")
     assert fw.get_pose("bracket")  # still serving
+
+
+def post(port: int, body: bytes) -> xmlrpc.client.Fault:
+    """The fault ``fixwizard serve`` answers a raw POST of ``body`` with (an XML-RPC answer, HTTP 200)."""
+    with socket.create_connection(("127.0.0.1", port), timeout=30) as connection:
+        connection.sendall(b"POST / HTTP/1.1\r\nHost: x\r\nContent-Type: text/xml\r\nContent-Length: "
+                           + str(len(body)).encode() + b"\r\n\r\n" + body)
+        answer = b""
+        while chunk := connection.recv(65536):
+            answer += chunk
+            if b"</methodResponse>" in answer:
+                break
+    assert answer.startswith(b"HTTP/1.0 200 ")
+    return fault_of(lambda: xmlrpc.client.loads(answer.split(b"\r\n\r\n", 1)[1]))
+
+
+def test_a_name_that_is_no_text_is_quoted_in_part_never_whole(running):
+    """A list of 400 kB, and lists nested 5000 deep (their whole repr would raise RecursionError): a short fault."""
+    nested = (b"<?xml version='1.0'?><methodCall><methodName>get_pose</methodName><params><param>"
+              + b"<value><array><data>" * 5000 + b"</data></array></value>" * 5000 + b"</param></params></methodCall>")
+    fw = running.client()
+    for fault in (fault_of(lambda: fw.get_pose(["x" * 1000] * 400)), post(running.port, nested)):
+        assert fault.faultCode == 6 and "give the fixture's name as text" in fault.faultString
+        assert len(fault.faultString) < 400
+    assert fw.is_usable("bracket")
+
+
+def test_a_request_that_is_no_call_of_a_function_is_a_fault_in_plain_words_and_logged(running, caplog):
+    """No XML-RPC at all, an XML bomb, a request of 20 MB (dropped as it arrives, unparsed): each a fault saying
+    what to send, one log line each, and serving goes on; a request that is no HTTP is logged too."""
+    bomb = (b'<?xml version="1.0"?><!DOCTYPE b [<!ENTITY a "aaaaaaaaaa">'
+            + b"".join(f'<!ENTITY a{i} "{f"&a{i - 1};" * 10 if i else "&a;" * 10}">'.encode() for i in range(8))
+            + b"]><methodCall><methodName>get_pose</methodName><params><param><value><string>&a7;</string>"
+            + b"</value></param></params></methodCall>")
+    huge = xmlrpc.client.dumps(("x" * 20_000_000,), "get_pose").encode()
+    with caplog.at_level(logging.INFO, logger="fixwizard.serve"):
+        for body in (b"GET me a pose", bomb):
+            fault = post(running.port, body)
+            assert fault.faultCode == 6 and fault.faultString.startswith("fixwizard: the request is no XML-RPC call")
+        fault = post(running.port, huge)
+        assert fault.faultCode == 6 and fault.faultString.startswith(
+            f"fixwizard: the request holds {len(huge)} bytes, more than the 1048576 a call of fixwizard takes")
+        with socket.create_connection(("127.0.0.1", running.port), timeout=30) as connection:
+            connection.sendall(b"GARBAGE\r\n\r\n")  # no HTTP: the HTTP server's answer, logged as every call
+            assert b"Error code: 400" in connection.makefile("rb").read()
+        assert running.client().get_pose("bracket")["x"]
+    messages = [record.getMessage() for record in caplog.records]
+    assert "127.0.0.1 code 400, message Bad request syntax ('GARBAGE')" in messages
+    assert sum("sent no XML-RPC call" in message and "-> refused (6)" in message for message in messages) == 2
+    assert any(message.startswith(f"127.0.0.1 sent {len(huge)} bytes -> refused (6)") for message in messages)
+    assert max(len(message) for message in messages) < 1000
+
+
+def test_a_reports_folder_that_is_gone_or_cannot_be_read_is_a_fault_saying_so(running, cell, monkeypatch):
+    fw = running.client()
+    cell.rename(cell.with_name("moved"))
+    for call in (lambda: fw.get_pose("bracket"), lambda: fw.list_fixtures()):
+        fault = fault_of(call)
+        assert fault.faultCode == 7 and f"the reports folder {cell} is gone" in fault.faultString
+    assert fw.is_usable("bracket") is False and "is gone" in fw.get_status_text("bracket")
+    cell.with_name("moved").rename(cell)
+    assert fw.get_pose("bracket")["x"]
+
+    def unreadable(folder):
+        raise PermissionError(errno.EACCES, "Permission denied", str(folder))
+
+    monkeypatch.setattr("fixwizard.serve.folder_state", unreadable)  # as a folder of mode 000 for a user
+    fault = fault_of(lambda: fw.get_bounds("bracket"))
+    assert fault.faultCode == 7 and f"cannot read the reports folder {cell}: no permission" in fault.faultString
+    assert main(["serve", "--reports", str(cell), "--host", "127.0.0.1", "--port", "0"]) == 1  # nor at the start
 
 
 def test_a_new_report_is_served_from_the_next_call_on(running, cell):
