@@ -121,6 +121,14 @@ def test_a_version_1_report_is_checked_with_its_mesh_given(tmp_path, capsys):
     assert run_verify(tmp_path, V1_REPORT, taps[:5] + [0.004, 0.0, 0.0], "--mesh", str(DEMO_MESH)) == 2
 
 
+def test_taps_in_millimetres_are_refused_not_called_a_moved_fixture(tmp_path, capsys):
+    taps = np.array(yaml.safe_load(DEMO_TAPS.read_text())["points_m"])[:4]
+    assert run_verify(tmp_path, V1_REPORT, taps * 1e3, "--mesh", str(DEMO_MESH)) == 1  # was 2, "MOVED"
+    out, err = capsys.readouterr()
+    assert "MOVED" not in out and "Traceback" not in err
+    assert err.startswith("fixwizard: tap 1 lies 571 m from the robot base") and "millimetres read as metres" in err
+
+
 def test_mistakes_get_a_message_not_a_traceback(expert, tmp_path, capsys):
     folder, path, taps, _ = expert
     (tmp_path / "empty.csv").write_text("")

@@ -156,6 +156,17 @@ class Solution:
         return self.cells is not None and self.cells.contains(base_T_cad @ invert(self.fix_T_cad))
 
 
+def check_reach(base_p_taps: np.ndarray) -> None:
+    """InputError naming the first tap (N, 3, m, finite) beyond ``MAX_REACH_M`` of the robot base: millimetres
+    read as metres."""
+    largest = np.max(np.abs(base_p_taps), axis=1, keepdims=True)  # scaled first: 1e300 m squared overflows
+    distances = largest[:, 0] * np.linalg.norm(base_p_taps / np.where(largest > 0.0, largest, 1.0), axis=1)
+    far = np.flatnonzero(distances > MAX_REACH_M)
+    if len(far):
+        raise InputError(f"tap {far[0] + 1} lies {distances[far[0]]:.3g} m from the robot base, "
+                         "beyond any robot arm's reach: the points must be in metres (millimetres read as metres?)")
+
+
 def validate_inputs(base_p_taps: np.ndarray, ball_diameter_m: float, sample_bound_m: float, sigma_m: float,
                     max_cells: float) -> None:
     """Raise ``InputError`` with the fix for taps (N, 3, m), lengths (m) or a cell budget a solve cannot use."""
@@ -171,12 +182,7 @@ def validate_inputs(base_p_taps: np.ndarray, ball_diameter_m: float, sample_boun
     bad = np.flatnonzero(~np.all(np.isfinite(base_p_taps), axis=1))
     if len(bad):
         raise InputError(f"tap {bad[0] + 1} has a coordinate that is not a finite number; fix or remove it")
-    largest = np.max(np.abs(base_p_taps), axis=1, keepdims=True)  # scaled first: 1e300 m squared overflows
-    distances = largest[:, 0] * np.linalg.norm(base_p_taps / np.where(largest > 0.0, largest, 1.0), axis=1)
-    far = np.flatnonzero(distances > MAX_REACH_M)
-    if len(far):
-        raise InputError(f"tap {far[0] + 1} lies {distances[far[0]]:.3g} m from the robot base, "
-                         "beyond any robot arm's reach: the points must be in metres (millimetres read as metres?)")
+    check_reach(base_p_taps)
     if not np.isfinite(sample_bound_m) or sample_bound_m <= 0:
         raise InputError(f"the sample bound must be a positive length, not {sample_bound_m} m; take it from the "
                          "tip calibration (typically 0.5-2 mm)")

@@ -34,7 +34,7 @@ from fixwizard.errors import InputError, MeshError, file_problem
 from fixwizard.fixture import Fixture, load_fixture
 from fixwizard.geometry.se3 import transform_points
 from fixwizard.points import load_points
-from fixwizard.solver.solve import MAX_BALL_DIAMETER_M, MAX_SAMPLE_BOUND_M
+from fixwizard.solver.solve import MAX_BALL_DIAMETER_M, MAX_SAMPLE_BOUND_M, check_reach
 from fixwizard.solver.verify_search import (
     AllowedRegion,
     BoundBracket,
@@ -97,6 +97,7 @@ def _checked_taps(base_p_taps: np.ndarray) -> np.ndarray:
     bad = np.flatnonzero(~np.all(np.isfinite(taps), axis=1))
     if len(bad):
         raise InputError(f"tap {bad[0] + 1} has a coordinate that is not a finite number; fix or remove it")
+    check_reach(taps)  # millimetres taken for metres would be called a moved fixture
     return taps
 
 
