@@ -1,7 +1,8 @@
 """``fixwizard export REPORT --format urscript|ros2|json``: the report's pose for robot programs.
 
-- ``urscript``: a global ``fixture_<name> = p[x, y, z, rx, ry, rz]`` (m, rad; the CAD frame in the base frame)
-  with comment lines saying what it is, to load in a program (a Script node in BeforeStart);
+- ``urscript``: a global ``fixture_<name> = p[x, y, z, rx, ry, rz]`` (m, rad; the CAD frame in the base frame;
+  numbers as fixwizard's own UR programs write them, without exponents) with comment lines saying what it is, to
+  load in a program (a Script node in BeforeStart);
 - ``ros2``: a ``geometry_msgs/msg/TransformStamped`` (YAML) from the UR base frame (``base``, as the UR ROS 2
   driver names the controller's base; not ``base_link``, which is turned by 180 deg about z) to the fixture, and
   the ``tf2_ros static_transform_publisher`` arguments that publish it; the fixture's frame is
@@ -27,6 +28,7 @@ from fixwizard import report
 from fixwizard.atomic import check_output, write_text_atomic
 from fixwizard.cli import ROS_BASE_FRAME_ID as BASE_FRAME_ID
 from fixwizard.errors import InputError
+from fixwizard.robot.ur_script import pose_literal
 
 
 def _identifier(name: str) -> str:
@@ -88,7 +90,7 @@ def _ur_values(loaded: report.Report) -> list[float]:
 def urscript_text(loaded: report.Report, allow_simulated: bool = False) -> str:
     """A URScript file defining ``fixture_<name>`` as the pose to use."""
     guarantee = _usable(loaded, allow_simulated, "URScript")
-    literal = "p[" + ", ".join(repr(value) for value in _ur_values(loaded)) + "]"
+    literal = pose_literal(_ur_values(loaded))
     variable = f"fixture_{_identifier(loaded.name)}"
     lines = _comment_lines(loaded, guarantee, "#")
     lines += ["# p[x, y, z, rx, ry, rz]: metres and a rotation vector in radians. A point taught in the CAD frame:",

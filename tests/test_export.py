@@ -17,7 +17,7 @@ from fixwizard.cli import main
 from test_report import V1_REPORT
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "report.yaml"
-UR_FLOAT = r"-?\d+(?:\.\d+)?(?:e-?\d+)?"
+UR_FLOAT = r"-?\d+(?:\.\d+)?"  # no exponent: fixwizard's UR programs write none either (ur_script._number)
 
 
 @pytest.fixture
@@ -69,6 +69,15 @@ def test_urscript_defines_the_pose_to_use_as_a_global(real_report, capsys):
     assert "SIMULATED" not in text and "pose_trans(fixture_cell2_bracket" in text
     guarantee = float(re.search(r"within (\d+\.\d\d) mm \(CAD origin\)", text).group(1))
     assert guarantee * 1e-3 >= loaded.pose_guarantee.position_m  # stated rounded up, never below the guarantee
+
+
+def test_urscript_writes_small_numbers_without_exponents_every_digit_kept(real_report, tmp_path, capsys):
+    data = yaml.safe_load(real_report.read_text())
+    data["pose"].update(position_m=[0.45, -0.00002, 0.0000001], rotvec_rad=[0.00005, -0.000003, 0.560606])
+    small = report.write(tmp_path / "small.yaml", data)
+    text = exported(capsys, small, "--format", "urscript")
+    assert "fixture_cell2_bracket = p[0.45, -0.00002, 0.0000001, 0.00005, -0.000003, 0.560606]" in text  # was 2e-05
+    assert parse_urscript(text)["fixture_cell2_bracket"] == [0.45, -0.00002, 0.0000001, 0.00005, -0.000003, 0.560606]
 
 
 def _static_transform_publisher_arguments() -> argparse.ArgumentParser:

@@ -167,7 +167,7 @@ def move_program(run_id: int, watchdog_hz: float, target: Sequence[float], speed
     is farther than ``MAX_MOVE_TRAVEL_M`` from the flange (a wrong calibration or units: the controller holds
     the bound, whatever the PC computed). Where the force on the tool has grown by ``MOVE_FORCE_LIMIT_N`` since
     the start, the move stops, reports that change and goes back to where it began (``PHASE_BLOCKED``)."""
-    return _program("move", run_id, watchdog_hz, {"target": _pose(target), "speed_m_s": speed_m_s,
+    return _program("move", run_id, watchdog_hz, {"target": pose_literal(target), "speed_m_s": speed_m_s,
                                                   "max_travel_m": MAX_MOVE_TRAVEL_M,
                                                   "force_limit_n": MOVE_FORCE_LIMIT_N,
                                                   "retract_speed_m_s": RETRACT_SPEED_M_S}, """\
@@ -264,5 +264,6 @@ def _number(value: float) -> str:
     return format(Decimal(repr(value)), "f") if isinstance(value, float) else str(value)
 
 
-def _pose(pose: Sequence[float]) -> str:
+def pose_literal(pose: Sequence[float]) -> str:
+    """A URScript pose literal ``p[x, y, z, rx, ry, rz]`` (m, rad), every digit kept, no exponents (``_number``)."""
     return "p[" + ", ".join(_number(float(value)) for value in pose) + "]"
