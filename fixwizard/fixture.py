@@ -258,6 +258,19 @@ class DistanceOracle:
         return self._distance.rays(origins_m, directions)[0]
 
 
+def _surface_of(loaded: object) -> object:
+    """The triangles of what trimesh read: a mesh as it is, a scene's meshes (an OBJ of several objects, an STL of
+    several solids) as one, without their textures and colours (copying a textured mesh, as trimesh's own
+    ``force="mesh"`` does, needs Pillow, which fixwizard does not install: every OBJ with texture coordinates was
+    refused); anything else (a point cloud, lines) as it is."""
+    if not isinstance(loaded, trimesh.Scene):
+        return loaded
+    for name, geometry in list(loaded.geometry.items()):
+        if isinstance(geometry, trimesh.Trimesh):
+            loaded.geometry[name] = trimesh.Trimesh(geometry.vertices, geometry.faces, process=False)
+    return trimesh.util.concatenate([part for part in loaded.dump() if isinstance(part, trimesh.Trimesh)])
+
+
 def _load_trimesh(path: Path) -> trimesh.Trimesh:
     if path.is_dir():
         raise MeshError(f"{path} is a folder, not a mesh file; give the path of an STL, PLY or OBJ file in it")
@@ -277,7 +290,7 @@ def _load_trimesh(path: Path) -> trimesh.Trimesh:
                         f"says (fixwizard reads a mesh by its suffix): rename it to {path.with_suffix(found).name}")
     try:
         with np.errstate(all="ignore"):  # absurd coordinates overflow in the reader; they are refused below
-            mesh = trimesh.load(path, force="mesh", process=False)
+            mesh = _surface_of(trimesh.load(path, process=False))
     except Exception as error:  # trimesh raises many types for malformed files
         raise MeshError(f"{path} could not be read as a mesh ({error}); check that it is an STL, PLY or "
                         "OBJ export of the fixture") from error
@@ -286,7 +299,24 @@ def _load_trimesh(path: Path) -> trimesh.Trimesh:
                         "fixture's surface as a triangle mesh")
     refuse_non_finite(np.asarray(mesh.vertices), str(path))
     refuse_far_vertices(np.asarray(mesh.vertices), str(path))
-    return mesh.process()
+    return _identical_vertices_merged(mesh)
+
+
+def _identical_vertices_merged(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """The mesh's faces on its referenced vertices, those at identical coordinates merged into one (an STL gives each
+    face its own corners; an OBJ splits a vertex at its texture seams), in the order they first appear. Exact, so the
+    surface stays the file's: trimesh's ``process`` also merged vertices up to 1e-8 of the file's unit apart (17 nm
+    of a mesh in metres), which moved the surface by an amount no bound carried; vertices written apart by rounding
+    are closed by ``mesh_hygiene``, which bounds how far that moves the surface."""
+    vertices, faces = np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64)
+    used = np.unique(faces)
+    _, first, inverse = np.unique(vertices[used], axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    index = np.full(len(vertices), -1, np.int64)
+    index[used] = rank[inverse.ravel()]
+    return trimesh.Trimesh(vertices[used[first[order]]], index[faces], process=False)
 
 
 def _check_size(path: Path, mesh_m: trimesh.Trimesh, units: str) -> None:

@@ -165,3 +165,56 @@ def test_sign_agrees_with_the_exact_winding_number(name):
     vertices = fixture.fix_vertices_m
     winding = igl.winding_number(vertices, np.asarray(fixture.mesh.faces, np.int64), points)
     assert np.array_equal(fixture.oracle.signed_distance_m(points) < 0.0, winding > 0.5)
+
+
+def _obj_text(vertices: np.ndarray, faces: np.ndarray) -> str:
+    """An OBJ file of the mesh with every digit of its vertices."""
+    return "".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in vertices.tolist()) + "".join(
+        f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces)
+
+
+def test_a_file_loads_with_its_own_surface_or_one_within_the_offset_the_bounds_carry(tmp_path):
+    """A patch of faces whose shared corners a mesh in metres wrote 3 nm apart along each axis: whatever closes that
+    crack, the distance intervals widened by ``surface_offset_m`` hold the distance to the file's own triangles
+    (trimesh's merge of vertices up to 1e-8 of a unit apart moved them by 5 nm, uncounted)."""
+    rng = np.random.default_rng(3)
+    box = trimesh.creation.box((0.1, 0.06, 0.03))
+    vertices, faces = np.asarray(box.vertices), np.asarray(box.faces).copy()
+    patch = np.flatnonzero(box.face_normals[:, 2] > 0.5)
+    corners = np.unique(faces[patch])
+    copies = vertices[corners] + rng.choice([-3e-9, 3e-9], size=(len(corners), 3))
+    copy_of = np.arange(len(vertices))
+    copy_of[corners] = len(vertices) + np.arange(len(corners))
+    faces[patch] = copy_of[faces[patch]]
+    file_vertices = np.vstack([vertices, copies])
+    path = tmp_path / "cracked.obj"
+    path.write_text(_obj_text(file_vertices, faces))
+    fixture = load_fixture(path)
+    cad_p_points = np.repeat(copies, 50, axis=0) + rng.normal(scale=0.002, size=(50 * len(copies), 3))
+    low, high, _ = fixture.oracle.distance_interval_m(cad_p_points - fixture.cad_p_center,
+                                                      np.zeros(len(cad_p_points), bool))
+    file_triangles = file_vertices[faces]
+    exact = exact_distances_m(trimesh.Trimesh(file_triangles.reshape(-1, 3), np.arange(3 * len(faces)).reshape(-1, 3),
+                                              process=False), cad_p_points)
+    assert np.all(low - fixture.surface_offset_m <= exact)
+    assert np.all(exact <= high + fixture.surface_offset_m)
+
+
+@pytest.mark.parametrize("objects", [1, 2])
+def test_an_obj_with_texture_coordinates_and_materials_loads_as_its_closed_surface(tmp_path, objects):
+    """CAD tools and Blender write texture coordinates (``f v/vt``, a texture seam at every face here), materials
+    and several objects into an OBJ: the surface loads whole, closed and signed, with no crack to close (it was
+    refused: trimesh needs Pillow to copy a textured mesh)."""
+    box = trimesh.creation.box((0.1, 0.06, 0.03))
+    faces = [f"f {a + 1}/{3 * row + 1} {b + 1}/{3 * row + 2} {c + 1}/{3 * row + 3}"
+             for row, (a, b, c) in enumerate(box.faces.tolist())]
+    half = len(faces) // objects
+    lines = ["mtllib fixture.mtl", *(f"v {x!r} {y!r} {z!r}" for x, y, z in box.vertices.tolist()),
+             *(f"vt {row / 40} {row % 7 / 7}" for row in range(3 * len(faces)))]
+    for start in range(0, len(faces), half):
+        lines += [f"o part_{start}", "usemtl steel", *faces[start:start + half]]
+    path = tmp_path / "fixture.obj"
+    path.write_text("\n".join(lines) + "\n")
+    fixture = load_fixture(path)
+    assert len(fixture.mesh.vertices) == 8 and len(fixture.mesh.faces) == 12
+    assert fixture.signed and fixture.warnings == () and fixture.surface_offset_m == 0.0
