@@ -36,10 +36,17 @@ from fixwizard.robot.base import MOVE_FORCE_LIMIT_N
 from fixwizard.robot.ur import URRobot
 from fixwizard.robot.ur_link import PROGRAM_START_TIMEOUT_S
 from fixwizard.robot.ur_script import (
+    GO_TIMEOUT_S,
     KICK_REGISTER,
     MAX_MOVE_TRAVEL_M,
+    PHASE_NO_GO,
+    PHASE_REGISTER,
+    PHASE_TOO_FAR,
+    REQUEST_GO,
+    REQUEST_REGISTER,
     freedrive_program,
     move_program,
+    request_value,
     setup_program,
     tap_program,
 )
@@ -308,6 +315,35 @@ def test_a_program_the_controller_starts_after_the_link_gave_up_on_it_ends_befor
     np.testing.assert_allclose(controller.flange_pose(), before, atol=1e-9)
 
 
+@pytest.mark.slow
+def test_a_late_program_never_moves_even_once_the_next_command_replaced_its_stop_request(robot, controller):
+    """The controller starts each program 4 s after it arrives. The first move is given up on at 3 s (its stop
+    request written); the operator retries at once, and that command's request replaces the stop request before the
+    late first program starts: the program still never moves, as it gets no go (it moved 52 mm before the go)."""
+    controller.delay_programs(PROGRAM_START_TIMEOUT_S + 1.0)
+    before = controller.flange_pose()
+    for target in (flange_above_surface(0.06), flange_above_surface(0.04)):
+        with pytest.raises(RobotError, match="took fixwizard's program on port 30003 but did not start it"):
+            robot.move_linear(target)
+    assert wait_until(lambda: [name for name, _, _ in controller.programs()] == ["setup", "move", "move"], 6.0)
+    assert wait_until(lambda: not controller.program_running())
+    np.testing.assert_allclose(controller.flange_pose(), before, atol=1e-9)
+
+
+def test_a_program_that_gets_no_go_ends_unmoved(robot, controller):
+    """A program the link does not answer (it gave up on it, or it stalled) ends by itself after its timeout."""
+    program = move_program(7, robot.watchdog_hz, [*flange_above_surface(0.03)[:3, 3], np.pi, 0.0, 0.0], 0.1)
+    before = controller.flange_pose()
+    with socket.create_connection((HOST, 30003)) as script_port:
+        script_port.sendall(program.encode())
+        assert wait_until(lambda: [name for name, _, _ in controller.programs()] == ["setup", "move"])
+        started = time.monotonic()
+        assert wait_until(lambda: not controller.program_running(), GO_TIMEOUT_S + 1.0)
+    assert time.monotonic() - started > GO_TIMEOUT_S - 0.1
+    assert controller.output_int(PHASE_REGISTER) == PHASE_NO_GO
+    np.testing.assert_allclose(controller.flange_pose(), before, atol=1e-9)
+
+
 # --- freedrive ---
 
 
@@ -406,7 +442,9 @@ def test_the_move_program_holds_its_travel_bound_on_the_controller(robot, contro
     with socket.create_connection((HOST, 30003)) as script_port:
         script_port.sendall(program.encode())
         assert wait_until(lambda: [name for name, _, _ in controller.programs()] == ["setup", "move"])
+        controller.write_input_int(REQUEST_REGISTER, request_value(5, REQUEST_GO))  # the link's go
         assert wait_until(lambda: not controller.program_running())
+    assert controller.output_int(PHASE_REGISTER) == PHASE_TOO_FAR
     np.testing.assert_allclose(controller.flange_pose(), before, atol=1e-9)
 
 

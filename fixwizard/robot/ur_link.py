@@ -39,16 +39,20 @@ from fixwizard.robot.base import (
 from fixwizard.robot.ur_errors import LinkLost, URProtectiveStop, pack_error
 from fixwizard.robot.ur_script import (
     FINAL_PHASES,
+    GO_TIMEOUT_S,
     KICK_REGISTER,
     PEAK_FORCE_REGISTER,
     PHASE_BLOCKED,
     PHASE_DONE,
     PHASE_NO_CONTACT,
+    PHASE_NO_GO,
     PHASE_NOT_SETTLED,
     PHASE_REGISTER,
     PHASE_SETTLED,
     PHASE_STOPPED,
     PHASE_TOO_FAR,
+    PHASE_WAITING,
+    REQUEST_GO,
     REQUEST_REGISTER,
     REQUEST_RETRACT,
     REQUEST_STOP,
@@ -268,7 +272,8 @@ class Link:
     # --- programs ---
 
     def _start(self, program_for: Callable[[int], str], context: str, what: str) -> int:
-        """Send the program for a new run id and wait until it runs (its watchdog is armed by then); ``MotionStopped``
+        """Send the program for a new run id, wait until it runs (its watchdog is armed by then) and give it the go
+        (only this run gets it: one the controller starts after this gave up on it never moves); ``MotionStopped``
         (``what`` was stopped) if STOP was pressed since ``_stop_mark``. A STOP pressed later reaches the run
         through ``_stop_loop``, which the program heeds before it moves."""
         if not self._open(DASHBOARD, self._dashboard.isInRemoteControl):
@@ -298,6 +303,18 @@ class Link:
                                      "arm), then retry")
                 raise self._diagnose(context, state)
             time.sleep(POLL_S)
+        self._request(run_id, REQUEST_GO, unless_stopped=True)  # a STOP meanwhile: the program ends unmoved
+        deadline = time.monotonic() + GO_TIMEOUT_S + PROGRAM_END_TIMEOUT_S
+        while (state := self._fresh_state(context)).program_running and state.phase == PHASE_WAITING:
+            if time.monotonic() > deadline:
+                self._end_run(run_id, context)
+                break
+            time.sleep(POLL_S)
+        if state.phase in (PHASE_WAITING, PHASE_NO_GO):
+            self._current_run = None
+            raise RobotError(f"fixwizard's {what} started on the robot but did not get fixwizard's go within "
+                             f"{GO_TIMEOUT_S:g} s{context} (this computer was too busy to answer), so nothing moved: "
+                             "retry")
         return run_id
 
     def _until_ended(self, run_id: int, timeout_s: float, context: str, what: str) -> ControllerState:

@@ -2,7 +2,9 @@
 
 Every motion (tap, linear move, freedrive) is one short program sent to the script port. Its first statement
 arms the controller's RTDE watchdog on the link's kick register, so no motion can ever run on a program whose
-watchdog is not armed; only then does it publish its run id, which is how the link knows it runs. The tap's
+watchdog is not armed; only then does it publish its run id, which is how the link knows it runs, and waits for
+the link's go: the link gives it to the run it waits for once it sees that run start, so a program the controller
+starts late, after the link gave up on it and showed an error, never moves (it ends after ``GO_TIMEOUT_S``). The tap's
 travel, speed and force limits live in the program: the approach is a ``movel`` whose target *is* the travel
 limit (the controller's trajectory cannot pass it, at the requested speed), stopped by the program the cycle
 the contact force reaches the limit. A PC that stalls or dies cannot take the tap further; it only stops
@@ -12,7 +14,8 @@ has grown by ``MOVE_FORCE_LIMIT_N`` on its way.
 
 Registers (integers unless told; the RTDE I/O interface's range 18-22, ur_rtde's receive range 12-19 for doubles):
   input 18   kick counter the link rewrites every ``KICK_PERIOD_S``; the programs' watchdog variable
-  input 19   request: ``run_id * 8 + REQUEST_*`` (a stale request of an earlier run matches nothing)
+  input 19   request: ``run_id * 8 + REQUEST_*`` (a stale request of an earlier run matches nothing; the link
+             writes ``run_id * 8`` before it sends a program)
   output 18  run id of the program that runs or ran last
   output 19  its phase: ``PHASE_*``
   output double 17, 18, 19  tap: travel to contact (m, along the tool z axis), peak force (N), settle time (s);
@@ -35,6 +38,7 @@ TRAVEL_REGISTER, PEAK_FORCE_REGISTER, SETTLE_REGISTER = 17, 18, 19
 
 REQUEST_STOP = 1  # stop the motion now and end the program
 REQUEST_RETRACT = 2  # tap: the contact is recorded, retract to the start
+REQUEST_GO = 3  # the link saw this run start: it may move
 
 PHASE_RUNNING = 1
 PHASE_SETTLED = 2  # tap: in contact and still; waits for REQUEST_RETRACT
@@ -44,7 +48,10 @@ PHASE_STOPPED = 5  # stopped on request
 PHASE_NOT_SETTLED = 6  # tap: the contact did not settle in time; the arm stands in contact
 PHASE_TOO_FAR = 7  # move: the target is farther than MAX_MOVE_TRAVEL_M from the flange; nothing moved
 PHASE_BLOCKED = 8  # move: the force grew by MOVE_FORCE_LIMIT_N on the way; back where it began
-FINAL_PHASES = {PHASE_DONE, PHASE_NO_CONTACT, PHASE_STOPPED, PHASE_NOT_SETTLED, PHASE_TOO_FAR, PHASE_BLOCKED}
+PHASE_WAITING = 9  # started, waiting for REQUEST_GO; nothing moved
+PHASE_NO_GO = 10  # no REQUEST_GO within GO_TIMEOUT_S: ended without moving
+FINAL_PHASES = {PHASE_DONE, PHASE_NO_CONTACT, PHASE_STOPPED, PHASE_NOT_SETTLED, PHASE_TOO_FAR, PHASE_BLOCKED,
+                PHASE_NO_GO}
 
 ACCELERATION_M_S2 = 0.5
 STOP_DECELERATION_M_S2 = 10.0
@@ -52,6 +59,9 @@ RETRACT_SPEED_M_S = 0.05
 SETTLE_SPEED_M_S = 0.0005  # settled: the flange slower than this ...
 SETTLE_WINDOW_S = 0.1  # ... for this long
 SETTLE_TIMEOUT_S = 2.0
+# A program ends unmoved when the link's go has not come this long after it started (controller time); the link
+# gives it within a few controller cycles, and a link that stalls longer than the watchdog's period stops it anyway.
+GO_TIMEOUT_S = 1.0
 
 
 # A tap's and a move's way back: ``retract_and_finish(phase)`` moves the flange back to where the program began
@@ -228,9 +238,11 @@ def setup_program(run_id: int, watchdog_hz: float) -> str:
 
 def _program(name: str, run_id: int, watchdog_hz: float, parameters: dict[str, float | str], body: str) -> str:
     """One program: its parameters as globals, the watchdog armed before anything else, then the run id,
-    zero TCP offset, the shared helpers, an end if a stop was requested before it ran, and ``body`` (two-space
-    indented URScript)."""
+    zero TCP offset, the shared helpers, the wait for the link's go (an end if a stop is requested before it or
+    the go does not come), and ``body`` (two-space indented URScript)."""
     constants = {"acceleration_m_s2": ACCELERATION_M_S2, "STOP_DECELERATION_M_S2": STOP_DECELERATION_M_S2,
+                 "go_timeout_s": GO_TIMEOUT_S, "REQUEST_GO": REQUEST_GO, "PHASE_RUNNING": PHASE_RUNNING,
+                 "PHASE_NO_GO": PHASE_NO_GO,
                  "REQUEST_STOP": REQUEST_STOP, "REQUEST_RETRACT": REQUEST_RETRACT, "PHASE_REGISTER": PHASE_REGISTER,
                  "TRAVEL_REGISTER": TRAVEL_REGISTER, "PEAK_FORCE_REGISTER": PEAK_FORCE_REGISTER,
                  "SETTLE_REGISTER": SETTLE_REGISTER, "PHASE_SETTLED": PHASE_SETTLED, "PHASE_DONE": PHASE_DONE,
@@ -242,7 +254,7 @@ def _program(name: str, run_id: int, watchdog_hz: float, parameters: dict[str, f
              f"  global run_id = {run_id}",
              *(f"  global {key} = {_number(value) if not isinstance(value, str) else value}"
                for key, value in {**parameters, **constants}.items()),
-             f"  write_output_integer_register({PHASE_REGISTER}, {PHASE_RUNNING})",
+             f"  write_output_integer_register({PHASE_REGISTER}, {PHASE_WAITING})",
              f"  write_output_integer_register({RUN_REGISTER}, run_id)",
              "  set_tcp(p[0, 0, 0, 0, 0, 0])",
              "  def requested(request):",
@@ -252,9 +264,19 @@ def _program(name: str, run_id: int, watchdog_hz: float, parameters: dict[str, f
              f"    write_output_integer_register({PHASE_REGISTER}, phase)",
              "    halt",
              "  end",
-             "  if requested(REQUEST_STOP):",  # STOP pressed before the program started: end before any motion
-             "    finish(PHASE_STOPPED)",
-             "  end"]
+             # a STOP pressed before the program started, or no go (a run the link gave up on): end unmoved
+             "  global waited_for_go_s = 0",
+             "  while not requested(REQUEST_GO):",
+             "    if requested(REQUEST_STOP):",
+             "      finish(PHASE_STOPPED)",
+             "    end",
+             "    if waited_for_go_s > go_timeout_s:",
+             "      finish(PHASE_NO_GO)",
+             "    end",
+             "    waited_for_go_s = waited_for_go_s + get_steptime()",
+             "    sync()",
+             "  end",
+             "  write_output_integer_register(PHASE_REGISTER, PHASE_RUNNING)"]
     return "\n".join(lines) + "\n" + body + "end\n"
 
 

@@ -138,6 +138,16 @@ class LoopbackController:
         with self._lock:
             self._program_delay_s = delay_s
 
+    def output_int(self, index: int) -> int:
+        """Output integer register ``index`` as the programs last wrote it."""
+        with self._lock:
+            return int(self._registers.outputs.get(f"output_int_register_{index}", 0))
+
+    def write_input_int(self, index: int, value: int) -> None:
+        """Write input integer register ``index`` as an RTDE client does (a test standing in for the link)."""
+        with self._lock:
+            self._registers.inputs[f"input_int_register_{index}"] = value
+
     # --- the cell and its operator ---
 
     def when(self, event: str, action: str, *args) -> None:

@@ -34,9 +34,9 @@ COMMENT = re.compile(r"#.*$", re.MULTILINE)
 
 RUN_REGISTER, PHASE_REGISTER, REQUEST_REGISTER = 18, 19, 19
 TRAVEL_REGISTER, PEAK_FORCE_REGISTER, SETTLE_REGISTER = 17, 18, 19
-REQUEST_STOP, REQUEST_RETRACT = 1, 2
+REQUEST_STOP, REQUEST_RETRACT, REQUEST_GO = 1, 2, 3
 PHASE_RUNNING, PHASE_SETTLED, PHASE_DONE, PHASE_NO_CONTACT, PHASE_STOPPED, PHASE_NOT_SETTLED = 1, 2, 3, 4, 5, 6
-PHASE_TOO_FAR, PHASE_BLOCKED = 7, 8
+PHASE_TOO_FAR, PHASE_BLOCKED, PHASE_WAITING, PHASE_NO_GO = 7, 8, 9, 10
 
 
 class Registers:
@@ -90,7 +90,7 @@ class FixwizardProgram:
         self.run_id = int(parameters["run_id"])
         # the script's first statements: the watchdog, the phase and run id, a zero TCP offset
         self.watchdog_variable, self.watchdog_min_frequency_hz = watchdog if watchdog else (None, None)
-        registers.write_int(PHASE_REGISTER, PHASE_RUNNING)
+        registers.write_int(PHASE_REGISTER, PHASE_WAITING)
         registers.write_int(RUN_REGISTER, self.run_id)
         arm.flange_T_tcp = np.eye(4)
         self.max_travel_m = 0.0  # a tap's deepest travel along the start's tool z axis, for the tests
@@ -129,9 +129,17 @@ class FixwizardProgram:
     # --- the programs ---
 
     def _started(self, body: Iterator[None]) -> Iterator[None]:
-        """The scripts' common start after the helpers: a stop requested before the program ran ends it at once."""
-        if self._requested(REQUEST_STOP):
-            return self._finish(PHASE_STOPPED)
+        """The scripts' common start after the helpers: wait for the link's go; a stop requested before it, or no
+        go within the program's timeout, ends the program unmoved."""
+        waited_s = 0.0
+        while not self._requested(REQUEST_GO):
+            if self._requested(REQUEST_STOP):
+                return self._finish(PHASE_STOPPED)
+            if waited_s > self.parameters["go_timeout_s"]:
+                return self._finish(PHASE_NO_GO)
+            waited_s += self._dt
+            yield
+        self.registers.write_int(PHASE_REGISTER, PHASE_RUNNING)
         yield from body
 
     def _tap(self) -> Iterator[None]:
