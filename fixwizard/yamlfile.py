@@ -20,7 +20,22 @@ def yaml_problem(error: yaml.YAMLError) -> str:
 
 class _Loader(yaml.SafeLoader):
     """``yaml.safe_load``'s loader, except that an integer too large for a float reads as +-inf: where a number is
-    read, it is then refused as not finite, with that place's message (``float()`` of it would raise)."""
+    read, it is then refused as not finite, with that place's message (``float()`` of it would raise); and a key
+    given twice in one mapping is an error (PyYAML keeps the last one silently: a report with ``status`` twice
+    would be read as whichever came last)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
+        first_at: dict[tuple[str, str], yaml.Mark] = {}
+        for key_node, _ in node.value:
+            if not isinstance(key_node, yaml.ScalarNode) or key_node.tag == "tag:yaml.org,2002:merge":
+                continue  # keys merged in with << may be given again: that is what merging is for
+            key = (key_node.tag, key_node.value)
+            if key in first_at:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"the key {quoted(key_node.value)} is given twice (keep one): at line "
+                    f"{first_at[key].line + 1} and", key_node.start_mark)
+            first_at[key] = key_node.start_mark
+        return super().construct_mapping(node, deep)
 
 
 def _int_or_infinity(loader: yaml.SafeLoader, node: yaml.ScalarNode) -> int | float:

@@ -17,6 +17,7 @@ from fixwizard.geometry.se3 import make_transform, transform_points
 from fixwizard.solver.estimates import Bounds
 from fixwizard.solver.solve import solve
 from fixwizard.synthetic import bounded_noise, touching_ball_centres
+from fixwizard.yamlfile import parse_yaml
 from shapes import l_prism
 
 V1_REPORT = Path(__file__).resolve().parent / "data" / "report_v1.yaml"
@@ -210,6 +211,17 @@ def test_damaged_reports_are_refused_with_a_reason(tmp_path, text, match):
     path.write_text(text)
     with pytest.raises(InputError, match=match):
         report.load(path)
+
+
+def test_a_key_given_twice_is_refused_naming_both_lines_never_read_as_the_last(tmp_path):
+    """A hand edit that adds a line instead of changing one: PyYAML alone reads the last value, so this report would
+    have been a real cell's unique pose; the merge keys of YAML (<<) may still be given again."""
+    example = (Path(__file__).resolve().parents[1] / "examples" / "report.yaml").read_text()
+    path = tmp_path / "edited.yaml"
+    path.write_text(example.replace("simulated: true\n", "simulated: true\nsimulated: false\n"))
+    with pytest.raises(InputError, match=r"the key 'simulated' is given twice \(keep one\): at line 8 and at line 9"):
+        report.load(path)
+    assert parse_yaml("base: &b {x: 1, y: 2}\nmoved:\n  <<: *b\n  x: 3\n")["moved"] == {"x": 3, "y": 2}
 
 
 def test_writing_replaces_the_file_whole(solved, tmp_path):
