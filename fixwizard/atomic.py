@@ -1,10 +1,10 @@
 """Output files: where one may go, and atomic writes (a reader sees the old file or the new one, never a torn one).
 
 An output is never one of the inputs it was made from, a folder or a device; a symlink is written through
-to its target (the link stays). ``check_output`` says so before the work that leads to the output, with
-its folder's writability; the write itself goes through a flushed temporary file in the target's folder
-(``.<name>.<pid>.<random>.tmp``) and a rename. Temporary files of ours that a killed write left behind
-are removed by the next write of the same file.
+to its target (the link stays); a leading ``~`` is the home folder, as in a shell. ``check_output`` says so
+before the work that leads to the output, with its folder's writability; the write itself goes through a flushed
+temporary file in the target's folder (``.<name>.<pid>.<random>.tmp``) and a rename. Temporary files of ours that
+a killed write left behind are removed by the next write of the same file.
 """
 
 import os
@@ -22,14 +22,29 @@ TEMPORARY_RANDOM = "[a-z0-9_]{8}"  # the random part of ``tempfile.mkstemp`` nam
 PROBE_BYTES = 4096  # written (and removed) to check that the output's folder takes a file
 
 
+def home_expanded(path: str | Path) -> str:
+    """``path`` with a leading ``~`` or ``~user`` made that home folder, as a shell does (a path typed in the wizard,
+    or ``--output=~/...``, which the shell leaves as typed); InputError for a user that does not exist, instead of
+    a folder named ``~`` made in the current one."""
+    text = str(path)
+    if not text.startswith("~"):
+        return text
+    expanded = os.path.expanduser(text)
+    if expanded == text:
+        user = text[1:].split(os.sep, 1)[0]
+        raise InputError(f"{path} starts with ~{user}, but this PC has no user {user!r}: give the folder in full, "
+                         "e.g. /home/NAME/reports/report.yaml")
+    return expanded
+
+
 def output_target(path: str | Path) -> Path:
-    """The file a write to ``path`` replaces: ``path`` with symlinks followed. InputError when it is a folder
-    (also one still to be made: a path ending in '/') or not a regular file (a device such as /dev/null, a
-    pipe)."""
+    """The file a write to ``path`` replaces: ``path`` with ``~`` expanded (``home_expanded``) and symlinks
+    followed. InputError when it is a folder (also one still to be made: a path ending in '/') or not a regular
+    file (a device such as /dev/null, a pipe)."""
     if str(path).endswith(("/", os.sep)):
         raise InputError(f"{path} ends with '/', so it names a folder; give the path of a file in it, e.g. "
                          f"{Path(path) / 'report.yaml'}")
-    target = Path(os.path.realpath(path))
+    target = Path(os.path.realpath(home_expanded(path)))
     try:
         mode = target.stat().st_mode
     except (FileNotFoundError, NotADirectoryError):  # a new file (its folder is checked apart)
@@ -59,7 +74,7 @@ def check_output(path: str | Path, inputs: Iterable[tuple[str, str | Path | None
 def check_not_read_later(path: str | Path, folders: Iterable[str | Path], suffix: str, what: str, fix: str) -> None:
     """InputError when ``path`` would be a ``*suffix`` file of one of ``folders``, which the next run reads as
     ``what`` (an output among the inputs)."""
-    target = Path(os.path.realpath(path))
+    target = Path(os.path.realpath(home_expanded(path)))
     for folder in folders:
         if target.name.endswith(suffix) and same_file(target.parent, Path(folder)):
             raise InputError(f"{path} would be a {suffix} file of the folder {folder}, which the next run reads as "

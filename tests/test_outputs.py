@@ -88,6 +88,18 @@ def test_a_folder_still_to_be_made_as_output_is_refused_not_written_as_a_file(de
     assert not (demo / "reports").exists()
 
 
+def test_a_path_starting_with_a_tilde_is_in_the_home_folder_never_in_a_folder_named_tilde(demo, capsys,
+                                                                                          monkeypatch):
+    """``--output=~/...`` (the shell leaves it as typed) or a path typed in the wizard: as the shell would have it,
+    so an input reached that way is refused too; an unknown ~user is refused, not made a folder."""
+    monkeypatch.setenv("HOME", str(demo))
+    monkeypatch.chdir(demo)
+    refused(capsys, solve(demo, "--output=~/taps.yaml"), "~/taps.yaml is the POINTS file")
+    refused(capsys, solve(demo, "--output=~nobody-here/report.yaml"), "this PC has no user 'nobody-here'")
+    assert write_text_atomic("~/notes/new.txt", "text\n") == demo / "notes" / "new.txt"
+    assert (demo / "notes" / "new.txt").read_text() == "text\n" and not (demo / "~").exists()
+
+
 @pytest.mark.slow
 def test_a_symlink_output_is_written_through_to_its_target_atomically(demo, capsys):
     target = demo / "archive" / "report.yaml"
