@@ -178,6 +178,26 @@ def test_import_poses_refuses_poses_in_millimetres(tmp_path, capsys):
     assert not (tmp_path / "p.yaml").exists()
 
 
+@pytest.mark.parametrize("text, read", [
+    ("\ufeff0.4\n0\n0.2\n0\n3.14159\n0\n", None),  # saved by Notepad with a byte-order mark: read
+    ("0.4\r\n0\r\n0.2\r\n0\r\n3.14159\r\n0\r\n", None),  # Windows line ends: read
+    ("0.4\n0\n0.2\n0\n3.14159\n", "must hold exactly six numbers x y z rx ry rz (metres, radians); it holds 5"),
+    ("0.4\nnan\n0.2\n0\n3.14159\n0\n", "holds a number that is not finite ([0.4, nan, 0.2, 0.0, 3.14159, 0.0])"),
+    ("0x10\n0\n0.2\n0\n3.14159\n0\n", "could not convert string to float: '0x10'")])
+def test_a_pose_file_as_editors_save_it_is_read_and_a_damaged_one_named(tmp_path, capsys, text, read):
+    _write_poses(tmp_path / "poses", [[0.5, 0.1, 0.2, 0.0, 3.14159, 0.0]])
+    (tmp_path / "poses" / "base_t_tcp_1.pose").write_text(text, encoding="utf-8", newline="")
+    (tmp_path / "tip.pose").write_text("0\n0\n0.05\n0\n0\n0\n")
+    code = main(["import-poses", str(tmp_path / "poses"), "--tip", str(tmp_path / "tip.pose"), "-o",
+                 str(tmp_path / "p.yaml")])
+    err = capsys.readouterr().err
+    if read is None:
+        assert code == 0 and len(yaml.safe_load((tmp_path / "p.yaml").read_text())["points_m"]) == 2
+    else:
+        assert code == 1 and f"the pose file {tmp_path / 'poses' / 'base_t_tcp_1.pose'}" in err
+        assert read in err and "Traceback" not in err and err.count("\n") == 1
+
+
 def test_import_poses_reads_a_tip_calibration(tmp_path, real_data):
     output = tmp_path / "points.yaml"
     calibration = REPO / "calibrations" / "example_matlab_logo.yaml"

@@ -11,7 +11,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
-from fixwizard.errors import InputError
+from fixwizard.errors import InputError, file_problem, quoted
 
 
 def make_transform(rotation: np.ndarray | Rotation, translation_m: npt.ArrayLike) -> np.ndarray:
@@ -93,13 +93,18 @@ def read_pose_file(path: str | Path) -> np.ndarray:
         raise InputError(f"the pose file {path} is not a regular file; a .pose file holds six numbers "
                          "x y z rx ry rz (metres, radians)")
     try:
-        values = np.array(path.read_text().split(), dtype=float)
-    except (OSError, ValueError, UnicodeDecodeError) as error:
+        values = np.array(path.read_text(encoding="utf-8-sig").split(), dtype=float)  # a byte-order mark: Notepad
+    except OSError as error:
+        raise InputError(f"cannot read the pose file: {file_problem(error, path)}") from error
+    except (ValueError, UnicodeDecodeError) as error:
         raise InputError(f"cannot read the pose file {path}: {error}. A .pose file holds six numbers "
                          "x y z rx ry rz (metres, radians).") from error
-    if values.shape != (6,) or not np.all(np.isfinite(values)):
-        raise InputError(f"the pose file {path} must hold exactly six finite numbers x y z rx ry rz "
-                         f"(metres, radians); it holds {values.size}.")
+    if values.shape != (6,):
+        raise InputError(f"the pose file {path} must hold exactly six numbers x y z rx ry rz (metres, radians); "
+                         f"it holds {values.size}.")
+    if not np.all(np.isfinite(values)):
+        raise InputError(f"the pose file {path} holds a number that is not finite ({quoted(values.tolist())}); "
+                         "record that pose again")
     return from_ur_pose(values)
 
 
