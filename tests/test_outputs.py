@@ -125,6 +125,17 @@ def test_a_full_disk_is_found_before_the_solve_and_named_as_such(demo, capsys, s
     assert sorted(path.name for path in small_disk.iterdir()) == ["filler"]  # the probe is gone, no folder made
 
 
+def test_a_disk_that_fills_during_the_write_is_named_with_the_file_and_keeps_nothing_half_written(small_disk, capsys):
+    """Room for the folder's probe (one page) but not for the JSON export (two pages): the write itself fails."""
+    filler = fill_disk(small_disk)
+    os.truncate(filler, filler.stat().st_size - 4096)
+    assert main(["export", str(REPO / "examples" / "report.yaml"), "--format", "json", "-o",
+                 str(small_disk / "report.json")]) == 1
+    assert capsys.readouterr().err == f"fixwizard: the disk holding {small_disk / 'report.json'} is full; free some " \
+                                      "space on it\n"
+    assert sorted(path.name for path in small_disk.iterdir()) == ["filler"]
+
+
 def test_a_read_only_disk_is_named_as_such(demo, capsys, small_disk):
     subprocess.run(["mount", "-o", "remount,ro", str(small_disk)], check=True)
     refused(capsys, solve(demo, "-o", str(small_disk / "report.yaml")), "read-only disk")
