@@ -20,6 +20,7 @@ from fixwizard.tui.cell import Cell, SavedCalibration
 from fixwizard.tui.launch import robot_host, simulated_cell, ur_cell
 from fixwizard.tui.start.screen import NEW, StartScreen
 from fixwizard.tui.start.sessions import start_session
+from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF
 from fixwizard.tui.tip_calibration.auto import AutoTapsScreen
 from fixwizard.tui.tip_calibration.hands import PivotScreen, TablePointsScreen
 from fixwizard.tui.tip_calibration.result import CalibrationResultScreen
@@ -269,6 +270,35 @@ def test_a_protective_stop_during_a_tap_is_explained_and_unlocking_recovers(tmp_
             await rearm(pilot)
             await pilot.press("m")
             await until(pilot, lambda: "A: tapped   B: next" in text_of(app, "#points-state"))
+    asyncio.run(run())
+
+
+def test_a_stop_as_a_table_point_tap_ends_leaves_freedrive_off_until_re_armed(tmp_path):
+    """STOP pressed as the tap of table point A ended (the robot's stop found no motion to halt) let freedrive come
+    back on by itself for B, with the wizard STOPPED; now the arm holds still, the point is kept and the screen says
+    how freedrive comes back (re-arming turns it on)."""
+    async def run():
+        context = wizard(tmp_path)
+        app = FixwizardApp(context)
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            await pivot_by_hand(pilot)
+            robot, tap = context.robot, context.robot.tap
+
+            def stopped_as_it_ends(*args, **kwargs):
+                result = tap(*args, **kwargs)
+                app.call_from_thread(app.action_stop_robot)  # F12 as the tap ends
+                return result
+
+            robot.tap = stopped_as_it_ends
+            await pilot.press("m")
+            await until(pilot, lambda: not app.screen.busy and "STOP was pressed" in text_of(app, "#points-state"))
+            await pilot.pause(0.1)
+            assert app.stopped and robot.status().mode == "idle"
+            assert "A: tapped   B: next" in text_of(app, "#points-state")
+            assert FREEDRIVE_STAYS_OFF in text_of(app, "#points-state")
+            await rearm(pilot)
+            await until(pilot, lambda: robot.status().mode == "freedrive")
     asyncio.run(run())
 
 

@@ -92,11 +92,28 @@ async def check(pilot, screen: CheckScreen) -> str:
     return text_of(screen, "#check-verdict")
 
 
-@pytest.mark.parametrize("fault, freedrive_after", [("no_surface", True), ("protective_stop_during_tap", False)])
+def stop_as_the_tap_ends(app: CheckHost, robot: SimulatedCell) -> None:
+    """Make the next taps end with STOP pressed as they end (the robot's stop finds no motion to halt)."""
+    tap = robot.tap
+
+    def stopped(*args, **kwargs):
+        result = tap(*args, **kwargs)
+        for cancel in app.motion_cancels:
+            cancel.set()
+        robot.stop()
+        return result
+
+    robot.tap = stopped
+
+
+@pytest.mark.parametrize("fault, freedrive_after", [("no_surface", True), ("protective_stop_during_tap", False),
+                                                    ("stop_as_the_tap_ends", False)])
 def test_freedrive_comes_back_after_a_check_tap_only_when_it_ended_as_planned(tmp_path, calibrated, fault,
                                                                              freedrive_after):
     """As on the sampling screen: after a tap that touched nothing freedrive is on again; after a protective stop
-    it stays off (before, it came back on by itself after the error), and the error says how to turn it on."""
+    it stays off (before, it came back on by itself after the error), and the error says how to turn it on. STOP
+    pressed as a tap ended let freedrive come back on by itself: now the tap is kept and the note says freedrive
+    stays off."""
     cell, tip = context_for(tmp_path, calibrated)
 
     async def run():
@@ -105,13 +122,22 @@ def test_freedrive_comes_back_after_a_check_tap_only_when_it_ended_as_planned(tm
             screen = app.screen
             await until(pilot, lambda: screen.fixture is not None and not screen.busy
                         and cell.robot.status().mode == "freedrive")
-            cell.robot.inject_fault(fault)
+            await pilot.press("m")  # above a suggested point: the tap touches
+            await until(pilot, lambda: not screen.busy and cell.robot.status().mode == "freedrive")
+            if fault == "stop_as_the_tap_ends":
+                stop_as_the_tap_ends(app, cell.robot)
+            else:
+                cell.robot.inject_fault(fault)
             await pilot.press("t")
-            await until(pilot, lambda: not screen.busy and app.errors)
+            await until(pilot, lambda: not screen.busy and (app.errors or "STOP was pressed" in
+                                                            text_of(screen, "#check-note")))
+            await pilot.pause(0.1)
             if fault == "protective_stop_during_tap":
                 cell.robot.unlock()
-            assert (cell.robot.status().mode == "freedrive") is freedrive_after
-            assert (FREEDRIVE_STAYS_OFF in error_message(app.errors[0])) is not freedrive_after
+            assert (cell.robot.status().mode == "freedrive") is freedrive_after and not app.motion_cancels
+            said = text_of(screen, "#check-note") if fault == "stop_as_the_tap_ends" else error_message(app.errors[0])
+            assert (FREEDRIVE_STAYS_OFF in said) is not freedrive_after
+            assert len(screen._taps()) == (1 if fault == "stop_as_the_tap_ends" else 0)
 
     asyncio.run(run())
 

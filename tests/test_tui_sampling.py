@@ -265,6 +265,49 @@ async def test_a_stop_between_the_moves_above_a_point_lets_no_further_move_start
         await until(pilot, lambda: cell.status().mode == "freedrive")
 
 
+@pytest.mark.parametrize("motion", ["tap", "move_linear"])
+async def test_a_stop_as_a_tap_or_the_last_move_above_a_point_ends_leaves_freedrive_off(context, motion):
+    """STOP pressed as the tap or the last move above a suggested point ended (the robot's stop found no motion to
+    halt) no longer lets freedrive come back on by itself: the wizard is STOPPED and the arm holds still. The tap is
+    recorded all the same, and the note says freedrive stays off and how to turn it on."""
+    app = ScreenHost(lambda: context.sampling_screen())
+    cell = cell_of(context)
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        await until(pilot, lambda: not screen.busy and cell.status().mode == "freedrive")
+        motion_call, calls = getattr(cell, motion), []
+
+        def stopped_as_it_ends(*args, **kwargs):
+            result = motion_call(*args, **kwargs)
+            calls.append(args)
+            if motion == "tap" or len(calls) == 3:  # STOP pressed as the tap or the third and last move ends
+                for cancel in app.motion_cancels:
+                    cancel.set()
+                cell.stop()
+            return result
+
+        setattr(cell, motion, stopped_as_it_ends)
+        if motion == "tap":
+            await pilot.press("m")
+            await until(pilot, lambda: not screen.busy and cell.status().mode == "freedrive")
+            await pilot.press("t")
+        else:
+            base_p_ball = cell.base_T_tcp()[:3, 3] + cell.base_T_tcp()[:3, :3] @ context.calibration.tcp_p_tip_m
+            point = base_p_ball + [0.03, 0.0, -0.01]
+            advice = TapAdvice(point, point, np.array([0.0, 0.0, 1.0]), 0.002)
+            screen.advice = advice
+            screen.hover_plan = HoverPlan(advice, 0.01, point + [0.0, 0.0, 0.01], point[2] + 0.02)
+            await pilot.press("g")
+            await until(pilot, lambda: isinstance(app.screen, ConfirmMove))
+            await pilot.press("y")
+        await until(pilot, lambda: app.screen is screen and not screen.busy and "STOP was pressed"
+                    in text_of(screen, "#note"))
+        await pilot.pause(0.1)
+        assert cell.status().mode == "idle" and not app.motion_cancels
+        assert FREEDRIVE_STAYS_OFF in text_of(screen, "#note")
+        assert (len(context.session.taps), len(calls)) == ((1, 1) if motion == "tap" else (0, 3))
+
+
 @pytest.mark.parametrize("fault, freedrive_after", [("no_surface", True), ("protective_stop_during_tap", False),
                                                     ("stop", False)])
 async def test_freedrive_comes_back_after_a_tap_only_when_it_ended_as_planned(context, fault, freedrive_after):

@@ -1,8 +1,9 @@
 """A tap as the sampling and check screens make it: freedrive off, tap, record the contact; freedrive on again
-only after a tap that ended as planned (a contact, or none within its travel). After a stop or a fault the arm
-holds still: freedrive stays off until the operator turns it on, and the error says so."""
+only after a tap that ended as planned (a contact, or none within its travel) and with no STOP meanwhile. After a
+stop or a fault the arm holds still: freedrive stays off until the operator turns it on, and the error says so."""
 
 import contextlib
+import threading
 from collections.abc import Callable
 from typing import TypeVar
 
@@ -14,20 +15,26 @@ FREEDRIVE_STAYS_OFF = (f"Freedrive stays off after this: press {keys.name(keys.F
                        "again once the cell is safe (after a STOP, re-arming turns it on).")
 
 
-def freedrive_again(robot: Robot) -> None:
-    """Freedrive on; a robot that refuses leaves it to the next robot call to tell the operator."""
+def freedrive_again(robot: Robot, cancel: threading.Event) -> None:
+    """Freedrive on, unless STOP was pressed meanwhile (``cancel``, which STOP sets: then the arm holds still, even
+    when the motion had ended before the STOP reached the robot); a robot that refuses leaves it to the next robot
+    call to tell the operator."""
+    if cancel.is_set():
+        return
     with contextlib.suppress(RobotError):
         robot.freedrive(True)
 
 
-def tap_and_record(robot: Robot, record: Callable[[TapResult], T], tap_count: Callable[[], int]) -> T:
+def tap_and_record(robot: Robot, record: Callable[[TapResult], T], tap_count: Callable[[], int],
+                   cancel: threading.Event) -> T:
     """Tap and ``record`` the contact; a contact the robot recorded before a fault is recorded too (the error then
-    holds it as ``recorded_tap`` and says it was saved as tap ``tap_count()``). Raises the robot's error."""
+    holds it as ``recorded_tap`` and says it was saved as tap ``tap_count()``). ``cancel``: set by STOP (freedrive
+    then stays off). Raises the robot's error."""
     robot.freedrive(False)
     try:
         result = robot.tap()
     except NoContact:
-        freedrive_again(robot)
+        freedrive_again(robot, cancel)
         raise
     except RobotError as error:
         recorded = getattr(error, "tap_result", None)
@@ -39,4 +46,4 @@ def tap_and_record(robot: Robot, record: Callable[[TapResult], T], tap_count: Ca
     try:
         return record(result)
     finally:
-        freedrive_again(robot)
+        freedrive_again(robot, cancel)

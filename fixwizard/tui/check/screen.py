@@ -27,11 +27,11 @@ from fixwizard.robot.base import TapResult
 from fixwizard.solver.search import SearchCancelled
 from fixwizard.tui import keys
 from fixwizard.tui.cell import Cell, SavedCalibration
-from fixwizard.tui.tapping import tap_and_record
+from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF, tap_and_record
 from fixwizard.tui.widgets.errors import error_message
 from fixwizard.tui.widgets.key_footer import KeyFooter
 from fixwizard.tui.widgets.taps_table import TapsTable
-from fixwizard.tui.workers import ShownError, in_thread
+from fixwizard.tui.workers import ShownError, in_thread, services
 from fixwizard.workflow.cell_reports import scan
 from fixwizard.workflow.live import tap_surface_distances_m
 from fixwizard.workflow.session import SUFFIX, SamplingSession
@@ -178,7 +178,8 @@ class CheckScreen(Screen[None]):
         if self.fixture is None:
             self._say("Choose a fixture whose mesh loads first.")
             return
-        self._run(self._tap_and_record, lambda _: self._tapped())
+        cancel = threading.Event()  # STOP sets it: no freedrive after the tap then
+        self._run(lambda: self._tap_and_record(cancel), lambda _: self._tapped(cancel.is_set()), cancel=cancel)
 
     def action_undo(self) -> None:
         if self.journal is None or not self.journal.taps:
@@ -240,12 +241,17 @@ class CheckScreen(Screen[None]):
     # --- robot work and the journal ---
 
     def _run(self, call: Callable[[], T], on_done: Callable[[T], None],
-             on_failed: Callable[[ShownError], None] | None = None) -> None:
-        """A robot call in a thread with the robot keys disabled meanwhile; errors shown as the app shows them."""
+             on_failed: Callable[[ShownError], None] | None = None, cancel: threading.Event | None = None) -> None:
+        """A robot call in a thread with the robot keys disabled meanwhile; errors shown as the app shows them.
+        ``cancel``: set by STOP while the call runs."""
         self.busy = True
         self.refresh_bindings()
+        if cancel is not None:
+            services(self).cancel_on_stop(cancel)
 
         def finish(callback: Callable, value) -> None:
+            if cancel is not None:
+                services(self).forget_cancel(cancel)
             self.busy = False
             self.refresh_bindings()
             if callback is not None:
@@ -254,8 +260,8 @@ class CheckScreen(Screen[None]):
         in_thread(self, call, lambda value: finish(on_done, value),
                   lambda error: finish(on_failed or (lambda _: self._show_taps()), error), modal=on_failed is None)
 
-    def _tap_and_record(self) -> None:
-        tap_and_record(self.cell.robot, self._record, lambda: len(self._taps()))
+    def _tap_and_record(self, cancel: threading.Event) -> None:
+        tap_and_record(self.cell.robot, self._record, lambda: len(self._taps()), cancel)
 
     def _record(self, result: TapResult) -> None:
         self._journal().record_tap(result.base_T_tcp_contact, force={
@@ -290,9 +296,14 @@ class CheckScreen(Screen[None]):
         except (FixwizardError, OSError):  # the taps are saved; only the verdict is not journaled
             journal.release()
 
-    def _tapped(self) -> None:
+    def _tapped(self, stopped: bool) -> None:
+        """``stopped``: STOP was pressed as the tap ended (freedrive stayed off)."""
         self.result = None
-        self._say(f"Tap {len(self._taps())} recorded and saved. Tap the next point, or press c to check.")
+        if stopped:
+            self._say(f"Tap {len(self._taps())} recorded and saved; STOP was pressed as it ended. "
+                      f"{FREEDRIVE_STAYS_OFF}")
+        else:
+            self._say(f"Tap {len(self._taps())} recorded and saved. Tap the next point, or press c to check.")
         self._show_taps()
         self._show_verdict()
 

@@ -161,8 +161,9 @@ class SamplingScreen(Screen[bool]):
         return True
 
     def action_tap(self) -> None:
-        self._run_robot(self._tap_and_record, self._tap_recorded,
-                        doing="Tapping: the robot moves the ball along the tool axis until it touches")
+        cancel = threading.Event()  # STOP sets it: no freedrive after the tap then
+        self._run_robot(lambda: self._tap_and_record(cancel), lambda tap: self._tap_recorded(tap, cancel.is_set()),
+                        doing="Tapping: the robot moves the ball along the tool axis until it touches", cancel=cancel)
 
     def action_undo(self) -> None:
         try:
@@ -214,19 +215,17 @@ class SamplingScreen(Screen[bool]):
                 services(self).refuse_motion()
             elif move:
                 cancel = threading.Event()  # STOP sets it: no move of the three starts after a STOP
-                services(self).cancel_on_stop(cancel)
 
                 def hovering(_: None) -> None:
-                    services(self).forget_cancel(cancel)
-                    self._say("The ball hovers above the suggested point (freedrive is on again): press "
-                              f"{keys.name(keys.TAP)} to tap it.")
+                    if cancel.is_set():
+                        self._say(f"The ball hovers above the suggested point; STOP was pressed as it got there. "
+                                  f"{FREEDRIVE_STAYS_OFF}")
+                    else:
+                        self._say("The ball hovers above the suggested point (freedrive is on again): press "
+                                  f"{keys.name(keys.TAP)} to tap it.")
 
-                def failed(error: ShownError) -> None:
-                    services(self).forget_cancel(cancel)
-                    self._robot_failed(error)
-
-                self._run_robot(lambda: self._move_above(plan, cancel), hovering, failed,
-                                doing="Moving above the suggested point")
+                self._run_robot(lambda: self._move_above(plan, cancel), hovering,
+                                doing="Moving above the suggested point", cancel=cancel)
 
         self.app.push_screen(ConfirmMove("Move the robot?", hover_question(plan, self.cell.simulated)), answered)
 
@@ -286,28 +285,34 @@ class SamplingScreen(Screen[bool]):
     # --- robot work in a thread ---
 
     def _run_robot(self, call: Callable[[], T], on_done: Callable[[T], object],
-                   on_failed: Callable[[ShownError], object] | None = None, doing: str | None = None) -> None:
+                   on_failed: Callable[[ShownError], object] | None = None, doing: str | None = None,
+                   cancel: threading.Event | None = None) -> None:
         """Run a robot call in a thread worker with the robot keys disabled; errors are shown on this screen
         unless ``on_failed`` takes them. ``doing``: what it does, said at once on the note line with the seconds
-        it takes."""
+        it takes; ``cancel``: set by STOP while the call runs."""
         self.busy = True
         self.refresh_bindings()
         if doing is not None and self._doing is not None:
             self._clear_problem()
             self._doing.start(doing)
-        self._robot_call(call, on_done, on_failed or self._robot_failed)
+        if cancel is not None:
+            services(self).cancel_on_stop(cancel)
+        self._robot_call(call, on_done, on_failed or self._robot_failed, cancel)
 
     @work(thread=True, group="robot")
     def _robot_call(self, call: Callable[[], T], on_done: Callable[[T], object],
-                    on_failed: Callable[[ShownError], object]) -> None:
+                    on_failed: Callable[[ShownError], object], cancel: threading.Event | None) -> None:
         try:
             result = call()
         except (FixwizardError, OSError) as error:
-            self.app.call_from_thread(self._robot_finished, on_failed, error)
+            self.app.call_from_thread(self._robot_finished, on_failed, error, cancel)
         else:
-            self.app.call_from_thread(self._robot_finished, on_done, result)
+            self.app.call_from_thread(self._robot_finished, on_done, result, cancel)
 
-    def _robot_finished(self, callback: Callable[[Any], object], result: object) -> None:
+    def _robot_finished(self, callback: Callable[[Any], object], result: object,
+                        cancel: threading.Event | None) -> None:
+        if cancel is not None:
+            services(self).forget_cancel(cancel)
         self.busy = False
         if self._doing is not None:
             self._doing.done()
@@ -315,8 +320,8 @@ class SamplingScreen(Screen[bool]):
             self.refresh_bindings()
             callback(result)
 
-    def _tap_and_record(self) -> Tap:
-        return tap_and_record(self.cell.robot, self._record, lambda: len(self.session.taps))
+    def _tap_and_record(self, cancel: threading.Event) -> Tap:
+        return tap_and_record(self.cell.robot, self._record, lambda: len(self.session.taps), cancel)
 
     def _record(self, result: TapResult) -> Tap:
         return self.session.record_tap(
@@ -336,12 +341,16 @@ class SamplingScreen(Screen[bool]):
         except RobotError as error:
             error.add_note(FREEDRIVE_STAYS_OFF)
             raise
-        freedrive_again(robot)
+        freedrive_again(robot, cancel)
 
-    def _tap_recorded(self, tap: Tap) -> None:
+    def _tap_recorded(self, tap: Tap, stopped: bool) -> None:
+        """``stopped``: STOP was pressed as the tap ended (freedrive stayed off)."""
         self._stopped = False
         count = len(self.session.taps)
-        self._say(f"Tap {count} recorded and saved. Move to the next point and press {keys.name(keys.TAP)}.")
+        if stopped:
+            self._say(f"Tap {count} recorded and saved; STOP was pressed as it ended. {FREEDRIVE_STAYS_OFF}")
+        else:
+            self._say(f"Tap {count} recorded and saved. Move to the next point and press {keys.name(keys.TAP)}.")
         self._taps_changed()
 
     def _robot_failed(self, error: ShownError) -> None:

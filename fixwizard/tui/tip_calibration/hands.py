@@ -2,6 +2,8 @@
 and the three table points A, B, C. On a simulated cell a SIMULATED key lets the simulated hands do the
 moving; on a real robot the text says what to do with the arm."""
 
+import threading
+
 from textual.app import ComposeResult
 from textual.widgets import Static
 
@@ -10,6 +12,7 @@ from fixwizard.calibration.pivot import MIN_POSES
 from fixwizard.calibration.table import MIN_EDGE_M
 from fixwizard.errors import sentence
 from fixwizard.tui import keys
+from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF
 from fixwizard.tui.tip_calibration.step import CalibrationStepScreen
 from fixwizard.tui.workers import ShownError
 from fixwizard.workflow.robot_calibration import TABLE_POINTS
@@ -146,18 +149,22 @@ class TablePointsScreen(CalibrationStepScreen):
         self.run_robot(lambda: self.cell.robot.freedrive(True), lambda _: None)
 
     def action_tap(self) -> None:
-        self.run_robot(self._tap, lambda _: self._show_points(), self._tap_failed,
-                       doing=f"Tapping {TABLE_POINTS[self._tapped()]}: the robot moves the ball down until it touches")
+        cancel = threading.Event()  # STOP sets it: no freedrive after the tap then
+        self.run_robot(lambda: self._tap(cancel), lambda _: self._tap_ended(cancel), self._tap_failed,
+                       doing=f"Tapping {TABLE_POINTS[self._tapped()]}: the robot moves the ball down until it touches",
+                       cancel=cancel)
 
     def action_simulated_hands(self) -> None:
         hands, label = self.cell.simulated_hands(), TABLE_POINTS[self._tapped()]
+        cancel = threading.Event()
 
         def place_and_tap() -> None:
             hands.table_point(label)
-            self._tap()
+            self._tap(cancel)
 
-        self.run_robot(place_and_tap, lambda _: self._show_points(), self._tap_failed,
-                       doing=f"SIMULATED: the hands bring the ball above {label}; then the robot taps it")
+        self.run_robot(place_and_tap, lambda _: self._tap_ended(cancel), self._tap_failed,
+                       doing=f"SIMULATED: the hands bring the ball above {label}; then the robot taps it",
+                       cancel=cancel)
 
     def action_next(self) -> None:
         if self._tapped() == len(TABLE_POINTS):
@@ -173,12 +180,17 @@ class TablePointsScreen(CalibrationStepScreen):
             self.notify(f"Not yet: tap {TABLE_POINTS[self._tapped()]} first ({keys.name(keys.TAP)}).",
                         severity="warning")
 
-    def _tap(self) -> None:
-        """Freedrive off, tap, and freedrive on again while points are left (worker thread)."""
+    def _tap(self, cancel: threading.Event) -> None:
+        """Freedrive off, tap, and freedrive on again while points are left and no STOP came (``cancel``; worker
+        thread)."""
         self.cell.robot.freedrive(False)
         self.workflow.tap_table_point()
-        if self._tapped() < len(TABLE_POINTS):
+        if self._tapped() < len(TABLE_POINTS) and not cancel.is_set():
             self.cell.robot.freedrive(True)
+
+    def _tap_ended(self, cancel: threading.Event) -> None:
+        stopped = cancel.is_set() and self._tapped() < len(TABLE_POINTS)
+        self._show_points(f"STOP was pressed as the tap ended. {FREEDRIVE_STAYS_OFF}" if stopped else "")
 
     def _tap_failed(self, error: ShownError) -> None:
         self._show_points("Freedrive is off after the failed tap: when the cell is safe, press F and place the "

@@ -2,6 +2,7 @@
 worker with the step's keys disabled meanwhile, and dismissing with "next", "back" or "redo" (the last step with
 the saved calibration instead of "next")"""
 
+import threading
 from collections.abc import Callable
 from typing import Literal, TypeVar
 
@@ -14,7 +15,7 @@ from fixwizard.tui import keys
 from fixwizard.tui.cell import Cell, SavedCalibration
 from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.doing import Doing
-from fixwizard.tui.workers import ShownError, in_thread
+from fixwizard.tui.workers import ShownError, in_thread, services
 from fixwizard.workflow.robot_calibration import RobotTipCalibration
 
 StepOutcome = Literal["next", "back", "redo"] | SavedCalibration
@@ -52,10 +53,14 @@ class CalibrationStepScreen(Screen[StepOutcome]):
         return None if self.busy else True
 
     def run_robot(self, call: Callable[[], T], on_done: Callable[[T], None],
-                  on_failed: Callable[[ShownError], None] | None = None, doing: str | None = None) -> None:
+                  on_failed: Callable[[ShownError], None] | None = None, doing: str | None = None,
+                  cancel: threading.Event | None = None) -> None:
         """Run a robot call in a worker with this step's keys disabled until it finishes; ``doing``: what it does,
-        said at once (with the seconds it takes) on the step's doing line, which is cleared afterwards."""
+        said at once (with the seconds it takes) on the step's doing line, which is cleared afterwards; ``cancel``:
+        set by STOP while the call runs."""
         self._set_busy(True)
+        if cancel is not None:
+            services(self).cancel_on_stop(cancel)
         line = self.query_one("#doing", Static)
         shown = None
         if doing is not None:
@@ -63,6 +68,8 @@ class CalibrationStepScreen(Screen[StepOutcome]):
             shown.start(doing)
 
         def finished() -> None:
+            if cancel is not None:
+                services(self).forget_cancel(cancel)
             self._set_busy(False)
             if shown is not None:
                 shown.done()
