@@ -119,7 +119,7 @@ class FixtureService:
                               f"{file_problem(error, self.folder)}") from None
             if state != self._state:
                 first = self._state is None
-                self._reports, self._state = scan(self.folder), state
+                self._reports, self._state = scan(self.folder, self._reports), state
                 names = ", ".join(self._reports.names) or "none"
                 LOG.info("%s reports in %s: %s", "read" if first else "reloaded", self.folder, names)
                 for unreadable in self._reports.unreadable:

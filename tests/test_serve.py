@@ -250,6 +250,22 @@ def test_a_new_report_is_served_from_the_next_call_on(running, cell):
     assert "gripper-2" in fw.list_fixtures() and fw.is_usable("gripper-2")
 
 
+def test_a_new_report_is_the_only_one_read_again_and_a_report_replaced_is_read_again(running, cell, monkeypatch):
+    """Parsing a report takes about 20 ms: a cell's folder of hundreds of reports was read whole for each new one,
+    holding every call up for seconds."""
+    fw = running.client()
+    assert fw.is_usable("bracket")
+    read, load = [], report.load
+    monkeypatch.setattr(report, "load", lambda path: read.append(Path(path).name) or load(path))
+    write_report(cell, "bracket-2.yaml", "bracket")
+    assert fw.get_status("bracket")["report"].endswith("bracket-2.yaml")
+    assert sorted(read) == ["bracket-2.yaml", "notes.yaml"]  # the new one, and the one that cannot be read
+    data = yaml.safe_load((cell / "bracket-2.yaml").read_text())
+    data["pose"]["position_m"] = [0.5, -0.1, 0.02]
+    report.write(cell / "bracket-2.yaml", data)  # replaced in place (a new file renamed over it)
+    assert fw.get_pose("bracket")["x"] == 0.5 and read.count("bracket-2.yaml") == 2
+
+
 def test_each_call_is_logged_and_unreadable_reports_are_named(cell, caplog):
     with caplog.at_level(logging.INFO, logger="fixwizard.serve"):
         served = Running(cell)

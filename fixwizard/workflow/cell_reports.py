@@ -7,7 +7,6 @@ recalibration that failed is not hidden behind an older good one. Files that can
 ``fixwizard serve`` and the wizard's "Check a calibrated fixture" use it.
 """
 
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,10 +26,12 @@ class Unreadable:
 
 @dataclass(frozen=True)
 class CellReports:
-    """The newest report of each fixture name (sorted by name) and the files that could not be read."""
+    """The newest report of each fixture name (sorted by name) and the files that could not be read; ``read``:
+    what every file read gave, by its path, with its ``signature`` then (a later scan reads only what changed)."""
 
     newest: dict[str, report.Report] = field(default_factory=dict)
     unreadable: tuple[Unreadable, ...] = ()
+    read: dict[Path, tuple[tuple, report.Report | Unreadable]] = field(default_factory=dict)
 
     @property
     def names(self) -> list[str]:
@@ -45,30 +46,45 @@ def report_files(folder: Path) -> list[Path]:
                   if path.suffix.lower() in SUFFIXES and not path.name.startswith(".") and path.is_file())
 
 
+def signature(path: Path) -> tuple:
+    """What changes when a file is written, replaced or removed: its size, mtime and inode (OSError when gone)."""
+    status = path.stat()
+    return (status.st_size, status.st_mtime_ns, status.st_ino)
+
+
 def folder_state(folder: Path) -> tuple:
-    """What changes when a report is written, replaced or removed: each file's name, size, mtime and inode."""
+    """What changes when a report is written, replaced or removed: each file's name and ``signature``."""
     state = []
     for path in report_files(folder):
         try:
-            status = path.stat()
+            state.append((path.name, *signature(path)))
         except OSError:
             continue
-        state.append((path.name, status.st_size, status.st_mtime_ns, status.st_ino))
     return tuple(state)
 
 
-def scan(folder: str | Path) -> CellReports:
-    """Read every report of ``folder`` and keep the newest of each fixture name."""
+def _read(path: Path, known: CellReports | None) -> tuple[tuple, report.Report | Unreadable]:
+    """The report in ``path`` (or why it cannot be read) with its signature; what ``known`` read of it when the file
+    has not changed since (a folder of hundreds of reports is not parsed again for each new one)."""
+    try:
+        before = signature(path)
+        if known is not None and path in known.read and known.read[path][0] == before:
+            return known.read[path]
+        return before, report.load(path)
+    except (InputError, OSError) as error:
+        return (), Unreadable(path, str(error))
+
+
+def scan(folder: str | Path, known: CellReports | None = None) -> CellReports:
+    """Read every report of ``folder`` (those unchanged since ``known`` was scanned are taken from it) and keep the
+    newest of each fixture name."""
     found: dict[str, tuple[tuple, report.Report]] = {}
-    unreadable = []
-    for path in report_files(Path(folder)):
-        try:
-            loaded = report.load(path)
-            changed_ns = os.stat(path).st_mtime_ns
-        except (InputError, OSError) as error:
-            unreadable.append(Unreadable(path, str(error)))
+    read = {path: _read(path, known) for path in report_files(Path(folder))}
+    for path, (file_signature, loaded) in read.items():
+        if isinstance(loaded, Unreadable):
             continue
-        key = (loaded.created, changed_ns, path.name)
+        key = (loaded.created, file_signature[1], path.name)
         if loaded.name not in found or key > found[loaded.name][0]:
             found[loaded.name] = (key, loaded)
-    return CellReports({name: found[name][1] for name in sorted(found)}, tuple(unreadable))
+    unreadable = tuple(loaded for _, loaded in read.values() if isinstance(loaded, Unreadable))
+    return CellReports({name: found[name][1] for name in sorted(found)}, unreadable, read)
