@@ -13,6 +13,7 @@ from fixwizard import report
 from fixwizard.geometry.se3 import format_ur_pose
 from fixwizard.solver.solve import Solution, solve
 from fixwizard.tui.results.screen import Done
+from fixwizard.tui.widgets.confirm import Confirm
 from pilot_wait import until
 from tui_cell import (
     PausedSolver,
@@ -155,6 +156,44 @@ async def test_the_report_path_can_be_edited_and_a_bad_one_is_explained(tapped, 
         assert report.load(tmp_path / "elsewhere" / "pose.yaml").status == tapped.solution.status
         await pilot.press("q")
         assert app.results == [Done(results.written)]
+
+
+@pytest.mark.slow
+async def test_a_report_path_naming_a_file_asks_before_replacing_it(tapped, tmp_path):
+    """A file already at the typed path was replaced without a word (another fixture's report, say); now the
+    screen asks first, and keeping the file says what to do next. The report it wrote itself is written again
+    without asking."""
+    tapped.with_cell(max_cells=1e5)  # a coarse result is enough to write
+    solved(tapped)
+    other = tmp_path / "other-fixture.yaml"
+    other.write_text("another fixture's report")
+    app = ScreenHost(lambda: tapped.results_screen())
+    async with app.run_test(size=SIZE) as pilot:
+        results = app.screen
+        path_input = results.query_one("#report-path", Input)
+
+        async def write_to(typed: str) -> None:
+            await pilot.press("e")
+            await until(pilot, lambda: path_input.has_focus)
+            path_input.value = typed
+            await pilot.press("enter")
+
+        await write_to(str(other))
+        await until(pilot, lambda: isinstance(app.screen, Confirm))
+        await pilot.press("n")
+        await until(pilot, lambda: app.screen is results)
+        assert other.read_text() == "another fixture's report" and results.written is None
+        assert f"{other} is kept. Type another path (e), then press w" in text_of(results, "#written")
+        assert results.query_one("#written").has_class("-problem")
+        await write_to(str(tmp_path / "pose.yaml"))
+        assert results.written == tmp_path / "pose.yaml"
+        await pilot.press("w")
+        assert app.screen is results and text_of(results, "#written").startswith("Report written to")
+        await write_to(str(other))
+        await until(pilot, lambda: isinstance(app.screen, Confirm))
+        await pilot.press("y")
+        await until(pilot, lambda: app.screen is results and results.written == other)
+        assert report.load(other).status == tapped.solution.status
 
 
 @pytest.mark.slow

@@ -5,6 +5,7 @@ Dismisses with "resample"
 written, if any)."""
 
 import datetime as dt
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,6 +16,7 @@ from textual.containers import Horizontal, VerticalScroll
 from textual.screen import Screen
 from textual.widgets import Input, Label, Static, TabbedContent, TabPane, Tabs
 
+from fixwizard.atomic import output_target
 from fixwizard.errors import FixwizardError
 from fixwizard.plots import rotation_map_for_solution, taps_view_for_solution
 from fixwizard.solver.solve import Solution
@@ -27,6 +29,7 @@ from fixwizard.tui.results.text import (
     suspect_lines,
     warning_lines,
 )
+from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.errors import error_message
 from fixwizard.tui.widgets.key_footer import KeyFooter
 from fixwizard.tui.widgets.picture_view import PictureView
@@ -152,11 +155,32 @@ class ResultsScreen(Screen[Outcome]):
         self.action_leave_path()
 
     def action_write(self) -> None:
-        sampling = self.sampling
-        target = self.query_one("#report-path", Input).value.strip()
-        if not target:
+        """Write the report to the path typed; asks before replacing a file this screen did not write (another
+        fixture's report, say)."""
+        typed = self.query_one("#report-path", Input).value.strip()
+        if not typed:
             self._say("Type where the report should go (e), then press w.", problem=True)
             return
+        try:
+            target = output_target(typed)
+        except (FixwizardError, OSError) as error:
+            self._say(f"The report was not written: {error_message(error)}", problem=True)
+            return
+        if target != self.written and os.path.isfile(target):
+            def answered(replace: bool | None) -> None:
+                if replace:
+                    self._write(target)
+                else:
+                    self._say(f"The report was not written; {target} is kept. Type another path "
+                              f"({keys.name(keys.EDIT_PATH)}), then press {keys.name(keys.WRITE)}.", problem=True)
+
+            self.app.push_screen(Confirm("Replace the file?", f"{target} already exists. Replace it with this "
+                                         "report? What it holds now is lost.", "Replace", "Keep it"), answered)
+            return
+        self._write(target)
+
+    def _write(self, target: Path) -> None:
+        sampling = self.sampling
         try:
             self.written = write_session_report(target, self.solution, sampling.fixture, sampling.session,
                                                 sampling.calibration, self.cell.simulated)
