@@ -262,7 +262,7 @@ def test_a_protective_stop_during_a_tap_is_explained_and_unlocking_recovers(tmp_
             await press_button(pilot, "#unlock")
             await until(pilot, lambda: isinstance(app.screen, TablePointsScreen)
                         and not app.robot_status.protective_stop)
-            assert "press F and place the ball again" in text_of(app, "#points-state")
+            assert "press f and place the ball again" in text_of(app, "#points-state")
             assert app.stopped  # unlocked on the pendant, but the wizard waits for a deliberate re-arm
             await pilot.press("m")
             await pilot.pause()

@@ -9,7 +9,9 @@ import dataclasses
 import importlib
 import inspect
 import pkgutil
+import re
 import sys
+from pathlib import Path
 
 import pytest
 from textual.containers import Vertical, VerticalScroll
@@ -69,6 +71,18 @@ def test_no_key_means_two_things():
         assert len(names) == len(set(names)), sorted(name for name in names if names.count(name) > 1)
         actions = [key.action for key in scope]
         assert len(actions) == len(set(actions))
+
+
+def test_messages_name_letter_keys_as_the_key_map_writes_them():
+    """The table points said "press T", "press N" and "press F" for t, n and f: a tired operator's Shift+T does
+    nothing. Messages take a key's name from the key map (``keys.name``), lower case for the letter keys."""
+    letter_keys = {name for key in (*keys.GLOBAL_KEYS, *keys.SCREEN_KEYS, *keys.DIALOG_KEYS)
+                   for name in key_names(key) if len(name) == 1 and name.isalpha()}
+    assert letter_keys and all(name.islower() for name in letter_keys)
+    package = Path(fixwizard.tui.__file__).parent
+    upper = [f"{path.relative_to(package)}: {match.group(0)!r}" for path in sorted(package.rglob("*.py"))
+             for match in re.finditer(r"\b[Pp]ress [A-Z]\b", path.read_text())]
+    assert not upper, upper
 
 
 def test_the_simulated_hands_are_on_one_key_on_every_screen_that_has_them():

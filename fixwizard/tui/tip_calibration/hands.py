@@ -23,7 +23,7 @@ PIVOT_TEXT = (
     "(forwards, sideways, backwards) and press Space after each pose. 5 to 8 poses are good.")
 TABLE_POINTS_TEXT = (
     "Choose a flat, clear corner of the table. For each point, bring the ball 5-10 mm above it in freedrive with "
-    "the tool pointing down, then press T: freedrive turns off, the robot taps straight down along the tool axis "
+    "the tool pointing down, then press {tap}: freedrive turns off, the robot taps straight down along the tool axis "
     "and freedrive turns on again. Tap A, then the corner B, then C, A and C at least {reach_mm:.0f} mm from B "
     "(the automatic taps use the square between them).")
 TABLE_POINTS_PICTURE = (
@@ -102,7 +102,7 @@ class PivotScreen(CalibrationStepScreen):
             lines.append(f"The ball centre stays within {fit.stats.max_m * 1e3:.2f} mm of one point over these poses "
                          f"(typically {fit.stats.rms_m * 1e3:.2f} mm); the tool turned by at least "
                          f"{fit.tilt_spread_deg[-1]:.0f} degrees.")
-            lines.append("Capture more poses to check it, or press N for the table points.")
+            lines.append(f"Capture more poses to check it, or press {keys.name(keys.NEXT)} for the table points.")
         self.query_one("#pivot-state", Static).update("\n".join(lines))
         self.refresh_bindings()
 
@@ -124,7 +124,7 @@ class TablePointsScreen(CalibrationStepScreen):
     def body(self) -> ComposeResult:
         rows, cols = self.workflow.table_grid
         reach_mm = max(rows, cols) * self.workflow.table_spacing_m * 1e3
-        yield Static(TABLE_POINTS_TEXT.format(reach_mm=reach_mm))
+        yield Static(TABLE_POINTS_TEXT.format(reach_mm=reach_mm, tap=keys.name(keys.TAP)))
         yield Static(TABLE_POINTS_PICTURE, markup=False)
         if self.cell.hands is not None:
             yield Static(f"SIMULATED: press {keys.name(keys.HANDS)} and the simulated hands bring the ball above "
@@ -193,8 +193,8 @@ class TablePointsScreen(CalibrationStepScreen):
         self._show_points(f"STOP was pressed as the tap ended. {FREEDRIVE_STAYS_OFF}" if stopped else "")
 
     def _tap_failed(self, error: ShownError) -> None:
-        self._show_points("Freedrive is off after the failed tap: when the cell is safe, press F and place the "
-                          "ball again.")
+        self._show_points(f"Freedrive is off after the failed tap: when the cell is safe, press "
+                          f"{keys.name(keys.FREEDRIVE)} and place the ball again.")
 
     def _show_points(self, note: str = "") -> None:
         tapped = self._tapped()
@@ -202,7 +202,7 @@ class TablePointsScreen(CalibrationStepScreen):
                  for index in range(len(TABLE_POINTS))]
         lines = ["   ".join(f"{label}: {mark}" for label, mark in zip(TABLE_POINTS, marks, strict=True))]
         if tapped == len(TABLE_POINTS):
-            lines.append("All three points are tapped: press N for the automatic taps.")
+            lines.append(f"All three points are tapped: press {keys.name(keys.NEXT)} for the automatic taps.")
         if note:
             lines.append(note)
         self.query_one("#points-state", Static).update("\n".join(lines))
