@@ -27,6 +27,7 @@ and the log on stderr go on (``LogFile``).
 
 import argparse
 import contextlib
+import inspect
 import logging
 import math
 import os
@@ -58,6 +59,7 @@ NO_SUCH_FIXTURE, NOT_UNIQUE, SIMULATED, TOO_OLD, FROM_THE_FUTURE, BAD_CALL, NO_R
 # A log line starts with its time (``LogFormatter``): 2026-12-06 05:59:00,123
 _LOG_LINE = re.compile(rb"\d{4}-\d{2}-\d{2} \d{2}:\d{2}:\d{2},\d{3} ")
 _CONTROL = re.compile(r"[\x00-\x1f\x7f]")  # written escaped in a log line
+_NOT_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")  # characters XML 1.0 cannot carry
 _DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*(s|min|h|d)?\s*$")
 _SECONDS = {"s": 1.0, "min": 60.0, "h": 3600.0, "d": 86400.0}
 
@@ -271,19 +273,22 @@ class FixtureServer(socketserver.ThreadingMixIn, SimpleXMLRPCServer):
 def _logged(service: FixtureService, function: str) -> Callable[..., Any]:
     """``function`` of the service with each call logged and every error a plain fault."""
     method = getattr(service, function)
+    signature = inspect.signature(method)
 
     def call(*args: object) -> Any:
         caller = getattr(_CALLER, "address", "?")
         shown = f"{function}({', '.join(quoted(arg) for arg in args)})"
         try:
-            result = method(*args)
-        except xmlrpc.client.Fault as fault:
-            LOG.info("%s %s -> refused (%d): %s", caller, shown, fault.faultCode, fault.faultString)
-            raise
+            signature.bind(*args)
         except TypeError:
             needs = "no arguments" if function == "list_fixtures" else "the fixture's name, e.g. \"bracket\""
             LOG.info("%s %s -> refused: wrong arguments", caller, shown)
             raise xmlrpc.client.Fault(BAD_CALL, f"fixwizard: {function} takes {needs}") from None
+        try:
+            result = _xml_safe(method(*args))
+        except xmlrpc.client.Fault as fault:
+            LOG.info("%s %s -> refused (%d): %s", caller, shown, fault.faultCode, fault.faultString)
+            raise xmlrpc.client.Fault(fault.faultCode, _xml_safe(fault.faultString)) from None
         except Exception as error:  # a bug: the caller gets a fault, the log the traceback
             LOG.exception("%s %s -> internal error", caller, shown)
             raise xmlrpc.client.Fault(INTERNAL, f"fixwizard: internal error in {function} ({type(error).__name__}); "
@@ -292,6 +297,19 @@ def _logged(service: FixtureService, function: str) -> Callable[..., Any]:
         return result
 
     return call
+
+
+def _xml_safe(value: Any) -> Any:
+    """``value`` (text, numbers, lists and structs of them) with every character XML 1.0 cannot carry made U+FFFD: a
+    control character, or a byte of a file name that is not UTF-8 (Python keeps it as a lone surrogate), which made
+    the whole answer one the caller cannot read."""
+    if isinstance(value, str):
+        return _NOT_XML.sub("\ufffd", value)
+    if isinstance(value, list):
+        return [_xml_safe(item) for item in value]
+    if isinstance(value, dict):
+        return {key: _xml_safe(item) for key, item in value.items()}
+    return value
 
 
 def make_server(service: FixtureService, host: str, port: int) -> FixtureServer:

@@ -173,6 +173,19 @@ def post(port: int, body: bytes) -> xmlrpc.client.Fault:
     return fault_of(lambda: xmlrpc.client.loads(answer.split(b"\r\n\r\n", 1)[1]))
 
 
+def test_a_report_file_name_that_is_not_utf8_or_holds_a_control_character_gives_answers_a_program_reads(running,
+                                                                                                         cell):
+    """A report copied from a share as Latin-1 (grün in one byte), and one named with a control character: their
+    names in an answer made the whole answer unreadable (the client's parser refused it), faults included."""
+    cell.joinpath("bracket-1.yaml").rename(cell / os.fsdecode(b"bracket-gr\xfcn.yaml"))
+    cell.joinpath("jig.yaml").rename(cell / "jig\x01.yaml")
+    fw = running.client()
+    assert fw.get_status("bracket")["report"].endswith("bracket-gr\ufffdn.yaml")
+    assert "(bracket-gr\ufffdn.yaml) is unique" in fw.get_status_text("bracket") and fw.get_pose("bracket")["x"]
+    fault = fault_of(lambda: fw.get_pose("jig"))
+    assert fault.faultCode == 2 and "(jig\ufffd.yaml) is ambiguous" in fault.faultString
+
+
 def test_a_name_that_is_no_text_is_quoted_in_part_never_whole(running):
     """A list of 400 kB, and lists nested 5000 deep (their whole repr would raise RecursionError): a short fault."""
     nested = (b"<?xml version='1.0'?><methodCall><methodName>get_pose</methodName><params><param>"
