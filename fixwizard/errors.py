@@ -1,9 +1,11 @@
 """Typed errors a person can cause; each message says what happened and what to do next."""
 
 import errno
+import re
 import reprlib
 
 QUOTE_LIMIT = 200  # characters of a person's input quoted in a message, at most
+_NOT_ONE_LINE = re.compile("[\x00-\x1f\x7f\ud800-\udfff]")  # control characters, and bytes that are not UTF-8
 
 _QUOTER = reprlib.Repr()
 _QUOTER.maxlevel, _QUOTER.maxlist, _QUOTER.maxdict, _QUOTER.maxstring, _QUOTER.maxother = 3, 6, 6, 80, 80
@@ -35,6 +37,13 @@ def quoted(value: object) -> str:
     message never grows with the input (an alias-expanding YAML stays a few hundred characters)."""
     text = _QUOTER.repr(value)
     return text if len(text) <= QUOTE_LIMIT else text[:QUOTE_LIMIT - 3] + "..."
+
+
+def one_line(text: str) -> str:
+    """``text`` as one line any UTF-8 file takes: control characters (line breaks too) written escaped (``\\n``),
+    so that it never starts a line of its own (a log line, a comment of a robot program), and the bytes of a file
+    name that are not UTF-8 (which Python keeps as lone surrogates, and no UTF-8 file can hold) as U+FFFD."""
+    return _NOT_ONE_LINE.sub(lambda match: "\ufffd" if match.group() >= "\ud800" else repr(match.group())[1:-1], text)
 
 
 def file_problem(error: OSError, path: object = None) -> str:

@@ -27,7 +27,7 @@ from scipy.spatial.transform import Rotation
 from fixwizard import report
 from fixwizard.atomic import check_output, write_text_atomic
 from fixwizard.cli import ROS_BASE_FRAME_ID as BASE_FRAME_ID
-from fixwizard.errors import InputError
+from fixwizard.errors import InputError, one_line
 from fixwizard.robot.ur_script import pose_literal
 
 
@@ -78,7 +78,7 @@ def _comment_lines(loaded: report.Report, guarantee: report.Guarantee, prefix: s
               "one")]
     if loaded.simulated:
         lines.insert(0, "SIMULATED: from the simulated cell, not a real fixture's pose; for tests only")
-    return [f"{prefix} {line}" for line in lines]
+    return [f"{prefix} {one_line(line)}" for line in lines]  # a path's line break would start a line of code
 
 
 def _ur_values(loaded: report.Report) -> list[float]:

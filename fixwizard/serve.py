@@ -45,7 +45,7 @@ from xmlrpc.server import SimpleXMLRPCRequestHandler, SimpleXMLRPCServer
 
 from fixwizard import report
 from fixwizard.atomic import same_file
-from fixwizard.errors import InputError, file_problem, quoted
+from fixwizard.errors import InputError, file_problem, one_line, quoted
 from fixwizard.workflow.cell_reports import SUFFIXES, CellReports, folder_state, report_files, scan
 from fixwizard.workflow.verify import age_text
 
@@ -58,7 +58,6 @@ NO_SUCH_FIXTURE, NOT_UNIQUE, SIMULATED, TOO_OLD, FROM_THE_FUTURE, BAD_CALL, NO_R
     1, 2, 3, 4, 5, 6, 7, 9)
 # A log line starts with its time (``LogFormatter``): 2026-12-06 05:59:00,123
 _LOG_LINE = re.compile(rb"\d{4}-\d{2}-\d{2} \d{2}:\d{2}:\d{2},\d{3} ")
-_CONTROL = re.compile(r"[\x00-\x1f\x7f]")  # written escaped in a log line
 _NOT_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")  # characters XML 1.0 cannot carry
 _DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*(s|min|h|d)?\s*$")
 _SECONDS = {"s": 1.0, "min": 60.0, "h": 3600.0, "d": 86400.0}
@@ -391,11 +390,12 @@ class LogFile(logging.FileHandler):
 
 
 class LogFormatter(logging.Formatter):
-    """One line per message: line breaks and other control characters in it (from a caller's text, or a report's
-    file name) are written escaped, so no caller can forge a log line; a traceback follows on lines of its own."""
+    """One line per message (``one_line``): line breaks and other control characters in it (from a caller's text, or
+    a report's file name) are written escaped, so no caller can forge a log line, and a file name's bytes that are
+    not UTF-8 do not cost the line; a traceback follows on lines of its own."""
 
     def formatMessage(self, record: logging.LogRecord) -> str:
-        return _CONTROL.sub(lambda match: repr(match.group())[1:-1], super().formatMessage(record))
+        return one_line(super().formatMessage(record))
 
 
 def _log_handlers(log: str | None) -> list[logging.Handler]:

@@ -4,6 +4,7 @@ way its user reads it; reports a robot must not use are refused."""
 import argparse
 import datetime as dt
 import json
+import os
 import re
 from pathlib import Path
 
@@ -78,6 +79,23 @@ def test_urscript_writes_small_numbers_without_exponents_every_digit_kept(real_r
     text = exported(capsys, small, "--format", "urscript")
     assert "fixture_cell2_bracket = p[0.45, -0.00002, 0.0000001, 0.00005, -0.000003, 0.560606]" in text  # was 2e-05
     assert parse_urscript(text)["fixture_cell2_bracket"] == [0.45, -0.00002, 0.0000001, 0.00005, -0.000003, 0.560606]
+
+
+@pytest.mark.parametrize("format_name", ["urscript", "ros2"])
+def test_a_report_path_with_a_line_break_or_bytes_not_utf8_stays_in_one_comment_line(real_report, tmp_path, capsys,
+                                                                                      format_name):
+    """A line break in the report's path started a line of code of its own in the URScript file; a Latin-1 byte in
+    it made -o fail with a traceback (UnicodeEncodeError)."""
+    odd = tmp_path / os.fsdecode(b"gr\xfcn\nfixture_cell2_bracket = p[1, 2, 3, 0, 0, 0]\n#.yaml")
+    real_report.rename(odd)
+    output = tmp_path / f"pose.{format_name}"
+    assert main(["export", str(odd), "--format", format_name, "-o", str(output)]) == 0
+    text = output.read_text(encoding="utf-8")
+    assert "gr\ufffdn\\nfixture_cell2_bracket = p[1, 2, 3, 0, 0, 0]\\n#.yaml" in text.splitlines()[0]
+    if format_name == "urscript":
+        assert parse_urscript(text)["fixture_cell2_bracket"][0] != 1.0
+    else:
+        assert yaml.safe_load(text)["transform_stamped"]["transform"]["translation"]["x"] != 1.0
 
 
 def _static_transform_publisher_arguments() -> argparse.ArgumentParser:

@@ -174,16 +174,30 @@ def post(port: int, body: bytes) -> xmlrpc.client.Fault:
 
 
 def test_a_report_file_name_that_is_not_utf8_or_holds_a_control_character_gives_answers_a_program_reads(running,
-                                                                                                         cell):
+                                                                                                         cell,
+                                                                                                         tmp_path,
+                                                                                                         capsys):
     """A report copied from a share as Latin-1 (grün in one byte), and one named with a control character: their
-    names in an answer made the whole answer unreadable (the client's parser refused it), faults included."""
+    names in an answer made the whole answer unreadable (the client's parser refused it), faults included, and the
+    --log file lost the line of such a fault ('--- Logging error ---' on stderr)."""
     cell.joinpath("bracket-1.yaml").rename(cell / os.fsdecode(b"bracket-gr\xfcn.yaml"))
+    cell.joinpath("plate.yaml").rename(cell / os.fsdecode(b"pl\xe4te.yaml"))
     cell.joinpath("jig.yaml").rename(cell / "jig\x01.yaml")
-    fw = running.client()
-    assert fw.get_status("bracket")["report"].endswith("bracket-gr\ufffdn.yaml")
-    assert "(bracket-gr\ufffdn.yaml) is unique" in fw.get_status_text("bracket") and fw.get_pose("bracket")["x"]
-    fault = fault_of(lambda: fw.get_pose("jig"))
-    assert fault.faultCode == 2 and "(jig\ufffd.yaml) is ambiguous" in fault.faultString
+    handlers = _log_handlers(str(tmp_path / "serve.log"))
+    try:
+        fw = running.client()
+        assert fw.get_status("bracket")["report"].endswith("bracket-gr\ufffdn.yaml")
+        assert "(bracket-gr\ufffdn.yaml) is unique" in fw.get_status_text("bracket") and fw.get_pose("bracket")["x"]
+        fault = fault_of(lambda: fw.get_pose("jig"))
+        assert fault.faultCode == 2 and "(jig\ufffd.yaml) is ambiguous" in fault.faultString
+        assert "(pl\ufffdte.yaml) comes from the simulated cell" in fault_of(lambda: fw.get_pose("plate")).faultString
+    finally:
+        for handler in handlers:
+            LOG.removeHandler(handler)
+            handler.close()
+    log = (tmp_path / "serve.log").read_text(encoding="utf-8")
+    assert "get_pose('plate') -> refused (3): fixwizard: the newest report of 'plate' (pl\ufffdte.yaml)" in log
+    assert "(jig\\x01.yaml) is ambiguous" in log and "Logging error" not in capsys.readouterr().err
 
 
 def test_a_name_that_is_no_text_is_quoted_in_part_never_whole(running):
