@@ -1,4 +1,5 @@
-"""Shared test helpers: where the paper's real data lives, and how to skip without it."""
+"""Shared test helpers: where the paper's real data lives, and how to skip without it; the loopback UR controllers'
+process."""
 
 import atexit
 import errno
@@ -14,6 +15,7 @@ import pytest
 from fixwizard.geometry.se3 import read_pose_dir, read_pose_file
 from fixwizard.workflow.import_poses import ball_centres_m
 from fixwizard.workflow.solver_process import SolverProcess
+from ur_loopback import LoopbackProcess
 
 # Distance lattices are cached on disk; tests (and the programs they start) keep theirs in a fresh folder.
 os.environ["FIXWIZARD_CACHE"] = tempfile.mkdtemp(prefix="fixwizard-cache-")
@@ -33,6 +35,14 @@ def _solver_processes_end_with_their_test():
     """A test's solver processes (the wizard's own end on quit) do not outlive it."""
     yield
     SolverProcess.close_all()
+
+
+@pytest.fixture(scope="module")
+def loopback():
+    """The child process that runs a test module's loopback UR controllers (``ur_loopback``)."""
+    process = LoopbackProcess()
+    yield process
+    process.close()
 
 
 @pytest.fixture(scope="session")

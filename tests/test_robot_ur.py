@@ -51,38 +51,16 @@ from fixwizard.robot.ur_script import (
     tap_program,
 )
 from fixwizard.robot.ur_state import ControllerState
-from ur_loopback import LoopbackProcess
+from ur_loopback import flange_above_surface, private_loopback_host
 from ur_loopback.arm import COLLISION_FORCE_N, SURFACE_STIFFNESS_N_M
 from ur_loopback.programs import unknown_functions
 
-
-def private_loopback_host() -> str:
-    """A loopback address of this test run's own (every 127.x.y.z is the loopback on Linux): the controller's fixed
-    ports there clash with no other program or parallel run holding them on 127.0.0.1."""
-    rng = random.Random(os.getpid() ^ time.time_ns())
-    return f"127.{rng.randint(1, 254)}.{rng.randint(1, 254)}.{rng.randint(1, 254)}"
-
-
-# UR_LOOPBACK_HOST chooses the address (e.g. 127.0.0.1 where only that one is the loopback)
-HOST = os.environ.get("UR_LOOPBACK_HOST") or private_loopback_host()
+HOST = private_loopback_host()
 # drop/reconnect cycles of the acceptance test: the issue's 100 in CI (about 3 min), 20 on a developer's run
 DROP_CYCLES = int(os.environ.get("UR_DROP_CYCLES", "100" if os.environ.get("CI") else "20"))
 UNLOCK_DELAY_S = 1.0  # the loopback's "5 s after the stop" rule, shortened
-TIP_OFFSET_M = 0.1  # the loopback's ball tip on the flange z axis
 FAST_TAP = {"speed_m_s": 0.02}
 TRAVEL_SLACK_M = 0.001  # the issue's bound on travel past the limit when the PC stalls
-
-
-def flange_above_surface(hover_m: float) -> np.ndarray:
-    """Flange pose with the tool pointing straight down and the tip ``hover_m`` above the surface (z = 0)."""
-    return make_transform(Rotation.from_euler("x", np.pi), [0.4, -0.1, TIP_OFFSET_M + hover_m])
-
-
-@pytest.fixture(scope="module")
-def loopback():
-    process = LoopbackProcess()
-    yield process
-    process.close()
 
 
 @pytest.fixture

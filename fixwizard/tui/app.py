@@ -22,7 +22,7 @@ from textual.widgets import Footer
 from textual.worker import WorkerFailed
 
 from fixwizard.errors import FixwizardError
-from fixwizard.robot.base import ProtectiveStop, RobotStatus
+from fixwizard.robot.base import ConnectionLost, ProtectiveStop, Robot, RobotError, RobotStatus
 from fixwizard.tui import keys
 from fixwizard.tui.cell import Cell, NewSession, Resumed, Sampling, SavedCalibration
 from fixwizard.tui.launch import session_to_resume
@@ -70,6 +70,7 @@ class FixwizardApp(App[None]):
         self._polling_status = False
         self._quitting = False  # once set, errors of the steps being stopped are not shown (the app is closing)
         self._left_session: Path | None = None  # the session the operator left sampling from (resumable)
+        self._link_up = False  # the robot's latest status said connected
 
     def on_mount(self) -> None:
         self.screen_change_signal.subscribe(self, self._frame_screen)
@@ -97,19 +98,34 @@ class FixwizardApp(App[None]):
 
     @work(thread=True, group="status", exit_on_error=False)
     def _poll_status(self) -> None:
-        status = None
+        robot, status = self.cell.robot, None
         try:
-            status = self.cell.robot.status()
+            status = robot.status()
         except FixwizardError:
             pass
         finally:
-            self.call_from_thread(self._status_arrived, status)
+            self.call_from_thread(self._status_arrived, robot, status)
 
-    def _status_arrived(self, status: RobotStatus | None) -> None:
+    def _status_arrived(self, robot: Robot, status: RobotStatus | None) -> None:
         self._polling_status = False
+        if robot is not self.cell.robot:  # asked before the start screen switched the robot
+            return
         self.robot_status = status
         if status is not None and (status.protective_stop or status.emergency_stop):
             self.stopped = True
+        link_was_up, self._link_up = self._link_up, status is not None and status.connected
+        if link_was_up and not self._link_up:
+            self._announce_lost_link(robot)
+
+    @work(thread=True, group="link", exit_on_error=False)
+    def _announce_lost_link(self, robot: Robot) -> None:
+        """The link dropped while nothing asked the robot for anything (the operator guiding the arm, say): the
+        robot's own error for it, with Reconnect. Asking for the pose gives it once the arm is sure to stand (a UR
+        arm's link waits for its watchdog first); a link that came back meanwhile raises nothing."""
+        try:
+            robot.base_T_tcp()
+        except RobotError as error:
+            self.call_from_thread(self.show_error, error)
 
     def watch_stopped(self) -> None:
         self.refresh_bindings()
@@ -128,6 +144,7 @@ class FixwizardApp(App[None]):
     def use_cell(self, cell: Cell) -> None:
         """The start screen switched the robot: status, STOP and the next steps use ``cell``'s."""
         self.cell = cell
+        self._link_up = False
 
     def action_stop_robot(self) -> None:
         """STOP: cancel automatic steps and halt the robot's motion now, from any screen; STOPPED until re-armed."""
@@ -219,7 +236,12 @@ class FixwizardApp(App[None]):
 
     def show_error(self, error: ShownError) -> None:
         """The error's message and next step in a modal; then the recovery the operator chose. Not while quitting:
-        stopping a running step may end it with an error, and the app is closing."""
+        stopping a running step may end it with an error, and the app is closing; not a lost link while one is
+        shown (a step that failed on it and the status that saw it go)."""
+        if isinstance(error, ConnectionLost) and any(
+                isinstance(screen, ErrorModal) and isinstance(screen.error, ConnectionLost)
+                for screen in self.screen_stack):
+            return
         modal = self._error_modal(error)
         if modal is not None:
             self.push_screen(modal, self._recover)
