@@ -73,8 +73,11 @@ def _rounded(values, decimals: int) -> list[float]:
 
 
 def round_up(value: float, decimals: int) -> float:
-    """The smallest number of ``decimals`` decimals that is not below ``value``."""
+    """The smallest number of ``decimals`` decimals that is not below ``value``; ``value`` itself when it is too
+    large to have decimals (a hand-edited report's 1e307 m, which times the scale is no longer finite)."""
     scale = 10.0**decimals
+    if not math.isfinite(value * scale):
+        return value
     rounded = math.ceil(value * scale) / scale
     return rounded if rounded >= value else rounded + 1.0 / scale
 

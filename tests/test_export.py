@@ -98,6 +98,13 @@ def test_a_report_path_with_a_line_break_or_bytes_not_utf8_stays_in_one_comment_
         assert yaml.safe_load(text)["transform_stamped"]["transform"]["translation"]["x"] != 1.0
 
 
+def test_a_hand_edited_guarantee_too_large_to_round_is_exported_as_it_is(real_report, tmp_path, capsys):
+    data = yaml.safe_load(real_report.read_text())
+    data["pose"]["guaranteed"]["position_m"] = 1e307  # in mm, 1e310: no longer a finite float (it was a traceback)
+    huge = report.write(tmp_path / "huge.yaml", data)
+    assert "guaranteed: the true pose lies within inf mm (CAD origin)" in exported(capsys, huge, "--format", "urscript")
+
+
 def _static_transform_publisher_arguments() -> argparse.ArgumentParser:
     """tf2_ros static_transform_publisher's named arguments (ROS 2 Humble and later)."""
     parser = argparse.ArgumentParser()
