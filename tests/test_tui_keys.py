@@ -49,6 +49,13 @@ def wizard_screens() -> list[type[Screen]]:
     return sorted(found, key=lambda cls: cls.__name__)
 
 
+async def at_pivot(pilot: Pilot) -> None:
+    """From the wizard's start to the pivot, its first step of a new tip calibration."""
+    await at_start(pilot)
+    await press_button(pilot, "#continue")
+    await until(pilot, lambda: isinstance(pilot.app.screen, PivotScreen) and not pilot.app.screen.busy)
+
+
 def key_names(key: keys.Key) -> list[str]:
     return key.keys.split(",")
 
@@ -159,9 +166,7 @@ def test_stop_shows_stopped_refuses_motion_until_a_confirmed_rearm(tmp_path):
     async def run():
         app = FixwizardApp(wizard(tmp_path))
         async with app.run_test(size=SIZE, notifications=True) as pilot:
-            await at_start(pilot)
-            await press_button(pilot, "#continue")
-            await until(pilot, lambda: isinstance(app.screen, PivotScreen) and not app.screen.busy)
+            await at_pivot(pilot)
             await pilot.press("m")
             await until(pilot, lambda: len(app.screen.workflow.poses("pivot")) == 1 and not app.screen.busy)
             await pilot.press("f12")
@@ -240,9 +245,7 @@ def test_esc_on_the_pivot_asks_before_dropping_the_captured_poses(tmp_path, stay
     async def run():
         app = FixwizardApp(wizard(tmp_path))
         async with app.run_test(size=SIZE) as pilot:
-            await at_start(pilot)
-            await press_button(pilot, "#continue")
-            await until(pilot, lambda: isinstance(app.screen, PivotScreen) and not app.screen.busy)
+            await at_pivot(pilot)
             pivot = app.screen
             await pilot.press("m")
             await until(pilot, lambda: len(pivot.workflow.poses("pivot")) == 1 and not pivot.busy)
@@ -335,6 +338,29 @@ def test_the_footer_keeps_esc_and_quit_in_view_at_80x24(tmp_path):
             await until(pilot, lambda: isinstance(app.screen, PivotScreen) and not app.screen.busy)
             await pilot.pause()
             await assert_in_view(pilot, "escape", "ctrl+q", "question_mark")
+    asyncio.run(run())
+
+
+def test_when_stopped_the_footer_of_the_hand_steps_keeps_re_arm_and_help_in_view_at_80x24(tmp_path):
+    """STOPPED adds Ctrl+R to the footer, and the pivot's footer lost ? Help at 80 columns. Freedrive (on by itself
+    on these steps, named in the messages that need it) is in their help, not their footer, as on sampling."""
+    async def run():
+        app = FixwizardApp(wizard(tmp_path))
+        async with app.run_test(size=SIZE) as pilot:
+            await at_pivot(pilot)
+            await pilot.press("f12")
+            await until(pilot, lambda: app.stopped)
+            await assert_in_view(pilot, "f12", "escape", "space", "m", "n", "ctrl+q", "ctrl+r", "question_mark")
+            await rearm(pilot)
+            for _ in range(app.cell.hands.pivot_count):
+                await until(pilot, lambda: not app.screen.busy)
+                await pilot.press(keys.HANDS.keys)
+            await until(pilot, lambda: not app.screen.busy)
+            await pilot.press("n")
+            await until(pilot, lambda: isinstance(app.screen, TablePointsScreen) and not app.screen.busy)
+            await pilot.press("f12")
+            await until(pilot, lambda: app.stopped)
+            await assert_in_view(pilot, "f12", "escape", "t", "m", "n", "ctrl+q", "ctrl+r", "question_mark")
     asyncio.run(run())
 
 

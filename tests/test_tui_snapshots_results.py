@@ -1,14 +1,17 @@
 """Snapshots at 80x24 of the sampling, solve and results screens on the simulated demo cell (fixed seeds; the
 clock, the report folder and the solve time are pinned so that only the screens can change)."""
 
+import asyncio
 import dataclasses
 import datetime as dt
 from pathlib import Path
 
 import numpy as np
 import pytest
+from textual.widgets._footer import FooterKey
 
 from fixwizard.solver.solve import solve
+from fixwizard.tui.app import FixwizardApp
 from fixwizard.tui.results.screen import ResultsScreen
 from fixwizard.tui.solve.screen import SolveScreen
 from pilot_wait import until
@@ -99,6 +102,32 @@ def test_results_screen_of_an_inconsistent_result(snap_compare, tmp_path):
     context = demo_context(tmp_path, 12, 2.4e6, in_the_air=True)
     assert context.solution.status == "inconsistent"
     assert snap_compare(ScreenHost(lambda: context.results_screen()), terminal_size=SIZE)
+    context.session.release()
+
+
+class WizardKeysHost(ScreenHost):
+    """The host with the wizard's keys of every screen, Re-arm among them as when STOPPED (its action answers
+    anything here)."""
+
+    BINDINGS = FixwizardApp.BINDINGS
+
+
+def test_the_footer_of_an_inconsistent_result_keeps_help_in_view_when_stopped(tmp_path):
+    """Drop tap and Re-arm (STOPPED) pushed ? Help and part of Re-arm off the footer at 80 columns; Resample is in
+    the help, Esc (in the footer) does the same."""
+    context = demo_context(tmp_path, 12, 2.4e6, in_the_air=True)
+    assert context.solution.status == "inconsistent"
+
+    async def run():
+        app = WizardKeysHost(lambda: context.results_screen())
+        async with app.run_test(size=SIZE) as pilot:
+            await until(pilot, lambda: isinstance(app.screen, ResultsScreen) and bool(app.screen.query(FooterKey)))
+            await pilot.pause()
+            shown = {key.key: key.region for key in app.screen.query(FooterKey)}
+            assert {"f12", "escape", "w", "v", "d", "q", "ctrl+q", "ctrl+r", "question_mark"} <= set(shown)
+            assert all(region.width > 0 and region.right <= SIZE[0] for region in shown.values()), shown
+
+    asyncio.run(run())
     context.session.release()
 
 

@@ -58,7 +58,7 @@ class ResultsScreen(Screen[Outcome]):
         keys.binding(keys.EDIT_PATH, show=False),
         keys.binding(keys.VIEW),
         keys.binding(keys.DROP),
-        keys.binding(keys.RESAMPLE),
+        keys.binding(keys.RESAMPLE, show=False),  # Esc (Back) does the same, and is in the footer
         keys.binding(keys.DONE),
         keys.binding(keys.SCROLL_DOWN, show=False),
         keys.binding(keys.SCROLL_UP, show=False),

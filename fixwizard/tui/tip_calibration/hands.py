@@ -38,7 +38,7 @@ class PivotScreen(CalibrationStepScreen):
 
     STEP = 1
     TITLE_TEXT = "pivot (coarse tip)"
-    BINDINGS = [keys.binding(keys.CAPTURE), keys.binding(keys.HANDS), keys.binding(keys.FREEDRIVE),
+    BINDINGS = [keys.binding(keys.CAPTURE), keys.binding(keys.HANDS), keys.binding(keys.FREEDRIVE, show=False),
                 keys.binding(keys.NEXT)]
     HELP_ABOUT = ("Find the ball tip roughly: with the ball held on one fixed point of the table, capture 5-8 poses "
                   "of the tool tilted in different directions. Once the pivot fit is good, go on to the table "
@@ -115,7 +115,7 @@ class TablePointsScreen(CalibrationStepScreen):
 
     STEP = 2
     TITLE_TEXT = "table points A, B, C"
-    BINDINGS = [keys.binding(keys.TAP), keys.binding(keys.HANDS), keys.binding(keys.FREEDRIVE),
+    BINDINGS = [keys.binding(keys.TAP), keys.binding(keys.HANDS), keys.binding(keys.FREEDRIVE, show=False),
                 keys.binding(keys.NEXT)]
     HELP_ABOUT = ("Tap three points of a flat, clear table corner: A, then the corner B, then C. For each, guide "
                   "the ball 5-10 mm above the point in freedrive with the tool pointing down and press the tap key; "
