@@ -11,7 +11,7 @@ from fixwizard.geometry.se3 import make_transform, transform_points
 from fixwizard.points import write_points
 from fixwizard.solver.estimates import Bounds
 from fixwizard.solver.solve import solve
-from fixwizard.solver.verdict import MIN_INTERVAL_SAMPLES, PINNED_FRACTION, status_of
+from fixwizard.solver.verdict import MIN_INTERVAL_SAMPLES, PINNED_FRACTION, PINNED_ROTATION_RAD, status_of
 from fixwizard.synthetic import touching_ball_centres
 from shapes import as_fixture
 
@@ -32,6 +32,29 @@ def test_the_rule_pinned_down_means_every_point_within_a_quarter_of_the_radius()
     assert status_of([loose], radius) == "undetermined"
     assert status_of([pinned, loose], radius) == "undetermined"
     assert status_of([], radius) == "inconsistent"
+
+
+def test_pinned_down_also_means_turned_less_than_the_chord_of_a_quarter_radius():
+    """Two poses of a pinned-down mode turn by under 30 degrees from each other, whatever the fixture's shape."""
+    radius = 0.1
+    within, beyond = (Bounds(np.eye(4), 0.0, turn, 0.01 * radius) for turn in (PINNED_ROTATION_RAD,
+                                                                                1.01 * PINNED_ROTATION_RAD))
+    assert np.degrees(2 * PINNED_ROTATION_RAD) < 30.0
+    assert status_of([within], radius) == "unique"
+    assert status_of([beyond], radius) == "undetermined"
+    assert status_of([within, beyond], radius) == "undetermined"
+
+
+def test_a_shaft_turned_about_its_own_axis_is_not_pinned_down():
+    """A shaft 300 mm long and 16 mm across turned by half a turn about its axis moves no point by more than 16 mm,
+    well under a quarter of its 150 mm radius: a mode holding every such turn is undetermined (by the displacement
+    alone it was unique, its turn free)."""
+    fixture = as_fixture("shaft", trimesh.creation.cylinder(radius=0.008, height=0.3, sections=48))
+    half_turn = Rotation.from_rotvec([0.0, 0.0, np.pi])
+    vertices = fixture.fix_vertices_m
+    displacement_m = float(np.max(np.linalg.norm(half_turn.apply(vertices) - vertices, axis=1)))
+    assert displacement_m <= 0.5 * PINNED_FRACTION * fixture.radius_m
+    assert status_of([Bounds(np.eye(4), 0.0, np.pi, displacement_m)], fixture.radius_m) == "undetermined"
 
 
 @pytest.fixture(scope="module")

@@ -3,12 +3,14 @@
 The rule (``status_of``), for a set that is not empty:
 
 - a mode is *pinned down* when every point of the fixture lies within ``PINNED_FRACTION`` (a quarter) of the
-  fixture radius ``r`` of its centre pose: ``max_point_displacement <= r / 4``. Then any two poses of the mode
-  move no fixture point by more than ``r / 2``, while a rotation by 30 degrees or more about any axis through
-  the fixture moves its farthest point by at least ``2 sin(15 deg) r = 0.52 r``: a pinned-down mode cannot hide
-  two poses related by a rotational symmetry of order 12 or less (nor any turn of 30 degrees or more). It also
-  bounds the rotation (``r * 2 sin(gamma / 2) <= r / 4``: under 14.4 degrees) and the position (under ``r / 4``).
-  Poses apart in position at one rotation (a repeated feature) are separate modes already (``modes``).
+  fixture radius ``r`` of its centre pose, ``max_point_displacement <= r / 4``, and its rotation within
+  ``PINNED_ROTATION_RAD`` of the centre's, the turn whose chord at ``r`` is ``r / 4`` (``2 asin(1 / 8)``, 14.4
+  degrees). Then any two poses of the mode turn by under 28.8 degrees from each other: a pinned-down mode cannot
+  hide two poses related by a rotational symmetry of order 12 or less (nor any turn of 30 degrees or more); the
+  position lies within ``r / 4``. The rotation is a condition of its own: a turn moves each point by its distance
+  from the axis, so a long fixture (a shaft, a bar) turned about its own axis by any angle moves no point by more
+  than its width, which may be well under ``r / 4`` (the displacement alone called such a mode unique with its
+  turn free). Poses apart in position at one rotation (a repeated feature) are separate modes already (``modes``).
 - ``unique``: one mode, pinned down;
 - ``ambiguous``: several modes, each pinned down (distinct poses that each explain the taps);
 - ``undetermined``: some mode is not pinned down: more taps (on other faces), or a larger cell budget where
@@ -34,6 +36,7 @@ from fixwizard.solver.estimates import Bounds
 Status = Literal["unique", "ambiguous", "undetermined", "inconsistent"]
 STATUSES: tuple[Status, ...] = ("unique", "ambiguous", "undetermined", "inconsistent")
 PINNED_FRACTION = 0.25
+PINNED_ROTATION_RAD = 2.0 * float(np.arcsin(PINNED_FRACTION / 2.0))  # the turn whose chord at r is PINNED_FRACTION r
 MIN_INTERVAL_SAMPLES = 200
 # The search stopped at coarse cells when one cell spans more than this fraction of the set's displacement bound.
 COARSE_CELL_FRACTION = 0.25
@@ -48,7 +51,8 @@ MIN_FACE_AREA_SHARE = 0.05  # a direction the fixture has faces towards, worth n
 
 def is_pinned(bounds: Bounds, fixture_radius_m: float) -> bool:
     """Whether a mode's bounds pin the pose down (see the module doc)."""
-    return bool(bounds.max_point_displacement_m <= PINNED_FRACTION * fixture_radius_m)
+    return bool(bounds.max_point_displacement_m <= PINNED_FRACTION * fixture_radius_m
+                and bounds.rotation_rad <= PINNED_ROTATION_RAD)
 
 
 def status_of(mode_bounds: list[Bounds], fixture_radius_m: float) -> Status:
@@ -112,7 +116,8 @@ def undetermined_message(why: Openness, bounds: Bounds, fixture_radius_m: float,
     lines = [f"The taps do not pin the pose down yet: the poses that explain them differ by up to "
              f"{np.degrees(bounds.rotation_rad):.0f} deg and move fixture points by up to "
              f"{bounds.max_point_displacement_m * 1e3:.0f} mm (pinned down means under "
-             f"{PINNED_FRACTION * fixture_radius_m * 1e3:.0f} mm, a quarter of the fixture's radius)."]
+             f"{PINNED_FRACTION * fixture_radius_m * 1e3:.0f} mm, a quarter of the fixture's radius, and turns "
+             f"under {np.degrees(PINNED_ROTATION_RAD):.1f} deg)."]
     todo = []
     if why.distinct_taps < MIN_SPREAD_TAPS:
         todo.append(f"only {why.distinct_taps} distinct tap{'s' if why.distinct_taps != 1 else ''}: tap at least "
