@@ -206,6 +206,14 @@ def test_numbers_in_programs_are_written_without_exponents_and_read_back_equal()
     assert "global speed_m_s = 0.00005" in programs[0]
 
 
+def test_numpy_numbers_are_written_as_urscript_numbers():
+    """A plan computed with numpy hands the programs numpy scalars (the tip calibration's tap travel): written as
+    the numbers they are (repr wrote np.float64(0.0222), and the program was never sent)."""
+    program = tap_program(np.int64(9), np.float64(2.0), np.float64(0.0222), np.float32(0.01), np.float64(10.0))
+    assert "global run_id = 9" in program and "global max_travel_m = 0.0222" in program
+    assert "global speed_m_s = 0.009999999776482582" in program and "np." not in program
+
+
 def test_every_motion_runs_on_a_program_whose_watchdog_is_armed(robot, controller):
     robot.tap(**FAST_TAP)
     robot.move_linear(flange_above_surface(0.02))

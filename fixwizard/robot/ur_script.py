@@ -25,6 +25,7 @@ Poses are UR pose vectors ``[x, y, z, rx, ry, rz]`` of the flange (each program 
 in the base frame: m and rad. Speeds m/s, accelerations m/s^2, forces N, times s.
 """
 
+import numbers
 from collections.abc import Sequence
 from decimal import Decimal
 
@@ -281,9 +282,12 @@ def _program(name: str, run_id: int, watchdog_hz: float, parameters: dict[str, f
 
 
 def _number(value: float) -> str:
-    """A URScript literal: an integer as it is, a float with the digits of its shortest repr in positional
-    notation (Python writes 1e-05 and 1.2e-17, which URScript's manual gives no form for)."""
-    return format(Decimal(repr(value)), "f") if isinstance(value, float) else str(value)
+    """A URScript literal: an integer as it is, any other number (numpy's too) with the digits of its float's
+    shortest repr in positional notation (Python writes 1e-05 and 1.2e-17, which URScript's manual gives no form
+    for; numpy's repr is ``np.float64(0.02)``)."""
+    if isinstance(value, numbers.Integral):
+        return str(int(value))
+    return format(Decimal(repr(float(value))), "f")
 
 
 def pose_literal(pose: Sequence[float]) -> str:

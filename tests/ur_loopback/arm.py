@@ -57,11 +57,13 @@ class LinearMove:
 
 @dataclass
 class SimulatedArm:
-    """Flange pose, active tool offset, tool tip and contact surface (the plane ``z = surface_z_m``)."""
+    """Flange pose, active tool offset, tool tip (the centre of a ball of ``ball_radius_m``; 0: a point) and contact
+    surface (the plane ``z = surface_z_m``)."""
 
     base_T_flange: np.ndarray
     flange_p_tip_m: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 0.1]))
     surface_z_m: float = 0.0
+    ball_radius_m: float = 0.0
     flange_T_tcp: np.ndarray = field(default_factory=lambda: np.eye(4))
     sensor_bias_n: np.ndarray = field(default_factory=lambda: np.array([1.5, -2.0, 4.0]))
     sensor_zero_n: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -84,9 +86,9 @@ class SimulatedArm:
         return [*(self.contact_force_n() + self.sensor_bias_n - self.sensor_zero_n), 0.0, 0.0, 0.0]
 
     def penetration_m(self) -> float:
-        """How far the tool tip is below the contact surface (m); 0 when it does not touch."""
+        """How far the tool tip's ball reaches below the contact surface (m); 0 when it does not touch."""
         tip_z = (self.base_T_flange[:3, :3] @ self.flange_p_tip_m + self.base_T_flange[:3, 3])[2]
-        return max(self.surface_z_m - tip_z, 0.0)
+        return max(self.surface_z_m - (tip_z - self.ball_radius_m), 0.0)
 
     def contact_force_n(self) -> np.ndarray:
         """Force of the surface on the tool (base frame, N): along the surface normal, +z."""

@@ -54,13 +54,14 @@ class LoopbackController:
     """
 
     def __init__(self, base_T_flange: np.ndarray | None = None, surface_z_m: float = 0.0,
-                 tcp_offset: list[float] | None = None, unlock_delay_s: float = 5.0, host: str = "127.0.0.1") -> None:
+                 tcp_offset: list[float] | None = None, unlock_delay_s: float = 5.0, host: str = "127.0.0.1",
+                 ball_radius_m: float = 0.0) -> None:
         if base_T_flange is None:  # tool pointing straight down, tip 8 mm above the surface
             base_T_flange = np.eye(4)
             base_T_flange[:3, :3] = Rotation.from_euler("x", np.pi).as_matrix()
             base_T_flange[:3, 3] = [0.4, -0.1, surface_z_m + 0.108]
         self._lock = threading.RLock()
-        self._arm = SimulatedArm(np.array(base_T_flange, float), surface_z_m=surface_z_m)
+        self._arm = SimulatedArm(np.array(base_T_flange, float), surface_z_m=surface_z_m, ball_radius_m=ball_radius_m)
         if tcp_offset is not None:
             self._arm.flange_T_tcp = transform(tcp_offset)
         self._registers = Registers()
