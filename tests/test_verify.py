@@ -121,6 +121,17 @@ def test_a_version_1_report_is_checked_with_its_mesh_given(tmp_path, capsys):
     assert run_verify(tmp_path, V1_REPORT, taps[:5] + [0.004, 0.0, 0.0], "--mesh", str(DEMO_MESH)) == 2
 
 
+def test_a_report_without_its_own_taps_is_said_to_be_tested_by_its_bounds_alone_for_that_reason(tmp_path, capsys):
+    data = yaml.safe_load(V1_REPORT.read_text())
+    data["inputs"]["points_m"] = []  # a hand-edited copy: it blamed the ball, which was the same
+    report_path = tmp_path / "no-taps.yaml"
+    report_path.write_text(yaml.safe_dump(data))
+    taps = np.array(yaml.safe_load(DEMO_TAPS.read_text())["points_m"])[:4]
+    assert run_verify(tmp_path, report_path, taps, "--mesh", str(DEMO_MESH)) == 0
+    out = capsys.readouterr().out
+    assert "Tested against the report's bounds only (the report lists no taps of its own" in out and "ball" not in out
+
+
 def test_taps_in_millimetres_are_refused_not_called_a_moved_fixture(tmp_path, capsys):
     taps = np.array(yaml.safe_load(DEMO_TAPS.read_text())["points_m"])[:4]
     assert run_verify(tmp_path, V1_REPORT, taps * 1e3, "--mesh", str(DEMO_MESH)) == 1  # was 2, "MOVED"

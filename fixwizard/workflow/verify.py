@@ -191,9 +191,13 @@ def verdict_lines(result: VerifyResult) -> list[str]:
         lines.append(f"Up to a sample bound of {bracket.ruled_out_m * 1e3:.2f} mm no allowed pose explains them "
                      f"(proved); with {explained_m * 1e3:.2f} mm some pose does.")
     search = result.search
-    tested = ("with the report's own taps" if result.with_report_taps else
-              "against the report's bounds only (the new ball differs from the report's, so its taps could not "
-              "join: a weaker test)")
+    if result.with_report_taps:
+        tested = "with the report's own taps"
+    elif len(_report_taps(result.report)) == 0:
+        tested = "against the report's bounds only (the report lists no taps of its own: a weaker test)"
+    else:
+        tested = ("against the report's bounds only (the new ball differs from the report's, so its taps could not "
+                  "join: a weaker test)")
     lines.append(f"Tested {tested}, to within {search.slack_m * 1e3:.2f} mm, in {search.elapsed_s:.1f} s.")
     return lines
 
