@@ -295,3 +295,18 @@ def test_a_mistaken_argument_to_verify_is_an_input_error(expert):
         verify(loaded, None, np.zeros((0, 3)))
     with pytest.raises(InputError, match="far more"):
         verify(loaded, None, np.zeros((500, 3)))
+
+
+@pytest.mark.parametrize("status", ["undetermined", "ambiguous"])
+def test_taps_consistent_with_a_report_that_is_not_unique_never_say_to_keep_using_its_pose(tmp_path, capsys, status):
+    """Consistent taps prove no move, but the pose of an undetermined or ambiguous report is none a robot program may
+    use (export and serve refuse it): the verdict says so instead of "Keep using the report's pose"."""
+    data = yaml.safe_load(V1_REPORT.read_text())
+    data["status"] = status
+    report_path = tmp_path / f"{status}.yaml"
+    report_path.write_text(yaml.safe_dump(data))
+    taps = np.array(yaml.safe_load(DEMO_TAPS.read_text())["points_m"])[:4]
+    assert run_verify(tmp_path, report_path, taps, "--mesh", str(DEMO_MESH)) == 0
+    out = capsys.readouterr().out
+    assert "Keep using" not in out
+    assert f"The report is {status}, so its pose is none a robot program may use" in out

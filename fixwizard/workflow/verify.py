@@ -176,6 +176,10 @@ def verdict_lines(result: VerifyResult) -> list[str]:
         lines.append(f"consistent with the report: poses the report allows explain the {taps}, too few to see a small "
                      f"move: tap {SUGGESTED_TAPS[0]}-{SUGGESTED_TAPS[1]} points spread over the fixture, then check "
                      "again.")
+    elif result.report.status != "unique":
+        lines.append(f"consistent with the report: poses the report allows explain the {taps}, so they show no move "
+                     f"beyond the report's bounds. The report is {result.report.status}, so its pose is none a robot "
+                     "program may use: tap more points and solve again for a unique pose.")
     else:
         lines.append(f"consistent with the report: poses the report allows explain the {taps}, so they show no move "
                      "beyond the report's bounds. Keep using the report's pose.")
