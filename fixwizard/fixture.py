@@ -23,6 +23,8 @@ from fixwizard.mesh_format import FORMAT_NAMES, content_format
 from fixwizard.mesh_hygiene import clean_mesh, refuse_far_vertices, refuse_non_finite
 
 METRES_PER_UNIT = {"m": 1.0, "mm": 1e-3}
+UNIT_NAMES = {"m": "metres", "mm": "millimetres"}
+METRES_PER_INCH = 0.0254
 # Rays for the parity cross-check of inside tests leave along the axis to the nearest side of the mesh's bounding
 # box (the shortest way out, the fewest crossings), tilted by this off every axis and diagonal so that they graze
 # the edges of axis-aligned CAD faces as rarely as possible.
@@ -319,21 +321,31 @@ def _identical_vertices_merged(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     return trimesh.Trimesh(vertices[used[first[order]]], index[faces], process=False)
 
 
-def _check_size(path: Path, mesh_m: trimesh.Trimesh, units: str) -> None:
-    size_m = float(np.max(mesh_m.extents))
+def _plausible(size_m: float) -> bool:
     low, high = PLAUSIBLE_SIZE_M
-    if size_m > high:
-        likely = "mm" if units == "m" else None
-        hint = "if the file is in millimetres, its units are mm" if likely else \
-            "check that the file holds the fixture and its units"
-        raise MeshUnitsError(f"{path} would be a {size_m:.3g} m large fixture with units '{units}', which is "
-                             f"implausible; {hint}", likely)
-    if size_m < low:
-        likely = "m" if units == "mm" else None
-        hint = "if the file is in metres, its units are m" if likely else \
-            "check the units of the file (fixwizard reads m or mm)"
-        raise MeshUnitsError(f"{path} would be a {size_m * 1e3:.3g} mm small fixture with units '{units}', "
-                             f"which is implausible; {hint}", likely)
+    return low <= size_m <= high
+
+
+def _check_size(path: Path, mesh_m: trimesh.Trimesh, units: str) -> None:
+    """Refuse a fixture whose size (m) is implausible in ``units``, naming the other unit only where it makes the size
+    plausible (``MeshUnitsError.likely_units``), and inches where only they do (fixwizard reads m or mm)."""
+    size_m = float(np.max(mesh_m.extents))
+    if _plausible(size_m):
+        return
+    file_size = size_m / METRES_PER_UNIT[units]  # in the file's own unit
+    other = "mm" if units == "m" else "m"
+    likely = other if _plausible(file_size * METRES_PER_UNIT[other]) else None
+    if likely is not None:
+        hint = f"if the file is in {UNIT_NAMES[likely]}, its units are {likely}"
+    elif _plausible(file_size * METRES_PER_INCH):
+        hint = (f"in {UNIT_NAMES[other]} it would be implausible too; if the file is in inches (a "
+                f"{file_size * METRES_PER_INCH * 1e3:.3g} mm fixture), export it again in millimetres or metres "
+                "(fixwizard reads m or mm)")
+    else:
+        hint = "check that the file holds the fixture and its units (fixwizard reads m or mm)"
+    size = f"{size_m:.3g} m large" if size_m > PLAUSIBLE_SIZE_M[1] else f"{size_m * 1e3:.3g} mm small"
+    raise MeshUnitsError(f"{path} would be a {size} fixture with units '{units}', which is implausible; {hint}",
+                         likely)
 
 
 def fixture_from_mesh(mesh_m: trimesh.Trimesh, path: Path, units: str, sha256: str) -> Fixture:

@@ -29,6 +29,18 @@ def test_a_metre_mesh_loaded_as_millimetres_is_refused_with_the_fix(tmp_path):
     assert caught.value.likely_units == "m"
 
 
+@pytest.mark.parametrize("units", ["m", "mm"])
+def test_a_mesh_in_inches_is_refused_naming_inches_not_a_unit_that_would_be_refused_too(tmp_path, units):
+    """A 120 mm part exported in inches is 4.7 mm in mm and 4.7 m in m, both implausible: the message names inches
+    and no unit to switch to (it suggested the other unit, which was then refused the other way round)."""
+    path = tmp_path / "bracket.stl"
+    trimesh.creation.box(np.array([120.0, 80.0, 10.0]) / 25.4).export(path)
+    inches = r"if the file is in inches \(a 120 mm fixture\), export it again"
+    with pytest.raises(MeshUnitsError, match=inches) as caught:
+        load_fixture(path, units)
+    assert caught.value.likely_units is None
+
+
 @pytest.mark.parametrize("content, match", [(b"", "empty"), (b"hello, I am not a mesh\n" * 10, "mesh"),
                                             (b"solid x\nendsolid x\n", "no triangles")])
 def test_files_that_are_not_meshes_get_a_clear_message(tmp_path, content, match):
