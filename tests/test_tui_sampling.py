@@ -265,6 +265,38 @@ async def test_a_stop_between_the_moves_above_a_point_lets_no_further_move_start
         await until(pilot, lambda: cell.status().mode == "freedrive")
 
 
+async def test_a_dialog_shown_as_the_screen_finishes_its_work_stays_until_closed(context):
+    """Textual's dismiss pops the top screen: when sampling went on to the solve (after turning freedrive off) with
+    an error or the help over it, that dialog vanished unread and the sampling screen stayed under the next one.
+    Now the screen goes once the dialog is closed."""
+    record_spread_taps(context, 3)
+    app = ScreenHost(lambda: context.sampling_screen())
+    cell = cell_of(context)
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        await until(pilot, lambda: not screen.busy)
+        released, freedrive = asyncio.Event(), cell.freedrive
+        loop = asyncio.get_running_loop()
+
+        def held_freedrive(on: bool) -> None:
+            asyncio.run_coroutine_threadsafe(released.wait(), loop).result(timeout=30)
+            freedrive(on)
+
+        cell.freedrive = held_freedrive
+        await pilot.press("s")
+        await until(pilot, lambda: screen.busy)
+        error = Dialog("Robot problem", "the link to the robot is down")
+        app.push_screen(error)
+        await until(pilot, lambda: app.screen is error and error.is_mounted)
+        released.set()
+        await until(pilot, lambda: not screen.busy)
+        await pilot.pause(0.2)
+        assert app.screen is error and app.results == []  # the message stays, and so does the screen under it
+        await pilot.press("escape")
+        await until(pilot, lambda: app.results == [True])
+        assert screen not in app.screen_stack
+
+
 @pytest.mark.parametrize("motion", ["tap", "move_linear"])
 async def test_a_stop_as_a_tap_or_the_last_move_above_a_point_ends_leaves_freedrive_off(context, motion):
     """STOP pressed as the tap or the last move above a suggested point ended (the robot's stop found no motion to

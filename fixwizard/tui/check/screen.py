@@ -27,6 +27,7 @@ from fixwizard.robot.base import TapResult
 from fixwizard.solver.search import SearchCancelled
 from fixwizard.tui import keys
 from fixwizard.tui.cell import Cell, SavedCalibration
+from fixwizard.tui.dismiss import dismiss_when_on_top
 from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF, tap_and_record
 from fixwizard.tui.widgets.errors import error_message
 from fixwizard.tui.widgets.key_footer import KeyFooter
@@ -236,7 +237,7 @@ class CheckScreen(Screen[None]):
                   on_failed=lambda _: self._leave())
 
     def _leave(self) -> None:
-        self.dismiss(None)
+        dismiss_when_on_top(self, None)
 
     # --- robot work and the journal ---
 

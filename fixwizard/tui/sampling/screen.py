@@ -27,6 +27,7 @@ from fixwizard.robot.base import MotionStopped, NoContact, ProtectiveStop, Robot
 from fixwizard.solver.solve import MIN_TAPS
 from fixwizard.tui import keys
 from fixwizard.tui.cell import Cell, Sampling
+from fixwizard.tui.dismiss import dismiss_when_on_top
 from fixwizard.tui.sampling.text import (
     NO_SAFE_HOVER,
     guide_text,
@@ -183,8 +184,9 @@ class SamplingScreen(Screen[bool]):
                           "bounds.")
             return
         self._cancel_live()
-        self._run_robot(lambda: self.cell.robot.freedrive(False), lambda _: self.dismiss(True),
-                        on_failed=lambda _: self.dismiss(True), doing="Turning freedrive off, then solving")
+        self._run_robot(lambda: self.cell.robot.freedrive(False), lambda _: dismiss_when_on_top(self, True),
+                        on_failed=lambda _: dismiss_when_on_top(self, True),
+                        doing="Turning freedrive off, then solving")
 
     def action_back(self) -> None:
         """Back to the start screen, after asking: the session stays resumable there (and is selected)."""
@@ -193,8 +195,8 @@ class SamplingScreen(Screen[bool]):
         def answered(yes: bool | None) -> None:
             if yes:
                 self._cancel_live()
-                self._run_robot(lambda: self.cell.robot.freedrive(False), lambda _: self.dismiss(False),
-                                on_failed=lambda _: self.dismiss(False), doing="Turning freedrive off")
+                self._run_robot(lambda: self.cell.robot.freedrive(False), lambda _: dismiss_when_on_top(self, False),
+                                on_failed=lambda _: dismiss_when_on_top(self, False), doing="Turning freedrive off")
 
         self.app.push_screen(Confirm("Leave sampling?", f"Back to the start screen. The session "
                                      f"{self.session.path.name} with its {count} tap"

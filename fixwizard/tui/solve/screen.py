@@ -17,6 +17,7 @@ from fixwizard.solver.search import SearchProgress, search_budget
 from fixwizard.solver.solve import Solution, SolveStage
 from fixwizard.tui import keys
 from fixwizard.tui.cell import Cell, Sampling
+from fixwizard.tui.dismiss import dismiss_when_on_top
 from fixwizard.tui.widgets.key_footer import KeyFooter
 from fixwizard.tui.workers import run_in_solver
 from fixwizard.workflow.solver_process import Event, Failed, Progress, Solved, SolveRequest, SolverProcess
@@ -106,7 +107,7 @@ class SolveScreen(Screen[Solution | None]):
             self.stage = event.stage or self.stage
         elif isinstance(event, Solved):
             self.running = False
-            self.dismiss(event.solution)
+            dismiss_when_on_top(self, event.solution)
         elif isinstance(event, Failed):
             self.running = False
             problem = self.query_one("#problem", Static)

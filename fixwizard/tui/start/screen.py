@@ -18,6 +18,7 @@ from fixwizard.errors import FixwizardError, MeshError, MeshUnitsError, quoted
 from fixwizard.fixture import Fixture, load_fixture
 from fixwizard.tui.cell import Cell, NewSession, Resumed, SavedCalibration, StartChoice
 from fixwizard.tui.check.screen import CheckScreen
+from fixwizard.tui.dismiss import dismiss_when_on_top
 from fixwizard.tui.launch import switch_to_simulated, switch_to_ur_arm
 from fixwizard.tui.start.choices import (
     CalibrationChoice,
@@ -261,7 +262,7 @@ class StartScreen(Screen[StartChoice]):
             raise resume_refusal(path, error) from error
 
     def _resumed(self, resumed: Resumed) -> None:
-        self.dismiss(resumed)  # the sampling screen says what was opened
+        dismiss_when_on_top(self, resumed)  # the sampling screen says what was opened
 
     def _check(self) -> None:
         """Check a calibrated fixture (``CheckScreen``) with the chosen stored tip calibration: its tip and ball."""

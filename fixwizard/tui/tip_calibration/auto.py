@@ -8,6 +8,7 @@ from textual.containers import Horizontal
 from textual.widgets import ProgressBar, Static
 
 from fixwizard.tui import keys
+from fixwizard.tui.dismiss import dismiss_when_on_top
 from fixwizard.tui.tip_calibration.step import CalibrationStepScreen
 from fixwizard.tui.workers import services
 from fixwizard.workflow.robot_calibration import Cancelled, Step
@@ -107,7 +108,7 @@ class AutoTapsScreen(CalibrationStepScreen):
         self._cancel = None
         self.refresh_bindings()
         if outcome is None:
-            self.dismiss("next")
+            dismiss_when_on_top(self, "next")
         elif isinstance(outcome, Cancelled):
             self._show(f"{outcome}. Press g to continue.")
         else:

@@ -14,6 +14,7 @@ from fixwizard.calibration.calibrate import MAX_BALL_DIAMETER_M
 from fixwizard.calibration.store import TipCalibration, save_calibration
 from fixwizard.calibration.verdict import tip_verdict
 from fixwizard.tui.cell import SavedCalibration
+from fixwizard.tui.dismiss import dismiss_when_on_top
 from fixwizard.tui.tip_calibration.step import CalibrationStepScreen
 from fixwizard.tui.widgets.dialog import Dialog
 from fixwizard.workflow.tip_calibration import summary_lines
@@ -121,5 +122,5 @@ class CalibrationResultScreen(CalibrationStepScreen):
         return SavedCalibration(calibration, save_calibration(calibration, path))
 
     def _saved(self, saved: SavedCalibration) -> None:
-        self.dismiss(saved)  # the sampling screen says where it was saved
+        dismiss_when_on_top(self, saved)  # the sampling screen says where it was saved
 
