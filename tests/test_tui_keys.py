@@ -190,6 +190,42 @@ def test_stop_shows_stopped_refuses_motion_until_a_confirmed_rearm(tmp_path):
     asyncio.run(run())
 
 
+def test_re_arm_pressed_twice_asks_once_and_a_stop_meanwhile_takes_the_question_back(tmp_path):
+    """Ctrl+R pressed twice stacked two re-arm questions (and Ctrl+Q twice during motion two quit questions); a yes
+    to a question asked before another STOP re-armed after that STOP. Now each is asked once, and STOP closes an
+    open re-arm question: the wizard stays STOPPED until the operator asks again."""
+    def questions(app) -> list[str]:
+        return [screen.title_text for screen in app.screen_stack if isinstance(screen, Confirm)]
+
+    async def run():
+        app = FixwizardApp(wizard(tmp_path, pace_s=0.02))
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            await pilot.press("f12")
+            await until(pilot, lambda: app.stopped)
+            await pilot.press("ctrl+r", "ctrl+r")
+            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await pilot.pause()
+            assert questions(app) == ["Re-arm the robot?"]
+            await pilot.press("f12")
+            await until(pilot, lambda: isinstance(app.screen, StartScreen))
+            await pilot.press("y")
+            await pilot.pause()
+            assert app.stopped and questions(app) == []
+            await rearm(pilot)
+            await calibrate_by_hand(pilot)
+            await pilot.press("g")
+            await until(pilot, lambda: app.motion_running())
+            await pilot.press("ctrl+q", "ctrl+q")
+            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await pilot.pause()
+            assert questions(app) == ["Quit while the robot moves?"]
+            await pilot.press("n")
+            await until(pilot, lambda: not questions(app))
+            assert app.is_running
+    asyncio.run(run())
+
+
 def test_a_protective_stop_makes_the_wizard_stopped_and_rearm_waits_for_the_unlock(tmp_path):
     async def run():
         context = wizard_context(tmp_path)

@@ -42,6 +42,7 @@ from fixwizard.workflow.solver_process import SolverProcess
 
 T = TypeVar("T")
 STATUS_INTERVAL_S = 0.5
+REARM_QUESTION = "Re-arm the robot?"
 CSS_FILE = Path(__file__).with_name("wizard.tcss")  # package data: every screen's look
 
 
@@ -152,6 +153,8 @@ class FixwizardApp(App[None]):
             cancel.set()
         in_thread(self, self.cell.robot.stop)
         self.stopped = True
+        if isinstance(self.screen, Confirm) and self.screen.title_text == REARM_QUESTION:
+            self.screen.dismiss(False)  # its answer would be about the cell before this STOP
         self.notify(f"STOP sent: the robot halts. Check the cell, then re-arm with {keys.name(keys.REARM)}.",
                     severity="warning")
 
@@ -192,9 +195,14 @@ class FixwizardApp(App[None]):
                     freedrive()
                 self.notify("Re-armed: the robot keys work again" + (" and freedrive is on." if freedrive else "."))
 
-        self.push_screen(Confirm("Re-arm the robot?", "The robot keys (tap, go, the automatic steps) will move the "
-                                 "arm again. Is the cell checked and clear of people and objects?", "Re-arm"),
-                         answered)
+        self._ask_once(Confirm(REARM_QUESTION, "The robot keys (tap, go, the automatic steps) will move the arm "
+                               "again. Is the cell checked and clear of people and objects?", "Re-arm"), answered)
+
+    def _ask_once(self, question: Confirm, answered: Callable[[bool | None], None]) -> None:
+        """Ask ``question`` unless it is asked already (a key pressed twice asked twice, one dialog over the other)."""
+        if not any(isinstance(screen, Confirm) and screen.title_text == question.title_text
+                   for screen in self.screen_stack):
+            self.push_screen(question, answered)
 
     def action_help(self) -> None:
         """The help of the screen below: its paragraph, its keys (as they stand now) and the global ones."""
@@ -219,9 +227,9 @@ class FixwizardApp(App[None]):
                 if yes:
                     self._quit_now(stop=True)
 
-            self.push_screen(Confirm("Quit while the robot moves?", "The robot is moving or an automatic step is "
-                                     "running. Quit stops it first; everything recorded is saved and an open "
-                                     "session stays resumable.", "Stop and quit"), answered)
+            self._ask_once(Confirm("Quit while the robot moves?", "The robot is moving or an automatic step is "
+                                   "running. Quit stops it first; everything recorded is saved and an open session "
+                                   "stays resumable.", "Stop and quit"), answered)
             return
         self._quit_now(stop=False)
 
