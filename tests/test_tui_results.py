@@ -8,12 +8,18 @@ import json
 import numpy as np
 import pytest
 from textual.widgets import Input, Static
+from textual.widgets._footer import FooterKey
 
 from fixwizard import report
 from fixwizard.geometry.se3 import format_ur_pose
 from fixwizard.solver.solve import Solution, solve
+from fixwizard.tui.app import FixwizardApp
 from fixwizard.tui.results.screen import Done
+from fixwizard.tui.sampling.screen import SamplingScreen
+from fixwizard.tui.solve.screen import SolveScreen
 from fixwizard.tui.widgets.confirm import Confirm
+from fixwizard.tui.widgets.key_footer import KeyFooter
+from fixwizard.tui.widgets.status import StatusBar
 from pilot_wait import until
 from tui_cell import (
     PausedSolver,
@@ -116,6 +122,22 @@ async def test_a_key_of_another_step_during_the_solve_says_why_it_does_nothing(t
             f"The solve is running, so {key} does nothing now: wait for the result, or press Esc to cancel it and go "
             "back to sampling (the taps are kept)." for key in ("t (Tap)", "g (Go)")]
         assert screen.running and app.results == [] and "Details: rotation level" in text_of(screen, "#figures")
+
+
+async def test_the_solve_screen_keeps_the_status_line_and_the_footer_whole(tapped):
+    """The solve screen's padding indented the wizard's status line and footer by a column and cut their last one."""
+    app = FixwizardApp(tapped.cell, sampling=tapped.sampling)
+    async with app.run_test(size=SIZE) as pilot:
+        await until(pilot, lambda: isinstance(app.screen, SamplingScreen) and not app.screen.busy)
+        app.screen.dismiss(True)
+        await until(pilot, lambda: isinstance(app.screen, SolveScreen) and bool(app.screen.query(StatusBar))
+                    and bool(app.screen.query(FooterKey)))
+        await pilot.pause()
+        for bar in (app.screen.query_one(StatusBar), app.screen.query_one(KeyFooter)):
+            assert (bar.region.x, bar.region.width) == (0, SIZE[0]), type(bar).__name__
+        assert app.screen.query_one("#title").region.x == 1  # the screen's own text stays indented
+        await pilot.press("escape")
+        await until(pilot, lambda: isinstance(app.screen, SamplingScreen))
 
 
 async def test_a_solve_input_problem_is_explained_and_esc_goes_back(tapped):
