@@ -18,6 +18,12 @@ def yaml_problem(error: yaml.YAMLError) -> str:
     return str(error).splitlines()[0]
 
 
+# fixwizard's documents take under 100 kB (a report of 1000 taps and a few candidate poses; 1 MB holds 1500 of them);
+# this YAML parser reads 60-200 kB/s, so a larger file (a point cloud saved as .yaml among the reports) would hold up
+# its reader, serve's calls included, for minutes (13.6 MB: 3.6 min): refused before it is read, as POINTS are.
+MAX_DOCUMENT_BYTES = 1_000_000
+
+
 class _Loader(yaml.SafeLoader):
     """``yaml.safe_load``'s loader, except that an integer too large for a float reads as +-inf: where a number is
     read, it is then refused as not finite, with that place's message (``float()`` of it would raise); and a key
@@ -58,8 +64,12 @@ def parse_yaml(text: str) -> Any:
 def load_document(path: Path, schema: str | tuple[str, ...], what: str, error: type[InputError] = InputError,
                   hint: str = "") -> dict:
     """The YAML mapping in ``path`` if its ``schema`` key matches (one of several, the first the current one);
-    ``error`` names the ``what`` otherwise."""
+    ``error`` names the ``what`` otherwise, also for a file over ``MAX_DOCUMENT_BYTES``, refused before it is read."""
     try:
+        size = path.stat().st_size
+        if size > MAX_DOCUMENT_BYTES:
+            raise error(f"{path} holds {size / 1e6:.1f} MB, more than any {what} (at most "
+                        f"{MAX_DOCUMENT_BYTES / 1e6:g} MB): it is no {what}; give the file fixwizard wrote")
         data = parse_yaml(path.read_text(encoding="utf-8-sig"))
     except OSError as problem:
         raise error(f"cannot read the {what}: {file_problem(problem, path)}") from problem

@@ -427,6 +427,20 @@ def test_a_caller_cannot_forge_or_flood_log_lines(cell, tmp_path):
     assert max(len(line) for line in lines) < 1000 and len(long_fault.faultString) < 1000
 
 
+def test_a_large_yaml_file_in_the_folder_is_skipped_unread_and_holds_up_no_call(running, cell, caplog):
+    """A point cloud of 1.4 MB saved as .yaml among the reports: parsing it held every call up for 15 s (13.6 MB: for
+    3.6 min)."""
+    fw = running.client()
+    assert fw.is_usable("bracket")
+    (cell / "cloud.yaml").write_text("points: [" + ", ".join(["[0.1, 0.2, 0.3]"] * 80_000) + "]\n")
+    with caplog.at_level(logging.INFO, logger="fixwizard.serve"):
+        started = time.monotonic()
+        assert fw.is_usable("bracket") and fw.list_fixtures() == ["bracket", "jig", "lid", "plate", "tray"]
+        assert time.monotonic() - started < 2.0
+    assert any(f"skipped {cell / 'cloud.yaml'}: {cell / 'cloud.yaml'} holds 1.4 MB, more than any fixwizard report "
+               "(at most 1 MB)" in record.getMessage() for record in caplog.records)
+
+
 def test_a_report_folder_file_nested_too_deeply_to_read_is_skipped_and_the_others_served(running, cell):
     fw = running.client()
     (cell / "deep.yaml").write_text("[" * 100_000)
