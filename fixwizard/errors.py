@@ -58,6 +58,9 @@ def file_problem(error: OSError, path: object = None) -> str:
     if code in (errno.EACCES, errno.EPERM):
         return (f"no permission to read or write {name or 'there'}; check its permissions, or choose a folder you "
                 "can write to")
+    if code == errno.EFBIG:
+        return (f"{name or 'the file'} has reached the largest file size allowed here (ulimit -f, or the disk's own "
+                "limit); raise that limit or choose a folder on another disk")
     if code == errno.ENOENT:
         return f"{name or 'the file'} does not exist; check the path"
     return f"cannot read or write {name or 'the file'}: {error.strerror or error}; check the path and the disk"

@@ -230,6 +230,27 @@ def test_a_full_disk_mid_record_loses_nothing_and_the_next_tap_does_not_follow_t
         assert [tap.id for tap in resumed.taps] == list(range(1, 12))
 
 
+def test_a_journal_at_the_file_size_limit_says_so_and_keeps_every_saved_tap(tmp_path):
+    """ulimit -f: a real write refused with EFBIG (Python ignores SIGXFSZ); the message named no cause before."""
+    script = ("import numpy as np, resource, sys\n"
+              "from fixwizard.workflow.session import SamplingSession, SessionError\n"
+              "resource.setrlimit(resource.RLIMIT_FSIZE, (8192, resource.RLIM_INFINITY))\n"
+              "session = SamplingSession.create(sys.argv[1], {'mesh': 'x.stl'}, {'tcp_p_tip_m': [0, 0, 0.05]})\n"
+              "try:\n"
+              "    while True:\n"
+              "        print(session.record_tap(np.eye(4)).id, flush=True)\n"
+              "except SessionError as error:\n"
+              "    print(error)\n")
+    path = tmp_path / "a.jsonl"
+    done = subprocess.run([sys.executable, "-c", script, str(path)], capture_output=True, text=True, timeout=60,
+                          check=True)
+    *saved, message = done.stdout.splitlines()
+    assert "has reached the largest file size allowed here (ulimit -f" in message
+    assert "This tap was not saved; everything saved before is kept" in message
+    with SamplingSession.open(path) as resumed:
+        assert resumed.recovered == () and [tap.id for tap in resumed.taps] == [int(tap) for tap in saved]
+
+
 def test_a_failed_undo_drop_or_close_is_not_applied(tmp_path, monkeypatch):
     with new_session(tmp_path) as session:
         for index in range(3):
