@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from conftest import fill_disk
+from fixwizard.errors import InputError
 from fixwizard.geometry.se3 import make_transform
 from fixwizard.points import load_points
 from fixwizard.workflow.session import SamplingSession, SessionError, find_unfinished
@@ -153,6 +154,20 @@ def test_export_points_holds_the_active_taps_in_order(tmp_path):
     np.testing.assert_allclose(expected[:, 1], [0.0, 0.01, 0.02])
     with new_session(tmp_path, "empty.jsonl") as empty, pytest.raises(SessionError, match="no taps"):
         empty.export_points(tmp_path / "none.yaml")
+
+
+def test_export_points_never_replaces_the_journal_and_taps_go_on_being_saved(tmp_path):
+    with new_session(tmp_path) as session:
+        session.record_tap(pose(0))
+        journal = session.path.read_bytes()
+        (tmp_path / "link.yaml").symlink_to(session.path)
+        for target in (session.path, tmp_path / "link.yaml"):
+            with pytest.raises(InputError, match="is the session journal .* give the points file another name"):
+                session.export_points(target)
+        assert session.path.read_bytes() == journal
+        session.record_tap(pose(1))
+    with SamplingSession.open(session.path) as resumed:
+        assert len(resumed.taps) == 2
 
 
 def test_find_unfinished_lists_only_open_sessions(tmp_path):

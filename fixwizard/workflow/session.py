@@ -38,6 +38,7 @@ from typing import Self
 
 import numpy as np
 
+from fixwizard.atomic import check_output
 from fixwizard.calibration.taps import ball_centres_m
 from fixwizard.errors import InputError, file_problem
 from fixwizard.geometry.se3 import from_ur_pose, to_ur_pose
@@ -325,9 +326,11 @@ class SamplingSession:
         return self._write_tap({"kind": "drop", "id": tap_id, "time": _now()})
 
     def export_points(self, path: str | Path) -> Path:
-        """Write the active taps as a POINTS YAML for ``fixwizard solve``, naming this session as source."""
+        """Write the active taps as a POINTS YAML for ``fixwizard solve``, naming this session as source; never over
+        the journal itself (replaced, the taps after it would go to a file no longer in the folder)."""
         if not self._taps:
             raise SessionError(f"the session {self.path} has no taps to export; record some taps first")
+        check_output(path, [("session journal", self.path)], "give the points file another name, e.g. points.yaml")
         return write_points(path, self.base_p_taps, source_session=str(self.path),
                             tap_ids=[tap.id for tap in self.taps])
 
