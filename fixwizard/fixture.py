@@ -21,7 +21,7 @@ from fixwizard.geometry.mesh_distance import MeshDistance
 from fixwizard.geometry.se3 import invert, make_transform, points_in_frames
 from fixwizard.mesh_format import FORMAT_NAMES, content_format
 from fixwizard.mesh_hygiene import clean_mesh, refuse_far_vertices, refuse_non_finite
-from fixwizard.obj_polygons import refuse_concave_polygons
+from fixwizard.polygon_faces import refuse_concave_polygons
 
 METRES_PER_UNIT = {"m": 1.0, "mm": 1e-3}
 UNIT_NAMES = {"m": "metres", "mm": "millimetres"}
@@ -291,8 +291,7 @@ def _load_trimesh(path: Path) -> trimesh.Trimesh:
     if found is not None and found != suffix:
         raise MeshError(f"{path} holds a mesh in {FORMAT_NAMES[found]} format, not {FORMAT_NAMES[suffix]} as its name "
                         f"says (fixwizard reads a mesh by its suffix): rename it to {path.with_suffix(found).name}")
-    if suffix == ".obj":
-        refuse_concave_polygons(path)
+    refuse_concave_polygons(path)
     try:
         with np.errstate(all="ignore"):  # absurd coordinates overflow in the reader; they are refused below
             mesh = _surface_of(trimesh.load(path, process=False))

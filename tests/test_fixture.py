@@ -265,3 +265,25 @@ def test_an_obj_of_convex_polygons_loads_as_its_surface(tmp_path):
     fixture = load_fixture(path)
     assert fixture.mesh.area == pytest.approx(SHAPES["l_prism"]().area, rel=1e-12)
     assert fixture.mesh.volume == pytest.approx(SHAPES["l_prism"]().volume, rel=1e-12)
+
+
+@pytest.mark.parametrize("encoding", ["ascii", "binary"])
+def test_a_ply_with_a_concave_polygon_face_is_refused_with_the_fix(tmp_path, encoding):
+    """PLY faces are cut into fans the same way: the L-plate's cap as one 8-corner polygon (binary PLY: every face
+    such a polygon, the only kind trimesh reads) is refused naming the face."""
+    vertices = np.array([[x, y, z] for z in (0.0, 0.01) for x, y in L_OUTLINE], np.float32)
+    faces = [list(range(8))[::-1], list(range(8, 16))]
+    header = (f"ply\nformat {'ascii' if encoding == 'ascii' else 'binary_little_endian'} 1.0\nelement vertex 16\n"
+              "property float x\nproperty float y\nproperty float z\nelement face 2\n"
+              "property list uchar int vertex_indices\nend_header\n").encode()
+    if encoding == "ascii":
+        body = "".join(" ".join(map(str, row)) + "\n" for row in vertices.tolist())
+        body += "".join(f"8 {' '.join(map(str, face))}\n" for face in faces)
+        content = header + body.encode()
+    else:
+        content = header + vertices.tobytes() + b"".join(
+            np.uint8(8).tobytes() + np.array(face, "<i4").tobytes() for face in faces)
+    path = tmp_path / "plate.ply"
+    path.write_bytes(content)
+    with pytest.raises(MeshError, match="face number 1 is a polygon of 8 corners that is not convex"):
+        load_fixture(path)

@@ -1,0 +1,95 @@
+"""OBJ and PLY faces of four or more corners that trimesh would cut wrongly: it cuts every such polygon into a fan of
+triangles from its first corner, which is its own surface only where the polygon is convex. A concave one (the top
+of an L-shaped plate as Blender writes it without "Triangulate Faces") gets triangles reaching outside it, a
+surface the part does not have, which can exclude the true pose. Such a file is refused with the fix."""
+
+import re
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+from trimesh.exchange import ply
+
+from fixwizard.errors import MeshError
+
+_VERTEX_LINE = re.compile(rb"^[ \t]*v[ \t]+(\S+)[ \t]+(\S+)[ \t]+(\S+)", re.MULTILINE)
+_POLYGON_LINE = re.compile(rb"^[ \t]*f((?:[ \t]+\S+){4,})[ \t]*$", re.MULTILINE)
+PLY_INDEX_NAMES = ("vertex_indices", "vertex_index")  # what PLY exporters call a face's corner list
+# A corner whose turn is below this share of its edges' and the normal's lengths is straight (rounding), not concave.
+STRAIGHT_SHARE = 1e-9
+
+
+def _is_convex(corners: np.ndarray) -> bool:
+    """Whether a polygon (K, 3 corners in order) turns the same way at every corner about its Newell normal (so a fan
+    from any corner cuts it into its own pieces)."""
+    following = np.roll(corners, -1, axis=0)
+    normal = np.cross(corners, following).sum(axis=0)
+    incoming = corners - np.roll(corners, 1, axis=0)
+    outgoing = following - corners
+    turns = np.cross(incoming, outgoing) @ normal
+    scale = np.linalg.norm(incoming, axis=1) * np.linalg.norm(outgoing, axis=1) * float(np.linalg.norm(normal))
+    return bool(np.all(turns >= -STRAIGHT_SHARE * scale))
+
+
+def _refuse_first_concave(path: Path, vertices: np.ndarray, polygons: Iterable[tuple[str, np.ndarray]]) -> None:
+    """Raise ``MeshError`` for the first of the polygons (where in the file, corner rows of ``vertices``) that has
+    four or more corners and is not convex; polygons with a corner outside ``vertices`` are the reader's to refuse."""
+    for where, rows in polygons:
+        if len(rows) < 4 or np.any(rows < 0) or np.any(rows >= len(vertices)):
+            continue
+        if not _is_convex(vertices[rows]):
+            raise MeshError(f"{path}: the face {where} is a polygon of {len(rows)} corners that is not convex; "
+                            "fixwizard's reader would cut it into triangles reaching outside it, a surface the part "
+                            "does not have. Export the mesh with triangulated faces (in Blender: Triangulate Faces), "
+                            "or as STL")
+
+
+def _obj_polygons(text: bytes) -> tuple[np.ndarray, list[tuple[str, np.ndarray]]]:
+    """The vertices of an OBJ file's text and its faces of four or more corners (empty where it cannot be read:
+    trimesh's reader then says what is wrong)."""
+    polygons = list(_POLYGON_LINE.finditer(text))
+    vertex_lines = list(_VERTEX_LINE.finditer(text)) if polygons else []
+    try:
+        vertices = np.array([[float(value) for value in line.groups()] for line in vertex_lines]).reshape(-1, 3)
+        starts = np.array([line.start() for line in vertex_lines], np.int64)
+        found = []
+        for polygon in polygons:
+            defined = int(np.searchsorted(starts, polygon.start()))  # negative indices count back from here
+            indices = [int(token.split(b"/")[0]) for token in polygon.group(1).split()]
+            rows = np.array([index - 1 if index > 0 else defined + index for index in indices])
+            line = text.count(b"\n", 0, polygon.start()) + 1
+            found.append((f"on line {line}", rows))
+    except ValueError:
+        return np.zeros((0, 3)), []
+    return vertices, found
+
+
+def _ply_polygons(path: Path) -> tuple[np.ndarray, list[tuple[str, np.ndarray]]]:
+    """The vertices of a PLY file and its faces, read by trimesh's own parser before it cuts them (empty where it
+    cannot be read: trimesh's reader then says what is wrong)."""
+    try:
+        with path.open("rb") as file:
+            elements, is_ascii, _ = ply._parse_header(file)
+            (ply._ply_ascii if is_ascii else ply._ply_binary)(elements, file)
+        vertex_data = elements["vertex"]["data"]
+        vertices = np.column_stack([np.asarray(vertex_data[axis], np.float64) for axis in "xyz"])
+        face_data = elements["face"]["data"]
+        names = face_data.keys() if isinstance(face_data, dict) else face_data.dtype.names
+        name = next(name for name in PLY_INDEX_NAMES if name in names)
+        faces = face_data[name] if isinstance(face_data, dict) else face_data[name]["f1"]
+    except Exception:  # noqa: BLE001 - any file trimesh's parser cannot read is its reader's to refuse
+        return np.zeros((0, 3)), []
+    if getattr(faces, "ndim", 1) == 2 and faces.shape[1] < 4:
+        return vertices, []  # triangles only
+    return vertices, [(f"number {number}", np.asarray(rows, np.int64)) for number, rows in enumerate(faces, 1)
+                      if len(rows) >= 4]
+
+
+def refuse_concave_polygons(path: Path) -> None:
+    """Raise ``MeshError`` naming the first face of the OBJ or PLY file at ``path`` that has four or more corners and
+    is not convex (see the module doc); files of triangles and convex polygons pass, and so do other formats."""
+    suffix = path.suffix.lower()
+    if suffix == ".obj":
+        _refuse_first_concave(path, *_obj_polygons(path.read_bytes()))
+    elif suffix == ".ply":
+        _refuse_first_concave(path, *_ply_polygons(path))
