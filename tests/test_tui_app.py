@@ -209,6 +209,34 @@ def test_a_new_tip_calibration_through_the_screens_is_saved_and_finds_the_hidden
     assert session.header["tip"]["calibration"] == str(tmp_path / "calibrations" / "sim-tip.yaml")
 
 
+@pytest.mark.slow
+def test_redo_from_the_pivot_asks_before_dropping_the_calibration_taps(tmp_path):
+    """The result's Redo dropped the pivot poses, the table points and the 56 automatic taps without a word (Esc on
+    the pivot asks before dropping 3 poses); it asks first now, and Stay keeps everything."""
+    async def run():
+        app = FixwizardApp(wizard(tmp_path))
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            await calibrate_by_hand(pilot)
+            await pilot.press("g")
+            await until(pilot, lambda: isinstance(app.screen, CalibrationResultScreen) and not app.screen.busy)
+            result = app.screen
+            await press_button(pilot, "#redo")
+            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            message = text_of(app, "#dialog-message")
+            assert message.startswith(f"Redo drops the {app.cell.hands.pivot_count} pivot poses, the 3 table points "
+                                      "and the 56 automatic taps")
+            await pilot.press("n")
+            await until(pilot, lambda: app.screen is result)
+            assert recorded(result.workflow) == {"table": 16, "tilted": 40}
+            await press_button(pilot, "#redo")
+            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await pilot.press("y")
+            await until(pilot, lambda: isinstance(app.screen, PivotScreen))
+            assert len(app.screen.workflow.poses("pivot")) == 0
+    asyncio.run(run())
+
+
 def recorded(workflow) -> dict[str, int]:
     return {step: len(workflow.poses(step)) for step in ("table", "tilted")}
 

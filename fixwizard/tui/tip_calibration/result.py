@@ -16,6 +16,7 @@ from fixwizard.calibration.verdict import tip_verdict
 from fixwizard.tui.cell import SavedCalibration
 from fixwizard.tui.dismiss import dismiss_when_on_top
 from fixwizard.tui.tip_calibration.step import CalibrationStepScreen
+from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.dialog import Dialog
 from fixwizard.workflow.tip_calibration import summary_lines
 
@@ -90,11 +91,26 @@ class CalibrationResultScreen(CalibrationStepScreen):
         if self.busy:
             return
         if event.button.id == "redo":
-            self.dismiss("redo")
+            self._ask_redo()
         elif event.button.id == "details" and self.calibration is not None:
             self.app.push_screen(Dialog("Tip calibration: details", "\n".join(details_lines(self.calibration))))
         elif event.button.id == "accept":
             self._accept()
+
+    def _ask_redo(self) -> None:
+        """Redo starts again from the pivot with nothing recorded: asks first, as going back does."""
+        workflow = self.workflow
+        recorded = (f"the {len(workflow.poses('pivot'))} pivot poses, the {len(workflow.poses('table_coarse'))} "
+                    f"table points and the {len(workflow.poses('table')) + len(workflow.poses('tilted'))} automatic "
+                    "taps")
+
+        def answered(yes: bool | None) -> None:
+            if yes:
+                self.dismiss("redo")
+
+        self.app.push_screen(Confirm("Redo the tip calibration?", f"Redo drops {recorded}, and starts again from "
+                                     "the pivot; you would record them again.", "Drop them and redo", "Stay"),
+                             answered)
 
     def _accept(self) -> None:
         name = self.query_one("#name", Input).value.strip()
