@@ -22,6 +22,7 @@ from fixwizard.tui.check.screen import CheckScreen
 from fixwizard.tui.launch import simulated_cell
 from fixwizard.tui.start.screen import StartScreen
 from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF
+from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.errors import error_message
 from pilot_wait import until
 from tui_cell import SAMPLE_BOUND_M, ScreenHost, spread_taps, start_fixture, truth_calibration
@@ -230,6 +231,30 @@ def test_the_start_screen_opens_the_check_with_a_stored_tip_calibration(tmp_path
             await pilot.press("escape")
             await until(pilot, lambda: isinstance(app.screen, StartScreen))
             await pilot.press("ctrl+q")
+
+    asyncio.run(run())
+
+
+def test_esc_asks_before_leaving_taps_that_are_not_checked(tmp_path, calibrated):
+    """Esc left a check with taps not checked yet without a word (a check is never resumed: they were to tap again);
+    it asks now, Stay keeps the taps, and once checked Esc leaves at once (the other tests)."""
+    cell, tip = context_for(tmp_path, calibrated)
+
+    async def run():
+        app = CheckHost(lambda: CheckScreen(cell, tip))
+        async with app.run_test(size=SIZE) as pilot:
+            screen = app.screen
+            await tap_suggested(pilot, screen, 1)
+            await pilot.press("escape")
+            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            assert text_of(app.screen, "#dialog-message").startswith("The 1 tap of this check is not checked yet")
+            await pilot.press("n")
+            await until(pilot, lambda: app.screen is screen)
+            assert len(screen._taps()) == 1 and app.results == []
+            await pilot.press("escape")
+            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await pilot.press("y")
+            await until(pilot, lambda: app.results == [None])
 
     asyncio.run(run())
 

@@ -29,6 +29,7 @@ from fixwizard.tui import keys
 from fixwizard.tui.cell import Cell, SavedCalibration
 from fixwizard.tui.dismiss import dismiss_when_on_top
 from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF, tap_and_record
+from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.errors import error_message
 from fixwizard.tui.widgets.key_footer import KeyFooter
 from fixwizard.tui.widgets.taps_table import TapsTable
@@ -232,6 +233,23 @@ class CheckScreen(Screen[None]):
                                       "t to tap."))
 
     def action_back(self) -> None:
+        """Back to the start screen; asks first while taps are not checked (a check is never resumed)."""
+        count = len(self._taps())
+        if count and self.result is None:
+            def answered(leave: bool | None) -> None:
+                if leave:
+                    self._back()
+
+            one = count == 1
+            taps = f"{count} tap{'' if one else 's'} of this check {'is' if one else 'are'}"
+            them = "it" if one else "them"
+            self.app.push_screen(Confirm("Leave the check?", f"The {taps} not checked yet, and a check is not "
+                                         f"resumed: you would tap again. Stay and press {keys.name(keys.CHECK)} to "
+                                         f"check {them} first.", "Leave", "Stay"), answered)
+            return
+        self._back()
+
+    def _back(self) -> None:
         self._cancel.set()
         self._run(lambda: self.cell.robot.freedrive(False), lambda _: self._leave(),
                   on_failed=lambda _: self._leave())
