@@ -1,7 +1,10 @@
-"""OBJ and PLY faces of four or more corners that trimesh would cut wrongly: it cuts every such polygon into a fan of
-triangles from its first corner, which is its own surface only where the polygon is convex. A concave one (the top
-of an L-shaped plate as Blender writes it without "Triangulate Faces") gets triangles reaching outside it, a
-surface the part does not have, which can exclude the true pose. Such a file is refused with the fix."""
+"""Face lists of OBJ and PLY files that trimesh would read as another surface, refused with the fix.
+
+Faces of four or more corners: trimesh cuts every such polygon into a fan of triangles from its first corner, which
+is its own surface only where the polygon is convex. A concave one (the top of an L-shaped plate as Blender writes
+it without "Triangulate Faces") gets triangles reaching outside it, a surface the part does not have, which can
+exclude the true pose. OBJ corner number 0: OBJ counts vertices from 1 (negative numbers count back), and trimesh
+read a 0 as some other vertex without a word."""
 
 import re
 from collections.abc import Iterable
@@ -14,6 +17,8 @@ from fixwizard.errors import MeshError
 
 _VERTEX_LINE = re.compile(rb"^[ \t]*v[ \t]+(\S+)[ \t]+(\S+)[ \t]+(\S+)", re.MULTILINE)
 _POLYGON_LINE = re.compile(rb"^[ \t]*f((?:[ \t]+\S+){4,})[ \t]*$", re.MULTILINE)
+_ZERO_TOKEN = re.compile(rb"[ \t][-+]?0+(?=[/ \t\r\n#]|$)")  # a number 0 in any line
+_ZERO_CORNER = re.compile(rb"^[ \t]*f[ \t][^\n#]*?(?<=[ \t])[-+]?0+(?=[/ \t\r\n#]|$)", re.MULTILINE)
 PLY_INDEX_NAMES = ("vertex_indices", "vertex_index")  # what PLY exporters call a face's corner list
 # A corner whose turn is below this share of its edges' and the normal's lengths is straight (rounding), not concave.
 STRAIGHT_SHARE = 1e-9
@@ -85,11 +90,25 @@ def _ply_polygons(path: Path) -> tuple[np.ndarray, list[tuple[str, np.ndarray]]]
                       if len(rows) >= 4]
 
 
+def _face_naming_vertex_zero(text: bytes) -> int | None:
+    """The number of the first line of an OBJ file's text that is a face with a corner numbered 0 (before any
+    comment), None when there is none."""
+    if _ZERO_TOKEN.search(text) is None:  # most files: no number 0 anywhere, found at the speed of a plain search
+        return None
+    zero = _ZERO_CORNER.search(text)
+    return None if zero is None else text.count(b"\n", 0, zero.start()) + 1
+
+
 def refuse_concave_polygons(path: Path) -> None:
     """Raise ``MeshError`` naming the first face of the OBJ or PLY file at ``path`` that has four or more corners and
-    is not convex (see the module doc); files of triangles and convex polygons pass, and so do other formats."""
+    is not convex, or an OBJ face naming vertex 0 (see the module doc); other files pass, and so do other formats."""
     suffix = path.suffix.lower()
     if suffix == ".obj":
-        _refuse_first_concave(path, *_obj_polygons(path.read_bytes()))
+        text = path.read_bytes()
+        line = _face_naming_vertex_zero(text)
+        if line is not None:
+            raise MeshError(f"{path}: the face on line {line} names vertex 0, which an OBJ file does not have (it "
+                            "counts vertices from 1); export the mesh again from CAD")
+        _refuse_first_concave(path, *_obj_polygons(text))
     elif suffix == ".ply":
         _refuse_first_concave(path, *_ply_polygons(path))

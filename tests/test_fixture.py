@@ -287,3 +287,12 @@ def test_a_ply_with_a_concave_polygon_face_is_refused_with_the_fix(tmp_path, enc
     path.write_bytes(content)
     with pytest.raises(MeshError, match="face number 1 is a polygon of 8 corners that is not convex"):
         load_fixture(path)
+
+
+@pytest.mark.parametrize("face", ["f 0 1 2", "f 1 2 0/1/1", "f -0 1 2\r"])
+def test_an_obj_face_naming_vertex_zero_is_refused(tmp_path, face):
+    """OBJ counts vertices from 1: trimesh read a 0 as another vertex and dropped one without a word."""
+    path = tmp_path / "part.obj"
+    path.write_text(f"v 0 0 0\nv 0.1 0 0\nv 0 0.1 0\nv 0 0 0.1\n{face}\nf 1 2 3 # 0 in a comment is no corner\n")
+    with pytest.raises(MeshError, match="the face on line 5 names vertex 0, which an OBJ file does not have"):
+        load_fixture(path)
