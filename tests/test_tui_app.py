@@ -2,8 +2,10 @@
 folders): the start screen, a whole new tip calibration, cancel, protective stop, STOP and resume."""
 
 import asyncio
+import contextlib
 import dataclasses
 import shutil
+from collections.abc import AsyncIterator
 from pathlib import Path
 
 import numpy as np
@@ -91,6 +93,18 @@ async def calibrate_by_hand(pilot: Pilot) -> None:
         await until(pilot, lambda: not app.screen.busy)
     await pilot.press("n")
     await until(pilot, lambda: isinstance(app.screen, AutoTapsScreen))
+
+
+@contextlib.asynccontextmanager
+async def at_the_automatic_taps(tmp_path: Path) -> AsyncIterator[tuple[Cell, FixwizardApp, Pilot]]:
+    """The wizard on the simulated cell at its automatic calibration taps (pivot and table points by the SIMULATED
+    hands)."""
+    context = wizard(tmp_path)
+    app = FixwizardApp(context)
+    async with app.run_test(size=SIZE) as pilot:
+        await at_start(pilot)
+        await calibrate_by_hand(pilot)
+        yield context, app, pilot
 
 
 async def rearm(pilot: Pilot) -> None:
@@ -330,6 +344,20 @@ def test_a_stop_as_a_table_point_tap_ends_leaves_freedrive_off_until_re_armed(tm
     asyncio.run(run())
 
 
+def test_a_protective_stop_during_the_automatic_taps_says_to_re_arm_before_going_on(tmp_path):
+    """The step said 'Press g to continue' after a stop, and g is refused until the wizard is re-armed."""
+    async def run():
+        async with at_the_automatic_taps(tmp_path) as (context, app, pilot):
+            screen = app.screen
+            context.robot.inject_fault("protective_stop_during_tap")
+            await pilot.press("g")
+            await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+            state = str(screen.query_one("#auto-state", Static).render())
+            assert state.startswith("Stopped: ") and state.endswith(
+                "Once the cell is checked and clear, re-arm (Ctrl+R), then press g to continue.")
+    asyncio.run(run())
+
+
 class StopCounter:
     """The simulated cell, counting ``stop`` calls."""
 
@@ -373,11 +401,7 @@ def test_the_stop_key_halts_the_robot_from_any_screen_and_keeps_the_taps(tmp_pat
 def test_the_status_line_says_moving_while_the_simulated_arm_moves_and_only_then(tmp_path):
     """On the simulated cell it said idle through the automatic taps (a UR arm says moving)."""
     async def run():
-        context = wizard(tmp_path)
-        app = FixwizardApp(context)
-        async with app.run_test(size=SIZE) as pilot:
-            await at_start(pilot)
-            await calibrate_by_hand(pilot)
+        async with at_the_automatic_taps(tmp_path) as (context, app, pilot):
             screen = app.screen
             await until(pilot, lambda: " | connected | idle | " in status_of(app))
             context.robot.pace_s = 0.3

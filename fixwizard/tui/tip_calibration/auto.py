@@ -7,6 +7,7 @@ from textual.app import ComposeResult
 from textual.containers import Horizontal
 from textual.widgets import ProgressBar, Static
 
+from fixwizard.robot.base import ProtectiveStop
 from fixwizard.tui import keys
 from fixwizard.tui.dismiss import dismiss_when_on_top
 from fixwizard.tui.tip_calibration.step import CalibrationStepScreen
@@ -111,8 +112,11 @@ class AutoTapsScreen(CalibrationStepScreen):
             dismiss_when_on_top(self, "next")
         elif isinstance(outcome, Cancelled):
             self._show(f"{outcome}. Press g to continue.")
+        elif services(self).stopped or isinstance(outcome, ProtectiveStop):  # g is refused until re-armed
+            self._show(f"Stopped: {outcome}\nOnce the cell is checked and clear, re-arm ({keys.name(keys.REARM)}), "
+                       f"then press {keys.name(keys.GO)} to continue.")
         else:
-            self._show(f"Stopped: {outcome}\nPress g to continue once the cell is ready.")
+            self._show(f"Stopped: {outcome}\nPress {keys.name(keys.GO)} to continue once the cell is ready.")
 
     def _progress(self, step: Step, done: int) -> None:
         if self.is_attached:
