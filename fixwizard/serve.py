@@ -399,7 +399,9 @@ class LogFormatter(logging.Formatter):
 
 
 def _log_handlers(log: str | None) -> list[logging.Handler]:
-    """The handlers of the log: stderr, and the ``--log`` file when given; added to ``LOG``."""
+    """The handlers of the log: stderr, and the ``--log`` file when given; added to ``LOG``, which then writes to
+    them alone (a handler above it, with a formatter of its own, would get a caller's raw text); ``_close_log``
+    ends them."""
     handlers: list[logging.Handler] = [logging.StreamHandler(sys.stderr)]
     if log:
         handlers.append(LogFile(log))
@@ -407,7 +409,16 @@ def _log_handlers(log: str | None) -> list[logging.Handler]:
         each.setFormatter(LogFormatter("%(asctime)s %(message)s"))
         LOG.addHandler(each)
     LOG.setLevel(logging.INFO)
+    LOG.propagate = False
     return handlers
+
+
+def _close_log(handlers: list[logging.Handler]) -> None:
+    """Remove and close the handlers ``_log_handlers`` added; ``LOG`` passes its records on again."""
+    for each in handlers:
+        LOG.removeHandler(each)
+        each.close()
+    LOG.propagate = True
 
 
 def serve_command(args: argparse.Namespace) -> int:
@@ -422,9 +433,7 @@ def serve_command(args: argparse.Namespace) -> int:
     try:
         _serve(service, args.host, args.port)
     finally:
-        for each in handlers:
-            LOG.removeHandler(each)
-            each.close()
+        _close_log(handlers)
     print("fixwizard serve: stopped", flush=True)
     return 0
 

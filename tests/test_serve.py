@@ -29,6 +29,7 @@ from fixwizard.serve import (
     FixtureServer,
     FixtureService,
     LogFile,
+    _close_log,
     _log_handlers,
     make_server,
     parse_duration_s,
@@ -192,9 +193,7 @@ def test_a_report_file_name_that_is_not_utf8_or_holds_a_control_character_gives_
         assert fault.faultCode == 2 and "(jig\ufffd.yaml) is ambiguous" in fault.faultString
         assert "(pl\ufffdte.yaml) comes from the simulated cell" in fault_of(lambda: fw.get_pose("plate")).faultString
     finally:
-        for handler in handlers:
-            LOG.removeHandler(handler)
-            handler.close()
+        _close_log(handlers)
     log = (tmp_path / "serve.log").read_text(encoding="utf-8")
     assert "get_pose('plate') -> refused (3): fixwizard: the newest report of 'plate' (pl\ufffdte.yaml)" in log
     assert "(jig\\x01.yaml) is ambiguous" in log and "Logging error" not in capsys.readouterr().err
@@ -416,9 +415,7 @@ def test_a_caller_cannot_forge_or_flood_log_lines(cell, tmp_path):
         long_fault = fault_of(lambda: fw.get_pose("x" * 100_000))
     finally:
         served.stop()
-        for handler in handlers:
-            LOG.removeHandler(handler)
-            handler.close()
+        _close_log(handlers)
     lines = (tmp_path / "serve.log").read_text().splitlines()
     assert all(re.match(r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3} ", line) for line in lines)
     calls = [line for line in lines if "get_pose(" in line]
