@@ -60,7 +60,7 @@ def test_sampling_on_a_ur_arm_taps_stops_rearms_and_reconnects(wizard, controlle
     async def run():
         app = FixwizardApp(wizard.cell, sampling=wizard.sampling)
         robot = wizard.robot
-        async with app.run_test(size=SIZE) as pilot:
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
             await until(pilot, lambda: (screen := sampling_of(app)) is not None and screen.is_mounted
                         and not screen.busy and controller.in_freedrive())
             screen = sampling_of(app)
@@ -113,6 +113,9 @@ def test_sampling_on_a_ur_arm_taps_stops_rearms_and_reconnects(wizard, controlle
             app.screen.query_one("#reconnect", Button).press()
             await until(pilot, lambda: app.robot_status is not None and app.robot_status.connected, 15.0)
             await until(pilot, lambda: app.screen is screen and not screen.busy)
+            await until(pilot, lambda: any("freedrive is off, press f" in str(note.message)
+                                           for note in app._notifications))
+            assert not controller.in_freedrive()  # a fault ended it: nothing starts by itself
             await pilot.press(keys.FREEDRIVE.keys)
             await until(pilot, lambda: controller.in_freedrive() and not screen.busy, 10.0)
             controller.move_by_hand(flange_above_surface(0.006))
@@ -128,7 +131,7 @@ def test_a_link_lost_while_the_operator_guides_the_arm_is_announced_with_reconne
     died: the wizard says so by itself, once the watchdog has ended freedrive, and offers Reconnect."""
     async def run():
         app = FixwizardApp(wizard.cell, sampling=wizard.sampling)
-        async with app.run_test(size=SIZE) as pilot:
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
             await until(pilot, lambda: (screen := sampling_of(app)) is not None and screen.is_mounted
                         and not screen.busy and controller.in_freedrive())
             await until(pilot, lambda: app.robot_status is not None and app.robot_status.connected)

@@ -273,13 +273,20 @@ class FixwizardApp(App[None]):
     def _recover(self, recovery: Recovery | None) -> None:
         robot, hands = self.cell.robot, self.cell.hands
         if recovery == "reconnect":
-            in_thread(self, robot.connect, lambda _: self.notify("Connected to the robot again."))
+            in_thread(self, robot.connect, lambda _: self._reconnected())
         elif recovery == "unlock" and hands is not None:
             in_thread(self, hands.cell.unlock, lambda _: self.notify("SIMULATED: protective stop unlocked."))
         elif recovery == "unlock":
             unlock: Callable[[], None] | None = getattr(robot, "unlock_protective_stop", None)
             if unlock is not None:
                 in_thread(self, unlock, lambda _: self.notify("Protective stop unlocked. Check the cell, then retry."))
+
+    def _reconnected(self) -> None:
+        """Say so; where the operator guides the arm by hand, that freedrive is off until turned on (the lost link
+        ended it, and after a fault nothing starts by itself)."""
+        by_hand = getattr(self.screen, "action_freedrive", None) is not None
+        self.notify("Connected to the robot again" + (f": freedrive is off, press {keys.name(keys.FREEDRIVE)} to "
+                                                       "guide the arm by hand." if by_hand else "."))
 
     # --- blocking steps of the flow ---
 
