@@ -20,8 +20,11 @@ _POLYGON_LINE = re.compile(rb"^[ \t]*f((?:[ \t]+\S+){4,})[ \t]*$", re.MULTILINE)
 _ZERO_TOKEN = re.compile(rb"[ \t][-+]?0+(?=[/ \t\r\n#]|$)")  # a number 0 in any line
 _ZERO_CORNER = re.compile(rb"^[ \t]*f[ \t][^\n#]*?(?<=[ \t])[-+]?0+(?=[/ \t\r\n#]|$)", re.MULTILINE)
 PLY_INDEX_NAMES = ("vertex_indices", "vertex_index")  # what PLY exporters call a face's corner list
-# A corner whose turn is below this share of its edges' and the normal's lengths is straight (rounding), not concave.
-STRAIGHT_SHARE = 1e-9
+# A corner whose turn is below this share of its edges' and the normal's lengths is straight: the rounding of the
+# turn's two products (a few units of float64's eps each), no more (it was 1e-9). A concave corner any larger is
+# refused; the fan of a polygon let through leaves its outline by at most about this share of its edges (4e-15 m for
+# a 1 m edge), where the turn's sign cannot be told in float64.
+STRAIGHT_SHARE = 16 * float(np.finfo(np.float64).eps)
 
 
 def _is_convex(corners: np.ndarray) -> bool:
