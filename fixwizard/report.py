@@ -20,6 +20,7 @@ import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 import yaml
@@ -34,6 +35,8 @@ from fixwizard.solver.estimates import Bounds
 from fixwizard.solver.solve import Solution
 from fixwizard.solver.verdict import STATUSES
 from fixwizard.yamlfile import load_document
+
+T = TypeVar("T")
 
 SCHEMA = "fixwizard.report/2"
 SCHEMA_V1 = "fixwizard.report/1"
@@ -317,12 +320,19 @@ class Report:
                                                  self.max_point_displacement_m)
 
 
+def _not_bool(value: T) -> T:
+    """``value`` unless it is or holds a YAML boolean (``true`` would be read as the number 1): ``TypeError`` then."""
+    if isinstance(value, bool) or (isinstance(value, list) and any(isinstance(item, bool) for item in value)):
+        raise TypeError("a boolean is no number")
+    return value
+
+
 def _pose_from(section: object, path: Path, where: str) -> np.ndarray:
     if not isinstance(section, dict):
         raise InputError(f"{path}: {where} needs position_m and rotvec_rad as three numbers each")
     try:
-        position = np.array(section["position_m"], float).reshape(3)
-        rotvec = np.array(section["rotvec_rad"], float).reshape(3)
+        position = np.array(_not_bool(section["position_m"]), float).reshape(3)
+        rotvec = np.array(_not_bool(section["rotvec_rad"]), float).reshape(3)
     except (KeyError, TypeError, ValueError) as error:
         raise InputError(f"{path}: {where} needs position_m and rotvec_rad as three numbers each") from error
     if not (np.all(np.isfinite(position)) and np.all(np.isfinite(rotvec))):
@@ -333,8 +343,8 @@ def _pose_from(section: object, path: Path, where: str) -> np.ndarray:
 def _figures_from(section: object, path: Path, where: str) -> list[float]:
     """(position_m, rotation_deg, max_point_displacement_m) of a bounds-like section, finite and not negative."""
     try:
-        figures = [float(section[key]) for key in ("position_m", "rotation_deg",  # type: ignore[index]
-                                                   "max_point_displacement_m")]
+        figures = [float(_not_bool(section[key])) for key in ("position_m", "rotation_deg",  # type: ignore[index]
+                                                              "max_point_displacement_m")]
     except (KeyError, TypeError, ValueError) as error:
         raise InputError(f"{path}: {where} need position_m, rotation_deg and max_point_displacement_m") from error
     if not all(math.isfinite(value) and value >= 0 for value in figures):
@@ -357,7 +367,7 @@ def _created(data: dict, path: Path) -> dt.datetime:
 
 def _positive_input(inputs: dict, key: str, path: Path, allow_zero: bool = False) -> float:
     try:
-        value = float(inputs[key])
+        value = float(_not_bool(inputs[key]))
     except (KeyError, TypeError, ValueError) as error:
         raise InputError(f"{path}: inputs.{key} must be a length in metres") from error
     if not math.isfinite(value) or value < 0 or (value == 0 and not allow_zero):

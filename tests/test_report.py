@@ -205,6 +205,13 @@ V2_START = ("schema: fixwizard.report/2\nsimulated: false\nstatus: unique\ncreat
     (V2_START + "pose: {position_m: [0, 0, 0], rotvec_rad: [0, 0, 0], guaranteed: {position_m: 0.001, rotation_deg: 1,"
      " max_point_displacement_m: 0.002}}\nbounds: {center: {position_m: [0, 0, 0], rotvec_rad: [0, 0, 0]},"
      f" position_m: -1{'0' * 400}, rotation_deg: 1, max_point_displacement_m: 0.002}}\n", "finite numbers"),
+    (V2_START + "pose: {position_m: [true, 0, 0], rotvec_rad: [0, 0, 0], guaranteed: {position_m: 0.001, "
+     "rotation_deg: 1, max_point_displacement_m: 0.002}}\nbounds: {center: {position_m: [0, 0, 0], rotvec_rad: [0, 0,"
+     " 0]}, position_m: 0.001, rotation_deg: 1, max_point_displacement_m: 0.002}\n", "three numbers each"),
+    (V2_START + "pose: {position_m: [0, 0, 0], rotvec_rad: [0, 0, 0], guaranteed: {position_m: yes, rotation_deg: 1,"
+     " max_point_displacement_m: 0.002}}\nbounds: {center: {position_m: [0, 0, 0], rotvec_rad: [0, 0, 0]},"
+     " position_m: 0.001, rotation_deg: 1, max_point_displacement_m: 0.002}\n", "need position_m, rotation_deg"),
+    (V2_START.replace("sample_bound_m: 0.001", "sample_bound_m: true"), "must be a length in metres"),
     ("{{{", "is not valid YAML: .* at line 1")])
 def test_damaged_reports_are_refused_with_a_reason(tmp_path, text, match):
     path = tmp_path / "bad.yaml"
