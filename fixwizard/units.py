@@ -1,4 +1,4 @@
-"""Parsing of lengths typed by people ("1mm", "0.003 m", "3") into metres, and how far a robot reaches."""
+"""Parsing of lengths typed by people ("1mm", "0.003 m", "3") into metres, and how far a robot and its tool reach."""
 
 import math
 import re
@@ -8,6 +8,7 @@ from fixwizard.errors import InputError
 _LENGTH = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(mm|m)?\s*$")
 _METRES_PER_UNIT = {"m": 1.0, "mm": 1e-3}
 MAX_REACH_M = 20.0  # no robot arm reaches farther from its base: a position beyond is millimetres read as metres
+MAX_TOOL_M = 2.0  # no tool holds its ball farther from the flange: a tip beyond is millimetres read as metres
 
 
 def parse_length_m(text: str, default_unit: str = "m") -> float:

@@ -178,6 +178,19 @@ def test_import_poses_refuses_poses_in_millimetres(tmp_path, capsys):
     assert not (tmp_path / "p.yaml").exists()
 
 
+@pytest.mark.parametrize("tip", ["0\n0\n50\n0\n0\n0\n", "1e308\n0\n0\n0\n0\n0\n"])
+def test_import_poses_refuses_a_tip_farther_than_a_tool_holds_it(tmp_path, capsys, tip):
+    """A tip in millimetres (50 for 50 mm), or an absurd one, wrote ball centres metres off; solve refused them only
+    later, saying the taps looked like millimetres."""
+    _write_poses(tmp_path / "poses", [[0.4, 0.0, 0.2, 0.0, 3.14159, 0.0], [0.5, 0.1, 0.2, 0.0, 3.14159, 0.0]])
+    (tmp_path / "tip.pose").write_text(tip)
+    assert main(["import-poses", str(tmp_path / "poses"), "--tip", str(tmp_path / "tip.pose"), "-o",
+                 str(tmp_path / "p.yaml")]) == 1
+    err = capsys.readouterr().err
+    assert "from the flange, farther than any tool holds it" in err and "Traceback" not in err
+    assert not (tmp_path / "p.yaml").exists()
+
+
 @pytest.mark.parametrize("text, read", [
     ("\ufeff0.4\n0\n0.2\n0\n3.14159\n0\n", None),  # saved by Notepad with a byte-order mark: read
     ("0.4\r\n0\r\n0.2\r\n0\r\n3.14159\r\n0\r\n", None),  # Windows line ends: read

@@ -9,7 +9,7 @@ from fixwizard.calibration.store import load_calibration
 from fixwizard.calibration.taps import ball_centres_m
 from fixwizard.errors import InputError
 from fixwizard.geometry.se3 import read_pose_dir, read_pose_file
-from fixwizard.units import MAX_REACH_M
+from fixwizard.units import MAX_REACH_M, MAX_TOOL_M
 
 
 @dataclass(frozen=True)
@@ -22,15 +22,23 @@ class Tip:
 
 
 def load_tip(path: str | Path) -> Tip:
-    """Tip from a ``.pose`` file (its translation) or a ``fixwizard.tip/1`` calibration YAML."""
+    """Tip from a ``.pose`` file (its translation) or a ``fixwizard.tip/1`` calibration YAML; ``InputError`` for a
+    ball farther from the flange than any tool holds it (``MAX_TOOL_M``: millimetres read as metres)."""
     path = Path(path)
     if path.suffix.lower() == ".pose":
-        return Tip(read_pose_file(path)[:3, 3])
-    if path.suffix.lower() in (".yaml", ".yml"):
+        tip = Tip(read_pose_file(path)[:3, 3])
+    elif path.suffix.lower() in (".yaml", ".yml"):
         calibration = load_calibration(path)
-        return Tip(np.asarray(calibration.tcp_p_tip_m, float), calibration.ball_diameter_m,
-                   calibration.sample_bound_m)
-    raise InputError(f"{path} is neither a .pose file nor a tip calibration (.yaml); give one of those")
+        tip = Tip(np.asarray(calibration.tcp_p_tip_m, float), calibration.ball_diameter_m,
+                  calibration.sample_bound_m)
+    else:
+        raise InputError(f"{path} is neither a .pose file nor a tip calibration (.yaml); give one of those")
+    with np.errstate(over="ignore"):  # an absurd tip is inf m long
+        length_m = float(np.linalg.norm(tip.tcp_p_tip_m))
+    if not length_m <= MAX_TOOL_M:
+        raise InputError(f"{path} puts the ball {length_m:.3g} m from the flange, farther than any tool holds it: "
+                         "a tip holds metres (as UR writes them); if it is in millimetres, divide x y z by 1000")
+    return tip
 
 
 def import_pose_dir(directory: str | Path, tip: Tip,
