@@ -226,6 +226,32 @@ def test_re_arm_pressed_twice_asks_once_and_a_stop_meanwhile_takes_the_question_
     asyncio.run(run())
 
 
+def test_a_yes_to_a_re_arm_question_asked_before_a_stop_under_the_help_re_arms_nothing(tmp_path):
+    """The help over the re-arm question, STOP pressed there (the question is not on top, so it stays open), the help
+    closed, then yes: the answer was about the cell before that STOP; the wizard stays STOPPED and says so."""
+    async def run():
+        app = FixwizardApp(wizard(tmp_path))
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await at_start(pilot)
+            await pilot.press("f12")
+            await until(pilot, lambda: app.stopped)
+            await pilot.press("ctrl+r")
+            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            app.action_help()  # a dialog over the question, however it came there
+            await until(pilot, lambda: isinstance(app.screen, HelpScreen))
+            await pilot.press("f12")
+            await pilot.press("escape")
+            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await pilot.press("y")
+            await until(pilot, lambda: not isinstance(app.screen, Confirm))
+            await pilot.pause()
+            assert app.stopped
+            assert any("A STOP came after the re-arm question" in str(note.message) for note in app._notifications)
+            await rearm(pilot)
+            assert not app.stopped
+    asyncio.run(run())
+
+
 def test_a_protective_stop_makes_the_wizard_stopped_and_rearm_waits_for_the_unlock(tmp_path):
     async def run():
         context = wizard_context(tmp_path)

@@ -72,6 +72,7 @@ class FixwizardApp(App[None]):
         self._quitting = False  # once set, errors of the steps being stopped are not shown (the app is closing)
         self._left_session: Path | None = None  # the session the operator left sampling from (resumable)
         self._link_up = False  # the robot's latest status said connected
+        self._stops = 0  # STOP presses, so that a re-arm question asked before one re-arms nothing
 
     def on_mount(self) -> None:
         self.screen_change_signal.subscribe(self, self._frame_screen)
@@ -153,8 +154,9 @@ class FixwizardApp(App[None]):
             cancel.set()
         in_thread(self, self.cell.robot.stop)
         self.stopped = True
+        self._stops += 1  # a re-arm question asked before is answered about the cell before this STOP
         if isinstance(self.screen, Confirm) and self.screen.title_text == REARM_QUESTION:
-            self.screen.dismiss(False)  # its answer would be about the cell before this STOP
+            self.screen.dismiss(False)
         self.notify(f"STOP sent: the robot halts. Check the cell, then re-arm with {keys.name(keys.REARM)}.",
                     severity="warning")
 
@@ -187,8 +189,13 @@ class FixwizardApp(App[None]):
                         f"{unlock}, then re-arm.", severity="warning")
             return
 
+        stops = self._stops
+
         def answered(yes: bool | None) -> None:
-            if yes:
+            if yes and stops != self._stops:  # under another dialog (the help) when that STOP came
+                self.notify(f"A STOP came after the re-arm question: check the cell, then re-arm again with "
+                            f"{keys.name(keys.REARM)}.", severity="warning")
+            elif yes:
                 self.stopped = False
                 freedrive = getattr(self.screen, "action_freedrive", None)  # a STOP ended the screen's freedrive
                 if freedrive is not None:
