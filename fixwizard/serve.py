@@ -27,11 +27,13 @@ and the log on stderr go on (``LogFile``).
 
 import argparse
 import contextlib
+import errno
 import inspect
 import logging
 import math
 import os
 import re
+import socket
 import socketserver
 import sys
 import threading
@@ -311,9 +313,17 @@ def _xml_safe(value: Any) -> Any:
     return value
 
 
+class FixtureServer6(FixtureServer):
+    """``FixtureServer`` on an IPv6 address (``--host ::1``, ``--host ::``)."""
+
+    address_family = socket.AF_INET6
+
+
 def make_server(service: FixtureService, host: str, port: int) -> FixtureServer:
-    """A server (bound, not yet serving) offering the service's functions."""
-    server = FixtureServer((host, port), requestHandler=_Handler, logRequests=False, allow_none=False)
+    """A server (bound, not yet serving) offering the service's functions, on IPv4 or IPv6 as ``host`` is."""
+    family = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0][0]
+    server_class = FixtureServer6 if family == socket.AF_INET6 else FixtureServer
+    server = server_class((host, port), requestHandler=_Handler, logRequests=False, allow_none=False)
     for function in FixtureService.FUNCTIONS:
         server.register_function(_logged(service, function), function)
     server.register_introspection_functions()
@@ -444,9 +454,12 @@ def _serve(service: FixtureService, host: str, port: int) -> None:
         server = make_server(service, host, port)
     except (OSError, OverflowError) as error:
         problem = getattr(error, "strerror", None) or error
-        raise InputError(f"cannot serve on {host}:{port}: {problem} (another fixwizard "
-                         "serve? give another --port, or --host an address of this PC)") from None
+        fix = ("another fixwizard serve? give another --port" if getattr(error, "errno", None) == errno.EADDRINUSE
+               else "give --host an address of this PC, e.g. 0.0.0.0 for every one")
+        raise InputError(f"cannot serve on {host}:{port}: {problem} ({fix})") from None
     bound_host, bound_port = str(server.server_address[0]), int(server.server_address[1])
+    if ":" in bound_host:
+        bound_host = f"[{bound_host}]"  # as a URL writes an IPv6 address
     try:
         names = service.list_fixtures()
     except Refused as refused:

@@ -392,6 +392,23 @@ def test_the_serve_command_refuses_what_cannot_work(cell, tmp_path, capsys):
     assert main(["serve", "--reports", str(cell), "--max-age", "forever"]) == 1
     err = capsys.readouterr().err
     assert "cannot read the age" in err and "Traceback" not in err
+    assert main(["serve", "--reports", str(cell), "--host", "192.0.2.1", "--port", "0"]) == 1
+    err = capsys.readouterr().err
+    assert "give --host an address of this PC" in err and "another fixwizard serve" not in err
+
+
+def test_serve_takes_an_ipv6_address(cell):
+    """--host ::1 was refused ("Address family not supported", with a hint about another serve); an address that is
+    not this PC's (192.0.2.1 above) is told to give one that is."""
+    server = make_server(FixtureService(cell, parse_duration_s("1d")), "::1", 0)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        fw = xmlrpc.client.ServerProxy(f"http://[::1]:{server.server_address[1]}")
+        assert fw.is_usable("bracket")
+    finally:
+        server.shutdown()
+        server.server_close()
 
 
 @pytest.fixture
