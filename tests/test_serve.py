@@ -400,6 +400,11 @@ def test_the_serve_command_refuses_what_cannot_work(cell, tmp_path, capsys):
 def test_serve_takes_an_ipv6_address(cell):
     """--host ::1 was refused ("Address family not supported", with a hint about another serve); an address that is
     not this PC's (192.0.2.1 above) is told to give one that is."""
+    try:
+        with socket.socket(socket.AF_INET6) as probe:
+            probe.bind(("::1", 0))
+    except OSError:
+        pytest.skip("this machine has no IPv6 loopback")
     server = make_server(FixtureService(cell, parse_duration_s("1d")), "::1", 0)
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
