@@ -198,7 +198,9 @@ def test_re_arm_pressed_twice_asks_once_and_a_stop_meanwhile_takes_the_question_
         return [screen.title_text for screen in app.screen_stack if isinstance(screen, Confirm)]
 
     async def run():
-        app = FixwizardApp(wizard(tmp_path, pace_s=0.02))
+        # 0.1 s a simulated motion: the automatic taps (112 motions) outlast both Ctrl+Q; at 0.02 s they could end
+        # between the two on a quiet machine, and the second quit at once
+        app = FixwizardApp(wizard(tmp_path, pace_s=0.1))
         async with app.run_test(size=SIZE) as pilot:
             await at_start(pilot)
             await pilot.press("f12")
