@@ -66,9 +66,16 @@ async def choose(pilot: Pilot, selector: str, value: str) -> None:
 
 
 async def press_button(pilot: Pilot, selector: str) -> None:
-    """Tab to the button (once it is mounted) and press Enter."""
+    """Tab to the button (once it is mounted) and press Enter once it has the focus (a dialog just closed gives the
+    focus back to the widget it had a moment later: an Enter pressed before went there)."""
     await until(pilot, lambda: bool(pilot.app.screen.query(selector)))
-    pilot.app.screen.query_one(selector, Button).focus()
+    button = pilot.app.screen.query_one(selector, Button)
+    button.focus()
+    await until(pilot, lambda: button.has_focus)
+    await pilot.pause()
+    if not button.has_focus:
+        button.focus()
+        await until(pilot, lambda: button.has_focus)
     await pilot.press("enter")
 
 
