@@ -73,6 +73,8 @@ def test_sampling_on_a_ur_arm_taps_stops_rearms_and_reconnects(wizard, controlle
             np.testing.assert_allclose(wizard.session.taps[0].base_T_tcp, controller.contact_poses()[-1], atol=2e-6)
             assert wizard.session.taps[0].base_T_tcp[2, 3] == pytest.approx(TIP_OFFSET_M, abs=1e-3)  # on the surface
 
+            # 30 mm to the surface at 10 mm/s: seen moving by the app's status poll (every 0.5 s) even under load
+            controller.move_by_hand(flange_above_surface(0.03))
             await pilot.press(TAP_KEY)
             await until(pilot, lambda: app.robot_status is not None and app.robot_status.mode == "moving", 10.0)
             await pilot.press(STOP_KEY)
@@ -98,8 +100,8 @@ def test_sampling_on_a_ur_arm_taps_stops_rearms_and_reconnects(wizard, controlle
                 await pilot.press(keys.FREEDRIVE.keys)
             await until(pilot, lambda: controller.in_freedrive(), 10.0)
 
-            controller.move_by_hand(flange_above_surface(0.02))
-            await pilot.press(TAP_KEY)  # 20 mm to the surface at 10 mm/s: the link dies on the way
+            controller.move_by_hand(flange_above_surface(0.03))
+            await pilot.press(TAP_KEY)  # 30 mm to the surface at 10 mm/s: the link dies on the way
             await until(pilot, lambda: app.robot_status is not None and app.robot_status.mode == "moving", 10.0)
             os.kill(robot.link_pid, signal.SIGKILL)  # a native crash in ur_rtde
             await until(pilot, lambda: isinstance(app.screen, ErrorModal) and bool(app.screen.query("#reconnect")),
