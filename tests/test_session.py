@@ -231,7 +231,7 @@ def test_a_full_disk_mid_record_loses_nothing_and_the_next_tap_does_not_follow_t
     for index in range(10):
         session.record_tap(pose(index))
     saved = session.path.read_bytes()
-    FailingWrites(monkeypatch, session._handle)
+    FailingWrites(monkeypatch, session.journal.handle)
     with pytest.raises(SessionError, match="the disk is full; free some space on it. This tap was not saved; "
                                            "everything saved before is kept"):
         session.record_tap(pose(10))
@@ -270,7 +270,7 @@ def test_a_failed_undo_drop_or_close_is_not_applied(tmp_path, monkeypatch):
     with new_session(tmp_path) as session:
         for index in range(3):
             session.record_tap(pose(index))
-        failing = FailingWrites(monkeypatch, session._handle, times=3)
+        failing = FailingWrites(monkeypatch, session.journal.handle, times=3)
         with pytest.raises(SessionError, match="This undo was not saved"):
             session.undo()
         with pytest.raises(SessionError, match="This dropped tap was not saved"):
@@ -288,7 +288,7 @@ def test_a_failed_fsync_is_not_acknowledged_and_is_cut_off(tmp_path, monkeypatch
     with new_session(tmp_path) as session:
         session.record_tap(pose(0))
         saved = session.path.read_bytes()
-        real_fsync, handle = os.fsync, session._handle
+        real_fsync, handle = os.fsync, session.journal.handle
         failures = iter([OSError(errno.EIO, "Input/output error")])
 
         def fsync(fd):
@@ -307,7 +307,7 @@ def test_when_the_partial_record_cannot_be_cut_off_the_session_stops_and_resume_
     session = new_session(tmp_path)
     for index in range(3):
         session.record_tap(pose(index))
-    FailingWrites(monkeypatch, session._handle)
+    FailingWrites(monkeypatch, session.journal.handle)
     monkeypatch.setattr(os, "ftruncate", lambda fd, size: (_ for _ in ()).throw(OSError(errno.EIO, "I/O error")))
     with pytest.raises(SessionError, match="quit and resume the session"):
         session.record_tap(pose(3))

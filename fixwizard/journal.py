@@ -1,0 +1,353 @@
+"""Append-only JSON Lines journals that lose no acknowledged record: the sampling session's taps and the poses of a
+tip calibration in progress each live in one.
+
+Line 1 is the header (``{"schema": ..., ...}``), then one record per line. Every line carries ``"crc"``, the CRC32
+(8 hex digits) of the line's canonical JSON without that key, so a damaged line is found even when it still
+parses. A record is written whole (one ``write``, repeated only for the rest of a short write), then ``fsync``-ed
+before the caller hears of it. A write that fails (a full disk) is cut off again at once, so the next record never
+follows a partial one; the caller is told that the record was not saved.
+
+A record that never finished (a crash, or a failed write whose cut-off did not happen) is a *torn* record: the
+start of a line without its end. On open a torn last line is moved aside into ``<name>.torn-<time>`` (evidence
+kept) and the journal continues after the last complete record; a torn record followed on the same line by a
+complete one (journals of older versions appended after a failed write) is skipped and the records after it are
+kept. A complete line that fails its checksum is damage to an acknowledged record: an error naming the line, since
+fixwizard will not guess what it held. One writer at a time, enforced with a non-blocking ``flock``.
+"""
+
+import errno
+import fcntl
+import json
+import os
+import zlib
+from collections.abc import Callable
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Self, TypeVar
+
+import numpy as np
+
+from fixwizard.errors import InputError, file_problem
+
+T = TypeVar("T")
+
+
+@dataclass(frozen=True)
+class JournalKind:
+    """What a journal holds, for its checks and messages: the header's ``schema``, the ``noun`` a message names it
+    by ("session"), the error raised for it, and what to do instead of using a damaged or foreign one
+    (``start_over``: "start a new session")."""
+
+    schema: str
+    noun: str
+    error: type[InputError]
+    start_over: str
+
+
+@dataclass(frozen=True)
+class TornRecord:
+    """A record found incomplete on open (1-based line, size in bytes): never acknowledged, so skipped.
+    ``moved_to`` is where a torn last line went (None for one left in place before a complete record)."""
+
+    noun: str
+    line_number: int
+    size_bytes: int
+    moved_to: Path | None
+
+    def __str__(self) -> str:
+        where = (f"it was moved to {self.moved_to}" if self.moved_to is not None
+                 else "it stays in the journal and is skipped")
+        return (f"line {self.line_number} of the {self.noun} journal holds a record that was never finished (a crash "
+                f"or a full disk, {self.size_bytes} bytes, never acknowledged); {where}, and every saved record "
+                "is kept")
+
+
+def now() -> str:
+    """The time a record is written: UTC, ISO 8601 with milliseconds."""
+    return datetime.now(UTC).isoformat(timespec="milliseconds")
+
+
+class Journal:
+    """An open, locked journal file and the records it held when opened. Use ``create`` or ``open``."""
+
+    def __init__(self, kind: JournalKind, path: Path, handle: int, header: dict, records: list[tuple[int, dict]],
+                 recovered: tuple[TornRecord, ...] = ()) -> None:
+        self.kind = kind
+        self.path = path
+        self.header = header
+        self.records = records  # (1-based line, record) as read on open
+        self.recovered = recovered
+        self.handle: int | None = handle
+        self._end = os.fstat(handle).st_size  # the journal's length up to its last saved record
+
+    @classmethod
+    def create(cls, kind: JournalKind, path: str | Path, header: dict) -> Self:
+        """A new journal at ``path`` (refused if it exists) starting with ``header`` (its schema added)."""
+        path = Path(path)
+        noun, error = kind.noun, kind.error
+        line = _encode({"schema": kind.schema, **header})
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            handle = os.open(path, os.O_RDWR | os.O_APPEND | os.O_CREAT | os.O_EXCL, 0o666)
+        except FileExistsError:
+            if not path.parent.is_dir():
+                raise error(f"cannot start the {noun} {path}: {path.parent} is a file, not a folder; move it "
+                            "away or work in another folder") from None
+            raise error(f"a {noun} {path} exists already; resume it or choose another name") from None
+        except OSError as problem:
+            raise error(f"cannot start the {noun} {path}: {file_problem(problem)}") from problem
+        _lock(kind, handle, path)
+        journal = cls(kind, path, handle, _decode_own(line), [])
+        try:
+            journal._append(line, f"the {noun}")
+            _fsync_dir(path.parent)
+        except BaseException:
+            journal.release()
+            path.unlink(missing_ok=True)
+            raise
+        return journal
+
+    @classmethod
+    def open(cls, kind: JournalKind, path: str | Path) -> Self:
+        """Open a journal to go on with it: its records read back, torn ones skipped and a torn last line moved
+        aside (see ``recovered``)."""
+        path = Path(path)
+        noun, error = kind.noun, kind.error
+        if path.is_dir():
+            raise error(f"{path} is a folder, not a {noun} journal; give a .jsonl file in it")
+        try:
+            handle = os.open(path, os.O_RDWR | os.O_APPEND)
+        except OSError as problem:
+            raise error(f"cannot open the {noun}: {file_problem(problem)}") from problem
+        _lock(kind, handle, path)
+        try:
+            data = path.read_bytes()
+            read = _read(kind, path, data)
+            recovered = [TornRecord(noun, number, len(piece), None) for number, piece in read.torn]
+            if read.torn_tail is not None:
+                number, piece = read.torn_tail
+                try:
+                    recovered.append(_move_aside(noun, path, handle, number, len(data) - len(piece), piece))
+                except OSError as problem:
+                    raise error(f"cannot set aside the unfinished last record of the {noun} {path}: "
+                                f"{file_problem(problem)}; then resume again") from problem
+            return cls(kind, path, handle, read.header, read.records, tuple(recovered))
+        except BaseException:
+            os.close(handle)
+            raise
+
+    @property
+    def released(self) -> bool:
+        return self.handle is None
+
+    def append(self, record: dict, what: str) -> dict:
+        """Write ``record`` durably and return it as read back; ``what`` names it in the message of a failed write
+        ("this tap")."""
+        if self.handle is None:
+            raise self.kind.error(f"the {self.kind.noun} {self.path} was released; resume it to record more")
+        line = _encode(record)
+        self._append(line, what)
+        return _decode_own(line)
+
+    def release(self) -> None:
+        """Let go of the file and its lock (the journal stays as written)."""
+        if self.handle is not None:
+            os.close(self.handle)
+            self.handle = None
+
+    def _append(self, line: bytes, what: str) -> None:
+        """Write and fsync one line; on failure cut the journal back to its last saved record, so that the next
+        record never follows a partial one, and raise the kind's error saying ``what`` was not saved."""
+        assert self.handle is not None
+        noun, error = self.kind.noun, self.kind.error
+        try:
+            _write_all(self.handle, line)
+            os.fsync(self.handle)
+        except OSError as failure:
+            problem = error(f"could not save to the {noun} {self.path}: {file_problem(failure)}. "
+                            f"{what[:1].upper()}{what[1:]} was not saved; everything saved before is kept, so try "
+                            "again once that is fixed")
+            try:
+                os.ftruncate(self.handle, self._end)
+                os.fsync(self.handle)
+            except OSError:
+                self.release()  # opening again cuts the partial record off; writing on could follow it
+                problem = error(f"{problem} (quit and resume the {noun}: the partial record could not be removed "
+                                "now)")
+            raise problem from failure
+        self._end += len(line)
+
+
+def replay(kind: JournalKind, path: str | Path, replayed: Callable[[Journal], T]) -> T:
+    """``replayed`` of the journal at ``path``, opened to go on with it; the journal is released again when
+    replaying it fails (a record the caller cannot use)."""
+    journal = Journal.open(kind, path)
+    try:
+        return replayed(journal)
+    except BaseException:
+        journal.release()
+        raise
+
+
+def read_header(kind: JournalKind, path: Path) -> tuple[dict, list[dict]] | None:
+    """A journal's header and the records that decode (after a torn one on the same line, if need be), read
+    without opening it for writing; None when ``path`` cannot be read or is no journal of ``kind``."""
+    try:
+        lines = path.read_bytes().splitlines(keepends=True)
+    except OSError:
+        return None
+    header = _header_of(kind, lines)
+    if header is None:
+        return None
+    records = []
+    for line in lines[1:]:
+        record = _decode(line)
+        if record is None:
+            after_torn = _after_torn(line)
+            record = after_torn[1] if after_torn is not None else None
+        if record is not None:
+            records.append(record)
+    return header, records
+
+
+# --- lines ---
+
+def _plain(value):
+    """JSON fallback for numpy arrays and scalars and paths."""
+    if isinstance(value, (np.ndarray, np.generic)):
+        return value.tolist()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"{type(value).__name__} cannot be written to a journal")
+
+
+def _canonical(record: dict) -> str:
+    return json.dumps(record, sort_keys=True, separators=(",", ":"), allow_nan=False, default=_plain)
+
+
+def _encode(record: dict) -> bytes:
+    """One journal line (with its checksum and newline) for a record."""
+    body = json.loads(_canonical(record))
+    body["crc"] = f"{zlib.crc32(_canonical(body).encode()):08x}"
+    return (_canonical(body) + "\n").encode()
+
+
+def _decode_own(line: bytes) -> dict:
+    """The record of a line this process has just encoded (it always decodes)."""
+    record = _decode(line)
+    assert record is not None
+    return record
+
+
+def _no_constant(name: str) -> float:
+    raise ValueError(f"{name} is no number a journal holds")
+
+
+def _decode(line: bytes) -> dict | None:
+    """The record of a complete line, or None when it does not parse (NaN and infinities included, which no
+    record holds, and JSON nested too deeply to read) or its checksum does not match."""
+    try:
+        record = json.loads(line, parse_constant=_no_constant)
+        crc = record.pop("crc")
+        return record if crc == f"{zlib.crc32(_canonical(record).encode()):08x}" else None
+    except (ValueError, TypeError, AttributeError, KeyError, RecursionError):
+        return None
+
+
+def _after_torn(line: bytes) -> tuple[int, dict] | None:
+    """Where a complete record starts after a torn one on the same line (the rest of the line decodes) and
+    that record, or None. A torn record is the start of a line, so it holds no newline and never decodes."""
+    start = line.find(b"{", 1)
+    while start != -1:
+        record = _decode(line[start:])
+        if record is not None:
+            return start, record
+        start = line.find(b"{", start + 1)
+    return None
+
+
+def _header_of(kind: JournalKind, lines: list[bytes]) -> dict | None:
+    """The header on the first line (with its newline), or None for a file that is no journal of ``kind``."""
+    header = _decode(lines[0]) if lines and lines[0].endswith(b"\n") else None
+    return header if header is not None and header.get("schema") == kind.schema else None
+
+
+@dataclass(frozen=True)
+class _Read:
+    """A journal file read back: its header, complete records and torn records, each with its 1-based line
+    number; ``torn_tail`` is a torn last line (cut off on open), if any."""
+
+    header: dict
+    records: list[tuple[int, dict]]
+    torn: list[tuple[int, bytes]]
+    torn_tail: tuple[int, bytes] | None
+
+
+def _read(kind: JournalKind, path: Path, data: bytes) -> _Read:
+    """Split a journal into header, records and torn records; the kind's error for a foreign or damaged file."""
+    lines = data.splitlines(keepends=True)
+    header = _header_of(kind, lines)
+    if header is None:
+        raise kind.error(f"{path} is not a fixwizard {kind.noun} journal ({kind.schema}); choose a {kind.noun} file "
+                         "the wizard wrote")
+    torn_tail = None
+    if len(lines) > 1 and (not lines[-1].endswith(b"\n")
+                           or (_decode(lines[-1]) is None and _after_torn(lines[-1]) is None)):
+        torn_tail = (len(lines), lines.pop())
+    records, torn = [], []
+    for number, line in enumerate(lines[1:], start=2):
+        record = _decode(line)
+        if record is None:
+            after_torn = _after_torn(line)
+            if after_torn is None:
+                raise kind.error(f"line {number} of the {kind.noun} {path} is damaged (checksum or JSON); "
+                                 f"fixwizard will not guess what it held. Keep the file and {kind.start_over}, or "
+                                 "repair that line by hand")
+            start, record = after_torn
+            torn.append((number, line[:start]))
+        records.append((number, record))
+    return _Read(header, records, torn, torn_tail)
+
+
+# --- files ---
+
+def _fsync_dir(directory: Path) -> None:
+    handle = os.open(directory, os.O_RDONLY)
+    try:
+        os.fsync(handle)
+    finally:
+        os.close(handle)
+
+
+def _lock(kind: JournalKind, handle: int, path: Path) -> None:
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(handle)
+        raise kind.error(f"the {kind.noun} {path} is open in another fixwizard; close that one first "
+                         "(or wait for it to finish) and resume again") from None
+
+
+def _write_all(handle: int, line: bytes) -> None:
+    """Write every byte of ``line`` (a short write is continued; a write that writes nothing is a full disk)."""
+    view = memoryview(line)
+    while view:
+        written = os.write(handle, view)
+        if written == 0:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        view = view[written:]
+
+
+def _move_aside(noun: str, path: Path, handle: int, line_number: int, offset: int, torn: bytes) -> TornRecord:
+    """Save the torn last line next to the journal, durably, then cut it off the journal."""
+    stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%S%fZ")
+    target = path.with_name(f"{path.name}.torn-{stamp}")
+    with open(target, "xb") as stream:
+        stream.write(torn)
+        stream.flush()
+        os.fsync(stream.fileno())
+    _fsync_dir(path.parent)
+    os.ftruncate(handle, offset)
+    os.fsync(handle)
+    return TornRecord(noun, line_number, len(torn), target)
