@@ -13,9 +13,10 @@ from fixwizard.robot import ProtectiveStop
 from fixwizard.robot.sim import SimulatedCell
 from fixwizard.robot.sim_hands import SimulatedHands
 from fixwizard.solver.solve import solve
-from fixwizard.workflow.robot_calibration import TABLE_POINTS, Cancelled, RobotTipCalibration
+from fixwizard.workflow.robot_calibration import Cancelled, RobotTipCalibration
 from fixwizard.workflow.session import SamplingSession
 from shapes import as_fixture
+from sim_operator import operator_steps
 
 TRUE_TIP_M = np.array([0.0012, -0.0007, 0.049])
 FK_BOUND_M = 0.0003
@@ -47,17 +48,6 @@ def new_cell(fixture) -> SimulatedCell:
     cell = SimulatedCell.with_fixture(fixture, seed=11, tcp_p_tip_m=TRUE_TIP_M, fk_error_bound_m=FK_BOUND_M)
     cell.connect()
     return cell
-
-
-def operator_steps(cell: SimulatedCell, workflow: RobotTipCalibration) -> None:
-    """What the operator does by hand: pivot about a table point, then tap A, B (corner), C counter-clockwise."""
-    hands = SimulatedHands(cell, seed=2)
-    for index in range(hands.pivot_count):
-        hands.pivot(index)
-        workflow.capture_pivot_pose()
-    for label in TABLE_POINTS:
-        hands.table_point(label)
-        workflow.tap_table_point()
 
 
 @pytest.fixture(scope="module")

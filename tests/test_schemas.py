@@ -1,6 +1,6 @@
 """The JSON Schemas of the files fixwizard writes hold for what it really writes: reports (from the CLI and the
 wizard, unique and inconsistent), the bundled example report, tip calibrations and every kind of session journal
-line; and they are strict enough to catch a broken file."""
+and tip calibration journal line; and they are strict enough to catch a broken file."""
 
 import copy
 import datetime as dt
@@ -21,6 +21,7 @@ from fixwizard.schemas import FILES, load_schema
 from fixwizard.solver.solve import solve
 from fixwizard.tui.cell import Cell, SavedCalibration
 from fixwizard.tui.start.sessions import start_session
+from fixwizard.workflow.robot_calibration import RobotTipCalibration
 from fixwizard.workflow.session import SamplingSession
 from fixwizard.workflow.wizard_report import session_report
 from test_calibration_helpers import synthetic_steps
@@ -155,3 +156,20 @@ def test_every_kind_of_session_line_matches_the_schema(tmp_path):
         validate(line, "fixwizard.session/1")
     assert invalid({key: value for key, value in lines[1].items() if key != "crc"}, "fixwizard.session/1")
     assert invalid({**lines[1], "base_p_ball_m": [0.4, 0.0]}, "fixwizard.session/1")
+
+
+def test_every_kind_of_tip_calibration_journal_line_matches_the_schema(tmp_path):
+    cell = demo_cell(0)
+    cell.connect()
+    workflow = RobotTipCalibration.journaled(cell, "SIMULATED demo cell (seed 0)", tmp_path, 0.003)
+    workflow.capture_pivot_pose()
+    workflow.restart()
+    workflow.capture_pivot_pose()
+    workflow.close(tmp_path / "tip.yaml")
+    path = workflow.journal.path
+    lines = [json.loads(line) for line in path.read_text().splitlines()]
+    assert [line.get("kind") for line in lines] == [None, "pose", "clear", "pose", "closed"]
+    for line in lines:
+        validate(line, "fixwizard.tip-calibration-journal/1")
+    assert invalid({**lines[1], "base_T_tcp": [[1, 0, 0, 0]] * 3}, "fixwizard.tip-calibration-journal/1")
+    assert invalid({**lines[2], "steps": ["tap"]}, "fixwizard.tip-calibration-journal/1")

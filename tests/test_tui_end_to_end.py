@@ -6,7 +6,6 @@ import asyncio
 import dataclasses
 
 import pytest
-from textual.pilot import Pilot
 from textual.widgets import Button, Static
 
 from fixwizard import report
@@ -15,11 +14,9 @@ from fixwizard.tui.launch import simulated_cell
 from fixwizard.tui.results.screen import ResultsScreen
 from fixwizard.tui.sampling.screen import SamplingScreen
 from fixwizard.tui.start.screen import StartScreen
-from fixwizard.tui.tip_calibration.auto import AutoTapsScreen
-from fixwizard.tui.tip_calibration.hands import PivotScreen, TablePointsScreen
-from fixwizard.tui.tip_calibration.result import CalibrationResultScreen
 from pilot_wait import until
 from tui_cell import bounds_contain, start_fixture
+from tui_tip_steps import press_when_ready, to_result
 
 pytestmark = pytest.mark.slow  # the whole wizard from launch to a report, about a minute
 
@@ -27,13 +24,6 @@ SEED = 5
 SIZE = (80, 24)
 TAPS = 12
 MAX_CELLS = 8e6
-
-
-async def press_when_ready(pilot: Pilot, key: str) -> None:
-    """Press ``key`` once the current screen has finished its robot call, and wait for the next one to end."""
-    await until(pilot, lambda: not pilot.app.screen.busy)
-    await pilot.press(key)
-    await until(pilot, lambda: not pilot.app.screen.busy)
 
 
 def test_launch_calibrate_tap_solve_and_write_a_report_holding_the_hidden_pose(tmp_path):
@@ -48,17 +38,7 @@ def test_launch_calibrate_tap_solve_and_write_a_report_holding_the_hidden_pose(t
             app.screen.query_one("#continue", Button).focus()
             await pilot.press("enter")  # a new tip calibration is the default
 
-            await until(pilot, lambda: isinstance(app.screen, PivotScreen))
-            for _ in range(context.hands.pivot_count):
-                await press_when_ready(pilot, "m")
-            await pilot.press("n")
-            await until(pilot, lambda: isinstance(app.screen, TablePointsScreen))
-            for _ in range(3):
-                await press_when_ready(pilot, "m")
-            await pilot.press("n")
-            await until(pilot, lambda: isinstance(app.screen, AutoTapsScreen))
-            await pilot.press("g")
-            await until(pilot, lambda: isinstance(app.screen, CalibrationResultScreen) and not app.screen.busy)
+            await to_result(pilot, context.hands.pivot_count)
             app.screen.query_one("#accept", Button).focus()
             await pilot.press("enter")
 

@@ -94,8 +94,8 @@ def test_messages_name_letter_keys_as_the_key_map_writes_them():
 
 def test_the_simulated_hands_are_on_one_key_on_every_screen_that_has_them():
     with_hands = [cls for cls in wizard_screens() if any(b.action == keys.HANDS.action for b in cls.BINDINGS)]
-    assert {cls.__name__ for cls in with_hands} == {"PivotScreen", "TablePointsScreen", "SamplingScreen",
-                                                    "CheckScreen"}
+    assert {cls.__name__ for cls in with_hands} == {"PivotScreen", "TablePointsScreen", "AutoTapsScreen",
+                                                    "SamplingScreen", "CheckScreen"}
     for cls in wizard_screens():
         for binding in cls.__dict__.get("BINDINGS", []):
             assert (binding.key == keys.HANDS.keys) == (binding.action == keys.HANDS.action)

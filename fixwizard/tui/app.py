@@ -31,7 +31,7 @@ from fixwizard.tui.sampling.screen import SamplingScreen
 from fixwizard.tui.solve.screen import SolveScreen
 from fixwizard.tui.start.screen import StartScreen
 from fixwizard.tui.start.sessions import resume_refusal, resume_session, start_session, started_text
-from fixwizard.tui.tip_calibration.steps import calibrate_tip_on_screens
+from fixwizard.tui.tip_calibration.steps import calibrate_tip_on_screens, open_tip_calibration
 from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.errors import ErrorModal, Recovery, ResumeRefused
 from fixwizard.tui.widgets.help import HelpScreen, help_text
@@ -354,9 +354,14 @@ class FixwizardApp(App[None]):
         created (the error shown)."""
         tip: SavedCalibration | None = choice.tip
         if tip is None:
-            cell = self.cell
-            tip = await calibrate_tip_on_screens(self, cell)
+            cell, unfinished = self.cell, choice.unfinished_tip
+            workflow = await self._step_or_error(lambda: open_tip_calibration(cell, unfinished))
+            if workflow is None:
+                return None
+            tip = await calibrate_tip_on_screens(self, cell, workflow)
             await self._step_or_error(lambda: cell.robot.freedrive(False))
+            saved_to = None if tip is None else tip.path
+            await self._step_or_error(lambda: workflow.close(saved_to))
             if tip is None:
                 return None
         cell, fixture, saved = self.cell, choice.fixture, tip

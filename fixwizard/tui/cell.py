@@ -59,10 +59,11 @@ class Sampling:
 @dataclass(frozen=True)
 class NewSession:
     """The start screen's choice of a new session: the fixture and a stored tip calibration, or None to calibrate
-    the tip first."""
+    the tip first (continuing the unfinished calibration journaled at ``unfinished_tip`` when given)."""
 
     fixture: Fixture
     tip: SavedCalibration | None
+    unfinished_tip: Path | None = None
 
 
 @dataclass(frozen=True)

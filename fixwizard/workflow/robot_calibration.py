@@ -8,14 +8,16 @@ table normal to it, then to each hover pose (ball centre ``approach_height_m`` a
 ball centres at contact); ``tap()`` does the rest and returns there. Between two taps they report
 progress; a cancel request (the wizard's STOP sets one) is honoured before every motion, so a STOP pressed as
 a move ends does not let the tap after it start. Every recorded pose stays available (``poses``) after a cancel or
-a robot error, and running a step again continues where it stopped.
+a robot error, and running a step again continues where it stopped. Given a ``CalibrationJournal``, every recorded
+pose is saved there before it counts, and ``resume`` continues a calibration from its journal after a crash.
 
 Not thread safe: drive one instance from one worker thread at a time.
 """
 
 import threading
 from collections.abc import Callable
-from typing import Literal, TypeVar
+from pathlib import Path
+from typing import Self, TypeVar
 
 import numpy as np
 
@@ -33,8 +35,8 @@ from fixwizard.calibration.table import coarse_table_frame, fit_table_plane
 from fixwizard.calibration.taps import PoseSeries, ball_centres_m
 from fixwizard.errors import FixwizardError
 from fixwizard.robot.base import MAX_TAP_TRAVEL_M, Robot, RobotError
+from fixwizard.workflow.calibration_journal import STEPS, CalibrationJournal, CalibrationJournalError, Step
 
-Step = Literal["pivot", "table_coarse", "table", "tilted"]
 Progress = Callable[[Step, int, int], None]
 T = TypeVar("T")
 
@@ -67,7 +69,7 @@ class RobotTipCalibration:
     def __init__(self, robot: Robot, ball_diameter_m: float, approach_height_m: float = DEFAULT_APPROACH_HEIGHT_M,
                  table_grid: tuple[int, int] = (4, 4), table_spacing_m: float = 0.03,
                  tilts_deg: tuple[float, ...] = DEFAULT_TILTS_DEG, azimuths: int = DEFAULT_AZIMUTHS,
-                 tilted_spacing_m: float = 0.005) -> None:
+                 tilted_spacing_m: float = 0.005, journal: CalibrationJournal | None = None) -> None:
         self.robot = robot
         self.ball_diameter_m = ball_diameter_m
         self.approach_height_m = approach_height_m
@@ -82,7 +84,49 @@ class RobotTipCalibration:
                 f"an approach height of {approach_height_m * 1e3:g} mm needs taps of {self._tap_travel_m * 1e3:.0f} "
                 f"mm at {max(tilts_deg):g} degrees tilt, beyond the safe {MAX_TAP_TRAVEL_M * 1e3:.0f} mm: choose a "
                 "lower approach height (above 0) or smaller tilts")
-        self._poses: dict[Step, list[np.ndarray]] = {step: [] for step in STEP_TITLES}
+        self.journal = journal
+        self._poses: dict[Step, list[np.ndarray]] = {step: [] for step in STEPS}
+
+    def settings(self) -> dict:
+        """What this calibration was made with (lengths in m, angles in deg), as its journal keeps it."""
+        return {"ball_diameter_m": self.ball_diameter_m, "approach_height_m": self.approach_height_m,
+                "table_grid": list(self.table_grid), "table_spacing_m": self.table_spacing_m,
+                "tilts_deg": list(self.tilts_deg), "azimuths": self.azimuths, "tilted_spacing_m": self.tilted_spacing_m}
+
+    @classmethod
+    def journaled(cls, robot: Robot, robot_name: str | None, folder: Path, ball_diameter_m: float) -> Self:
+        """A new calibration whose poses are saved in a new journal in ``folder``."""
+        calibration = cls(robot, ball_diameter_m)
+        calibration.journal = CalibrationJournal.create(folder, robot_name, calibration.settings())
+        return calibration
+
+    @classmethod
+    def resume(cls, robot: Robot, journal: CalibrationJournal) -> Self:
+        """The calibration ``journal`` holds, continued: its settings and every pose recorded so far."""
+        settings = journal.settings
+        try:
+            calibration = cls(robot, float(settings["ball_diameter_m"]), float(settings["approach_height_m"]),
+                              (int(settings["table_grid"][0]), int(settings["table_grid"][1])),
+                              float(settings["table_spacing_m"]), tuple(float(tilt) for tilt in settings["tilts_deg"]),
+                              int(settings["azimuths"]), float(settings["tilted_spacing_m"]), journal)
+        except (KeyError, IndexError, TypeError, ValueError, CalibrationError) as error:
+            raise CalibrationJournalError(f"the tip calibration {journal.path.name} holds no settings this version "
+                                          f"can use ({error}); start a new tip calibration") from None
+        for step in STEPS:
+            calibration._poses[step] = list(journal.poses[step])
+        return calibration
+
+    def restart(self) -> None:
+        """Drop every recorded pose (redo from the pivot); the journal keeps them, marked as dropped."""
+        self._clear(STEPS)
+
+    def close(self, saved_to: Path | None) -> None:
+        """End the journal, if any: the calibration was saved to ``saved_to``, or given up (None)."""
+        if self.journal is not None:
+            if saved_to is None:
+                self.journal.close("discarded")
+            else:
+                self.journal.close("saved", calibration=str(saved_to))
 
     def poses(self, step: Step) -> np.ndarray:
         """The flange poses ``base_T_tcp`` (N, 4, 4) recorded so far in ``step``."""
@@ -92,7 +136,7 @@ class RobotTipCalibration:
 
     def capture_pivot_pose(self) -> None:
         """Record the current flange pose; the ball must sit on the same fixed point as for the others."""
-        self._poses["pivot"].append(_call(f"pivot, pose {len(self._poses['pivot']) + 1}", self.robot.base_T_tcp))
+        self._record("pivot", _call(f"pivot, pose {len(self._poses['pivot']) + 1}", self.robot.base_T_tcp))
 
     def pivot_fit(self) -> PivotFit:
         """The coarse tip from the pivot poses so far, with its live residuals; ``CalibrationError`` says
@@ -106,7 +150,7 @@ class RobotTipCalibration:
         if done == len(TABLE_POINTS):
             raise CalibrationError("the table points A, B and C are recorded already; go on with the table taps")
         contact = _call(f"table point {TABLE_POINTS[done]}", self.robot.tap).base_T_tcp_contact
-        self._poses["table_coarse"].append(contact)
+        self._record("table_coarse", contact)
         return contact
 
     def accept_table_points(self) -> None:
@@ -115,7 +159,7 @@ class RobotTipCalibration:
         try:
             self._coarse_frame(None)
         except CalibrationError:
-            self._poses["table_coarse"].clear()
+            self._clear(("table_coarse",))
             raise
 
     # --- automatic steps ---
@@ -142,6 +186,18 @@ class RobotTipCalibration:
                              series["table_coarse"], name, robot)
 
     # --- internals ---
+
+    def _record(self, step: Step, base_T_tcp: np.ndarray) -> None:
+        """A recorded pose counts once its journal (if any) has it."""
+        if self.journal is not None:
+            self.journal.record_pose(step, base_T_tcp)
+        self._poses[step].append(base_T_tcp)
+
+    def _clear(self, steps: tuple[Step, ...]) -> None:
+        if self.journal is not None:
+            self.journal.record_clear(steps)
+        for step in steps:
+            self._poses[step].clear()
 
     def _coarse_frame(self, base_n_table: np.ndarray | None) -> np.ndarray:
         """``base_T_table`` from A, B, C and the pivot tip, z along ``base_n_table`` when given."""
@@ -171,7 +227,7 @@ class RobotTipCalibration:
             _call(where, self.robot.move_linear, plan[index])
             unless_cancelled()
             result = _call(where, self.robot.tap, max_travel_m=self._tap_travel_m)
-            recorded.append(result.base_T_tcp_contact)
+            self._record(step, result.base_T_tcp_contact)
             if progress is not None:
                 progress(step, len(recorded), total)
 

@@ -10,6 +10,7 @@ from fixwizard.calibration.store import TipCalibration, load_calibration
 from fixwizard.calibration.verdict import tip_verdict
 from fixwizard.demo import DEMO_MESH, DEMO_MESH_UNITS, DISC_MESH
 from fixwizard.fixture import MESH_SUFFIXES, Fixture
+from fixwizard.workflow.calibration_journal import Unfinished
 from fixwizard.workflow.session import find_unfinished
 
 CAD_UNITS = "mm"  # what CAD exports usually use; the operator confirms it on the start screen
@@ -61,6 +62,12 @@ def describe_calibration(calibration: TipCalibration) -> str:
     return (f"Ball diameter {calibration.ball_diameter_m * 1e3:.1f} mm (check it is the ball on the tool), "
             f"calibrated {created} on {calibration.robot or 'an unknown robot'}\n"
             f"{verdict.level.capitalize()}: {verdict.reasons[0]}")
+
+
+def describe_unfinished_calibration(unfinished: Unfinished) -> str:
+    """What an unfinished tip calibration holds, and when continuing it is right."""
+    return (f"Recorded so far: {unfinished.describe()}. Continue goes on where it stopped: only if the ball and "
+            "the tool were not touched since (otherwise start a new one).")
 
 
 def describe_fixture(fixture: Fixture) -> str:

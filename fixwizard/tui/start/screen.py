@@ -6,6 +6,7 @@ decides what comes next. "Check a calibrated fixture" opens ``CheckScreen`` over
 
 import os
 from collections.abc import Callable
+from datetime import datetime
 from pathlib import Path
 
 from textual.app import ComposeResult
@@ -25,14 +26,17 @@ from fixwizard.tui.start.choices import (
     calibration_choices,
     describe_calibration,
     describe_fixture,
+    describe_unfinished_calibration,
     fixture_choices,
     session_choices,
 )
 from fixwizard.tui.start.sessions import resume_refusal, resume_session
 from fixwizard.tui.widgets.errors import ResumeRefused, error_message
 from fixwizard.tui.workers import ShownError, in_thread, services
+from fixwizard.workflow.calibration_journal import find_unfinished_calibrations
 
 NEW = "new"
+UNFINISHED = "unfinished:"  # prefix of the value of an unfinished tip calibration to continue
 UNITS = [("mm", "mm"), ("m", "m")]
 
 
@@ -57,6 +61,8 @@ class StartScreen(Screen[StartChoice]):
         self.fixture: Fixture | None = None  # the selected fixture once it has loaded
         self._fixtures = fixture_choices(cell.fixtures_dir)
         self._calibrations = {str(choice.path): choice for choice in calibration_choices(cell.calibrations_dir)}
+        self._unfinished = {f"{UNFINISHED}{found.path}": found
+                            for found in find_unfinished_calibrations(cell.calibrations_dir, cell.robot_name)}
         self._sessions = session_choices(cell.sessions_dir)
         self._requested: tuple[Path, str] | None = None
         self._loaded: tuple[Path, str] | None = None
@@ -87,6 +93,8 @@ class StartScreen(Screen[StartChoice]):
             with Horizontal(classes="row"):
                 yield Static("Tip", classes="label")
                 yield Select([("New tip calibration (about 5 minutes)", NEW),
+                              *((f"Continue the unfinished tip calibration of {found.changed:%Y-%m-%d %H:%M}", key)
+                                for key, found in self._unfinished.items()),
                               *((self._calibration_label(choice), key) for key, choice in self._calibrations.items())],
                              id="calibration", value=self._preselected_calibration(), allow_blank=False,
                              compact=True)
@@ -117,9 +125,14 @@ class StartScreen(Screen[StartChoice]):
         return next((str(path) for path in self._sessions if self.left is not None and path == self.left), NEW)
 
     def _preselected_calibration(self) -> str:
-        """The newest calibration made on this robot (choices are newest first), else a new calibration."""
-        return next((key for key, choice in self._calibrations.items()
-                     if choice.calibration is not None and choice.calibration.robot == self.cell.robot_name), NEW)
+        """The newest calibration made on this robot (choices are newest first), unless an unfinished one of this
+        robot changed after it was made (the wizard stopped during that calibration); else a new calibration."""
+        saved = next(((key, choice.calibration) for key, choice in self._calibrations.items()
+                      if choice.calibration is not None and choice.calibration.robot == self.cell.robot_name), None)
+        unfinished = next(iter(self._unfinished.items()), None)
+        if unfinished is not None and (saved is None or unfinished[1].changed > _local_time(saved[1].created)):
+            return unfinished[0]
+        return NEW if saved is None else saved[0]
 
     @staticmethod
     def _calibration_label(choice: CalibrationChoice) -> str:
@@ -214,10 +227,17 @@ class StartScreen(Screen[StartChoice]):
     def _chosen_calibration(self) -> CalibrationChoice | None:
         return self._calibrations.get(str(self.query_one("#calibration", Select).value))
 
+    def _chosen_unfinished(self) -> Path | None:
+        found = self._unfinished.get(str(self.query_one("#calibration", Select).value))
+        return None if found is None else found.path
+
     def _show_calibration(self) -> None:
         choice = self._chosen_calibration()
         info = self.query_one("#calibration-info", Static)
-        if choice is None:
+        unfinished = self._unfinished.get(str(self.query_one("#calibration", Select).value))
+        if unfinished is not None:
+            info.update(describe_unfinished_calibration(unfinished))
+        elif choice is None:
             info.update("Calibrate the ball tip on this robot: pivot, three table points, then automatic taps.")
         elif choice.calibration is None:
             info.update(choice.problem or "")
@@ -290,4 +310,12 @@ class StartScreen(Screen[StartChoice]):
             return
         tip = None if choice is None or choice.calibration is None else \
             SavedCalibration(choice.calibration, choice.path)
-        self.dismiss(NewSession(self.fixture, tip))
+        self.dismiss(NewSession(self.fixture, tip, self._chosen_unfinished()))
+
+
+def _local_time(iso: str) -> datetime:
+    """A calibration's ``created`` time (ISO 8601) as a naive local time; the oldest time when it does not parse."""
+    try:
+        return datetime.fromisoformat(iso).astimezone().replace(tzinfo=None)
+    except ValueError:
+        return datetime.min

@@ -18,16 +18,21 @@ AUTO_TEXT = (
     "The robot now moves by itself: it lifts the ball {height_mm:.0f} mm above the table, taps a {rows} x {cols} "
     "grid in the corner between A, B and C, then taps {tilted} times near B with the tool tilted. Keep clear of "
     "the cell; the STOP key (F12) halts it at once. Press g to start.")
+CONTINUED_TEXT = (
+    "This calibration goes on where it stopped, with every tap recorded before. If the arm was moved since, turn "
+    "freedrive on ({freedrive}) and bring the ball a few centimetres above the corner B first; then press {go}.")
 AUTO_STEPS: tuple[Step, ...] = ("table", "tilted")
 STEP_LABELS = {"table": "Table taps", "tilted": "Tilted taps"}
 
 
 class AutoTapsScreen(CalibrationStepScreen):
-    """Run the table and tilted taps in a worker; Esc cancels between two taps (and goes back when none run)."""
+    """Run the table and tilted taps in a worker; Esc cancels between two taps (and goes back when none run). A
+    calibration continued after the wizard left it lets the operator guide the arm back near the corner B first."""
 
     STEP = 3
     TITLE_TEXT = "automatic taps"
-    BINDINGS = [keys.binding(keys.GO), keys.binding(keys.NEXT)]
+    BINDINGS = [keys.binding(keys.GO), keys.binding(keys.HANDS), keys.binding(keys.FREEDRIVE, show=False),
+                keys.binding(keys.NEXT)]
     HELP_ABOUT = ("The robot taps the table by itself: a grid in the corner of A, B and C, then tilted taps near "
                   "B. Keep clear of the cell; STOP (F12) halts it at once, Esc cancels after the current tap and "
                   "going on continues where it stopped. Once all taps are done, go on to the result.")
@@ -55,15 +60,35 @@ class AutoTapsScreen(CalibrationStepScreen):
     def on_mount(self) -> None:
         for step in AUTO_STEPS:
             self._progress(step, len(self.workflow.poses(step)))
-        self._show("All taps are done: press n for the result." if self._finished() else "")
+        if self._finished():
+            self._show("All taps are done: press n for the result.")
+        elif self._continued():
+            self._show(CONTINUED_TEXT.format(freedrive=keys.name(keys.FREEDRIVE), go=keys.name(keys.GO)) + (
+                f"\nSIMULATED: press {keys.name(keys.HANDS)} and the simulated hands bring the ball above B."
+                if self.cell.hands is not None else ""))
+
+    def action_freedrive(self) -> None:
+        self.run_robot(lambda: self.cell.robot.freedrive(True), lambda _: self._show(
+            f"Freedrive is on: bring the ball a few centimetres above the corner B, then press {keys.name(keys.GO)}."))
+
+    def action_simulated_hands(self) -> None:
+        hands = self.cell.simulated_hands()
+        self.run_robot(lambda: hands.table_point("B"), lambda _: self._show(f"Press {keys.name(keys.GO)} to go on."),
+                       doing="SIMULATED: the operator's hands bring the ball above the corner B")
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
         if action in (keys.BACK.action, keys.NEXT.action) and self._cancel is not None:
             return True  # Esc cancels the running taps, n says they are running
+        if action in (keys.FREEDRIVE.action, keys.HANDS.action) and not self._continued():
+            return False  # the arm is where the table point C left it: nothing to guide by hand
         allowed = super().check_action(action, parameters)
         if allowed and action == keys.GO.action and self._finished():
             return None
         return allowed
+
+    def _continued(self) -> bool:
+        """Whether this calibration was continued from its journal after the wizard left it."""
+        return self.workflow.journal is not None and self.workflow.journal.continued
 
     def action_go(self) -> None:
         robot, workflow, app = self.cell.robot, self.workflow, self.app

@@ -106,7 +106,7 @@ class CalibrationResultScreen(CalibrationStepScreen):
 
         def answered(yes: bool | None) -> None:
             if yes:
-                self.dismiss("redo")
+                self.run_robot(workflow.restart, lambda _: dismiss_when_on_top(self, "redo"))
 
         self.app.push_screen(Confirm("Redo the tip calibration?", f"Redo drops {recorded}, and starts again from "
                                      "the pivot; you would record them again.", "Drop them and redo", "Stay"),

@@ -1,0 +1,125 @@
+"""The wizard continues a tip calibration it left unfinished: the start screen offers it (chosen already when it is
+newer than the robot's saved calibrations) with what it holds; Continue goes on at the step it reached with every
+pose kept, and once accepted it is finished and no longer offered. A redo drops the poses for good, going back
+from the pivot gives the calibration up."""
+
+import asyncio
+import json
+
+import pytest
+from textual.pilot import Pilot
+from textual.widgets import Button, ProgressBar, Select, Static
+
+from fixwizard.tui.app import FixwizardApp
+from fixwizard.tui.launch import simulated_cell
+from fixwizard.tui.sampling.screen import SamplingScreen
+from fixwizard.tui.start.screen import UNFINISHED, StartScreen
+from fixwizard.tui.tip_calibration.auto import AutoTapsScreen
+from fixwizard.tui.tip_calibration.hands import PivotScreen
+from fixwizard.tui.tip_calibration.result import CalibrationResultScreen
+from fixwizard.tui.widgets.confirm import Confirm
+from fixwizard.workflow.calibration_journal import find_unfinished_calibrations
+from pilot_wait import until
+from tui_cell import start_fixture
+from tui_tip_steps import press_when_ready, to_automatic_taps, to_result
+
+pytestmark = pytest.mark.slow  # two wizard runs through a tip calibration, about 30 s
+
+SEED = 5
+SIZE = (100, 30)
+
+
+async def at_start(pilot: Pilot) -> StartScreen:
+    app = pilot.app
+    await until(pilot, lambda: isinstance(app.screen, StartScreen) and start_fixture(app) is not None
+                and app.robot_status is not None and app.robot_status.connected)
+    return app.screen
+
+
+async def press_continue(pilot: Pilot) -> None:
+    pilot.app.screen.query_one("#continue", Button).focus()
+    await pilot.press("enter")
+
+
+def test_a_calibration_left_during_the_automatic_taps_continues_where_it_stopped(tmp_path):
+    cell = simulated_cell(SEED, pace_s=0.02, folder=tmp_path)  # the automatic taps take long enough to leave them
+
+    async def leave_during_the_automatic_taps() -> tuple[int, int]:
+        app = FixwizardApp(cell)
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            await press_continue(pilot)  # a new tip calibration: nothing saved yet
+            await to_automatic_taps(pilot, cell.hands.pivot_count)
+            table, tilted = (app.screen.query_one(f"#progress-{step}", ProgressBar) for step in ("table", "tilted"))
+            await pilot.press("g")
+            await until(pilot, lambda: table.progress >= 4, 20.0)
+            await pilot.press("escape")  # cancel after the current tap; then the wizard is gone (as after a crash)
+            await until(pilot, lambda: not app.screen.busy)
+            return int(table.progress), int(tilted.progress)
+
+    done = asyncio.run(leave_during_the_automatic_taps())
+    (unfinished,) = find_unfinished_calibrations(cell.calibrations_dir, cell.robot_name)
+    assert (unfinished.counts["table"], unfinished.counts["tilted"]) == done
+    assert unfinished.counts["table_coarse"] == 3 and sum(done) < 56
+
+    async def continue_it() -> None:
+        app = FixwizardApp(simulated_cell(SEED, pace_s=0.0, folder=tmp_path))
+        async with app.run_test(size=SIZE) as pilot:
+            start = await at_start(pilot)
+            assert start.query_one("#calibration", Select).value == f"{UNFINISHED}{unfinished.path}"
+            info = str(start.query_one("#calibration-info", Static).render())
+            assert f"{cell.hands.pivot_count} pivot poses, 3 table points, {sum(done)} automatic taps" in info
+            await press_continue(pilot)
+            await until(pilot, lambda: isinstance(app.screen, AutoTapsScreen) and app.screen.is_mounted)
+            assert "goes on where it stopped" in str(app.screen.query_one("#auto-state", Static).render())
+            assert tuple(app.screen.query_one(f"#progress-{step}", ProgressBar).progress
+                         for step in ("table", "tilted")) == done
+            await press_when_ready(pilot, "m")  # the simulated hands bring the ball back above the corner B
+            await pilot.press("g")
+            await until(pilot, lambda: isinstance(app.screen, CalibrationResultScreen) and not app.screen.busy)
+            assert {step: len(app.screen.workflow.poses(step)) for step in ("table", "tilted")} == {
+                "table": 16, "tilted": 40}
+            app.screen.query_one("#accept", Button).focus()
+            await pilot.press("enter")
+            await until(pilot, lambda: isinstance(app.screen, SamplingScreen))
+
+    asyncio.run(continue_it())
+    assert find_unfinished_calibrations(cell.calibrations_dir, cell.robot_name) == []
+    closed = json.loads(unfinished.path.read_text().splitlines()[-1])
+    assert closed["outcome"] == "saved" and closed["calibration"].startswith(str(cell.calibrations_dir))
+
+
+def test_a_redo_drops_the_poses_for_good_and_back_from_the_pivot_gives_the_calibration_up(tmp_path):
+    cell = simulated_cell(SEED, pace_s=0.0, folder=tmp_path)
+
+    def offered() -> list:
+        return find_unfinished_calibrations(cell.calibrations_dir, cell.robot_name)
+
+    async def run() -> None:
+        app = FixwizardApp(cell)
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            await press_continue(pilot)
+            await to_result(pilot, cell.hands.pivot_count)
+            (journal,) = offered()
+            assert journal.counts["tilted"] == 40
+            app.screen.query_one("#redo", Button).press()
+            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await pilot.press("y")
+            await until(pilot, lambda: isinstance(app.screen, PivotScreen) and app.screen.is_mounted)
+            assert "Poses captured: 0" in str(app.screen.query_one("#pivot-state", Static).render())
+            assert offered() == []  # nothing left to continue
+
+            for _ in range(2):
+                await press_when_ready(pilot, "m")
+            assert len(offered()) == 1
+            await pilot.press("escape")
+            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await pilot.press("y")
+            await until(pilot, lambda: isinstance(app.screen, StartScreen))
+            await until(pilot, lambda: offered() == [])
+            return journal.path
+
+    path = asyncio.run(run())
+    last = json.loads(path.read_text().splitlines()[-1])
+    assert last["kind"] == "closed" and last["outcome"] == "discarded"
