@@ -56,8 +56,9 @@ class Unfinished:
     def describe(self) -> str:
         """The recorded poses in words."""
         counts = self.counts
-        return (f"{counts['pivot']} pivot poses, {counts['table_coarse']} table points, "
-                f"{counts['table'] + counts['tilted']} automatic taps")
+        return ", ".join(_count(number, what) for number, what in (
+            (counts["pivot"], "pivot pose"), (counts["table_coarse"], "table point"),
+            (counts["table"] + counts["tilted"], "automatic tap")))
 
 
 class CalibrationJournal:
@@ -158,6 +159,10 @@ class CalibrationJournal:
                 raise ValueError(f"unknown record {kind!r}")
         except (KeyError, TypeError, ValueError):
             raise invalid from None
+
+
+def _count(number: int, what: str) -> str:
+    return f"{number} {what}{'' if number == 1 else 's'}"
 
 
 def _step(name: object) -> Step:

@@ -93,7 +93,7 @@ class StartScreen(Screen[StartChoice]):
             with Horizontal(classes="row"):
                 yield Static("Tip", classes="label")
                 yield Select([("New tip calibration (about 5 minutes)", NEW),
-                              *((f"Continue the unfinished tip calibration of {found.changed:%Y-%m-%d %H:%M}", key)
+                              *((f"Continue calibration left {found.changed:%m-%d %H:%M}", key)
                                 for key, found in self._unfinished.items()),
                               *((self._calibration_label(choice), key) for key, choice in self._calibrations.items())],
                              id="calibration", value=self._preselected_calibration(), allow_blank=False,
