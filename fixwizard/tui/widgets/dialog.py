@@ -1,5 +1,6 @@
 """A modal dialog: a title, a message (scrolls when it is longer than the screen, by Up/Down and PgUp/PgDn) and a
-row of buttons; subclasses choose the buttons and the result. n or Esc closes it as its first button would."""
+row of buttons; subclasses choose the buttons and the result. n or Esc closes it as its first button would; ? shows
+its help."""
 
 from collections.abc import Iterable
 from typing import TypeVar, cast
@@ -17,9 +18,10 @@ ResultType = TypeVar("ResultType")
 class Dialog(ModalScreen[ResultType]):
     """Title in reverse video, the message, then ``buttons()``; the button with id ``focused_id`` has focus."""
 
+    # ? is the app's, but a modal screen cuts the app's bindings off (all but the priority ones): it is bound here too
     BINDINGS = [keys.binding(keys.NO, "Close"),
                 *(keys.binding(key, show=False) for key in (keys.SCROLL_DOWN, keys.SCROLL_UP, keys.PAGE_DOWN,
-                                                             keys.PAGE_UP))]
+                                                             keys.PAGE_UP, keys.HELP))]
     focused_id = "ok"
     HELP_TITLE = "a message"
     HELP_ABOUT = ("Read the message (Up/Down and PgUp/PgDn scroll a long one); Enter presses the focused button, Tab "
@@ -55,6 +57,12 @@ class Dialog(ModalScreen[ResultType]):
 
     def action_no(self) -> None:
         self.dismiss(cast(ResultType, "ok"))
+
+    def action_help(self) -> None:
+        """The app's help, about this dialog."""
+        help_of = getattr(self.app, "action_help", None)
+        if help_of is not None:
+            help_of()
 
     def action_scroll_summary(self, lines: int) -> None:
         """Scroll the message by ``lines`` (the focus stays on a button, so the keys scroll it from here)."""
