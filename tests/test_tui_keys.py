@@ -270,7 +270,8 @@ def test_a_protective_stop_makes_the_wizard_stopped_and_rearm_waits_for_the_unlo
             await until(pilot, lambda: app.robot_status.protective_stop)
             if app.screen is not sampling:  # the error dialog
                 await pilot.press("escape")
-            await assert_in_view(pilot, "escape", "ctrl+q")  # also with the unlock and re-arm keys shown
+            # also with the unlock and re-arm keys shown (re-arm and help were cut off at 80 columns)
+            await assert_in_view(pilot, "escape", "t", "k", "ctrl+q", "ctrl+r", "question_mark")
             await pilot.press("ctrl+r")
             await pilot.pause()
             assert not isinstance(app.screen, Confirm) and app.stopped  # still locked: unlock first

@@ -157,6 +157,8 @@ class SamplingScreen(Screen[bool]):
             return False
         if action == keys.UNLOCK.action and not self._stopped:
             return False
+        if action in (keys.GO.action, keys.HANDS.action) and self._stopped:
+            return False  # no motion until unlocked: room in the footer for the unlock and re-arm keys at 80 columns
         if action in ROBOT_ACTIONS and self.busy:
             return None
         return True
