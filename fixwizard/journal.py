@@ -190,15 +190,16 @@ def replay(kind: JournalKind, path: str | Path, replayed: Callable[[Journal], T]
         raise
 
 
-def read_header(kind: JournalKind, path: Path) -> tuple[dict, list[dict]] | None:
-    """A journal's header and the records that decode (after a torn one on the same line, if need be), read
-    without opening it for writing; None when ``path`` cannot be read or is no journal of ``kind``."""
+def read_unfinished(kind: JournalKind, path: Path) -> tuple[dict, list[dict]] | None:
+    """An unfinished journal's header and the records that decode (after a torn one on the same line, if need be),
+    read without opening it for writing; None when ``path`` cannot be read, is no journal of ``kind`` or ends with
+    its closed record (told from that last line alone: a folder of finished journals is listed quickly)."""
     try:
         lines = path.read_bytes().splitlines(keepends=True)
     except OSError:
         return None
     header = _header_of(kind, lines)
-    if header is None:
+    if header is None or (len(lines) > 1 and (_decode(lines[-1]) or {}).get("kind") == "closed"):
         return None
     records = []
     for line in lines[1:]:

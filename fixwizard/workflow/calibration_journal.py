@@ -22,7 +22,7 @@ from typing import Literal, Self, get_args
 import numpy as np
 
 from fixwizard.errors import InputError
-from fixwizard.journal import Journal, JournalKind, TornRecord, now, read_header, replay
+from fixwizard.journal import Journal, JournalKind, TornRecord, now, read_unfinished, replay
 
 SCHEMA = "fixwizard.tip-calibration-journal/1"
 JOURNALS_DIR = "journals"
@@ -177,7 +177,7 @@ def find_unfinished_calibrations(calibrations_dir: Path, robot: str | None) -> l
     unfinished = []
     folder = journals_dir(calibrations_dir)
     for path in sorted(folder.glob(f"*{SUFFIX}")) if folder.is_dir() else []:
-        read = read_header(KIND, path)
+        read = read_unfinished(KIND, path)
         if read is None or read[0].get("robot") != robot:
             continue
         counts = _counts(read[1])

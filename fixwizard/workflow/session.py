@@ -25,7 +25,7 @@ from fixwizard.atomic import check_output
 from fixwizard.calibration.taps import ball_centres_m
 from fixwizard.errors import InputError
 from fixwizard.geometry.se3 import from_ur_pose, to_ur_pose
-from fixwizard.journal import Journal, JournalKind, TornRecord, now, read_header, replay
+from fixwizard.journal import Journal, JournalKind, TornRecord, now, read_unfinished, replay
 from fixwizard.points import write_points
 
 SCHEMA = "fixwizard.session/1"
@@ -193,7 +193,7 @@ def find_unfinished(folder: str | Path = SESSIONS_DIR) -> list[Path]:
     too: resuming it says what is wrong)."""
     unfinished = []
     for path in sorted(Path(folder).glob(f"*{SUFFIX}")):
-        read = read_header(KIND, path)
+        read = read_unfinished(KIND, path)
         if read is not None and not any(record.get("kind") == "closed" for record in read[1]):
             unfinished.append(path)
     return unfinished
