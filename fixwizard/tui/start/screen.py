@@ -33,7 +33,7 @@ from fixwizard.tui.start.choices import (
 from fixwizard.tui.start.sessions import resume_refusal, resume_session
 from fixwizard.tui.widgets.errors import ResumeRefused, error_message
 from fixwizard.tui.workers import ShownError, in_thread, services
-from fixwizard.workflow.calibration_journal import find_unfinished_calibrations
+from fixwizard.workflow.calibration_journal import Unfinished, find_unfinished_calibrations
 
 NEW = "new"
 UNFINISHED = "unfinished:"  # prefix of the value of an unfinished tip calibration to continue
@@ -227,14 +227,13 @@ class StartScreen(Screen[StartChoice]):
     def _chosen_calibration(self) -> CalibrationChoice | None:
         return self._calibrations.get(str(self.query_one("#calibration", Select).value))
 
-    def _chosen_unfinished(self) -> Path | None:
-        found = self._unfinished.get(str(self.query_one("#calibration", Select).value))
-        return None if found is None else found.path
+    def _chosen_unfinished(self) -> Unfinished | None:
+        return self._unfinished.get(str(self.query_one("#calibration", Select).value))
 
     def _show_calibration(self) -> None:
         choice = self._chosen_calibration()
         info = self.query_one("#calibration-info", Static)
-        unfinished = self._unfinished.get(str(self.query_one("#calibration", Select).value))
+        unfinished = self._chosen_unfinished()
         if unfinished is not None:
             info.update(describe_unfinished_calibration(unfinished))
         elif choice is None:
@@ -310,7 +309,8 @@ class StartScreen(Screen[StartChoice]):
             return
         tip = None if choice is None or choice.calibration is None else \
             SavedCalibration(choice.calibration, choice.path)
-        self.dismiss(NewSession(self.fixture, tip, self._chosen_unfinished()))
+        unfinished = self._chosen_unfinished()
+        self.dismiss(NewSession(self.fixture, tip, None if unfinished is None else unfinished.path))
 
 
 def _local_time(iso: str) -> datetime:
