@@ -93,7 +93,7 @@ def test_a_calibration_continues_from_its_journal_with_the_same_poses_and_settin
     resumed.run_tilted_taps()
     assert len(resumed.poses("table")) == 16
     calibration = resumed.result("tip", ROBOT)
-    assert np.linalg.norm(calibration.tcp_p_tip_m - TRUE_TIP_M) < 0.0003
+    assert np.linalg.norm(calibration.tcp_p_tip_m - TRUE_TIP_M) < 0.001  # a tip, from the poses of both runs
     resumed.close(tmp_path / "tip.yaml")
     assert find_unfinished_calibrations(tmp_path, ROBOT) == []
     closed = json.loads(found.path.read_text().splitlines()[-1])

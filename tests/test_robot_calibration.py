@@ -175,3 +175,21 @@ def test_steps_out_of_order_and_unsafe_heights_are_refused(fixture):
         workflow.run_table_taps()
     with pytest.raises(CalibrationError, match="at least 3 flange poses"):
         workflow.pivot_fit()
+
+
+def test_the_automatic_taps_start_only_above_the_table_corner(ready):
+    """A calibration continued after the arm was moved: the way to the first hover point runs at the approach
+    height, so from elsewhere (here 300 mm beyond the corner, the flange low) the robot does not move at all."""
+    cell, workflow = ready
+    log = MoveLog(cell)
+    workflow.robot = log
+    away = cell.base_T_tcp()
+    away[:3, 3] += [0.3, 0.3, 0.0]
+    cell.guide_by_hand(away)
+    with pytest.raises(CalibrationError, match=r"the ball is \d+ mm away from the table corner of A, B and C, .* so "
+                                               "the robot did not move: bring it a few centimetres above the corner B"):
+        workflow.run_table_taps()
+    assert log.targets == [] and len(workflow.poses("table")) == 0
+    SimulatedHands(cell, seed=3).table_point("B")  # the operator brings it back
+    workflow.run_table_taps()
+    assert len(workflow.poses("table")) == 16

@@ -18,6 +18,7 @@ from fixwizard.tui.tip_calibration.auto import AutoTapsScreen
 from fixwizard.tui.tip_calibration.hands import PivotScreen
 from fixwizard.tui.tip_calibration.result import CalibrationResultScreen
 from fixwizard.tui.widgets.confirm import Confirm
+from fixwizard.tui.widgets.errors import ErrorModal
 from fixwizard.workflow.calibration_journal import find_unfinished_calibrations
 from pilot_wait import until
 from tui_cell import start_fixture
@@ -74,6 +75,13 @@ def test_a_calibration_left_during_the_automatic_taps_continues_where_it_stopped
             assert "goes on where it stopped" in str(app.screen.query_one("#auto-state", Static).render())
             assert tuple(app.screen.query_one(f"#progress-{step}", ProgressBar).progress
                          for step in ("table", "tilted")) == done
+            auto = app.screen
+            await pilot.press("g")  # the arm is elsewhere (the new cell's home pose): it does not move
+            await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+            shown = "\n".join(str(widget.render()) for widget in app.screen.query(Static))
+            assert "mm away from the table corner of A, B and C" in shown and "did not move" in shown
+            await pilot.press("escape")
+            await until(pilot, lambda: app.screen is auto and not auto.busy)
             await press_when_ready(pilot, "m")  # the simulated hands bring the ball back above the corner B
             await pilot.press("g")
             await until(pilot, lambda: isinstance(app.screen, CalibrationResultScreen) and not app.screen.busy)

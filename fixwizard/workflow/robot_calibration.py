@@ -34,6 +34,7 @@ from fixwizard.calibration.store import TipCalibration
 from fixwizard.calibration.table import coarse_table_frame, fit_table_plane
 from fixwizard.calibration.taps import PoseSeries, ball_centres_m
 from fixwizard.errors import FixwizardError
+from fixwizard.geometry.se3 import invert, transform_points
 from fixwizard.robot.base import MAX_TAP_TRAVEL_M, Robot, RobotError
 from fixwizard.workflow.calibration_journal import STEPS, CalibrationJournal, CalibrationJournalError, Step
 
@@ -45,6 +46,9 @@ STEP_TITLES: dict[Step, str] = {"pivot": "pivot", "table_coarse": "table point",
 TABLE_POINTS = ("A", "B", "C")
 # A tap may travel this much (m) beyond the planned distance to the table, for the coarse tip's error.
 TAP_MARGIN_M = 0.01
+# An automatic step starts only with the ball above the corner the operator chose (A, B, C and the planned taps)
+# or within this much (m) of it seen from above: its first move crosses only that corner.
+START_MARGIN_M = 0.05
 DEFAULT_APPROACH_HEIGHT_M = 0.03
 
 
@@ -222,6 +226,7 @@ class RobotTipCalibration:
             where = f"{STEP_TITLES[step]}, tap {index + 1} of {total}"
             if index == first:
                 unless_cancelled()
+                self._check_above_corner(_call(where, self.robot.base_T_tcp), tip, base_p_hover)
                 _call(where, self._lift, tip, base_n_up, base_p_hover[index])
             unless_cancelled()
             _call(where, self.robot.move_linear, plan[index])
@@ -230,6 +235,22 @@ class RobotTipCalibration:
             self._record(step, result.base_T_tcp_contact)
             if progress is not None:
                 progress(step, len(recorded), total)
+
+    def _check_above_corner(self, base_T_tcp: np.ndarray, tcp_p_tip_m: np.ndarray, base_p_hover: np.ndarray) -> None:
+        """CalibrationError unless the ball is above the table corner of A, B, C and the planned hover points
+        (``START_MARGIN_M`` around it, seen along the table normal): after a calibration was continued, the arm may
+        have been moved anywhere, and the way to the first hover point runs at the approach height."""
+        table_T_base = invert(self._coarse_frame(None))
+        table_xy_corner = transform_points(table_T_base, np.vstack(
+            [ball_centres_m(self.poses("table_coarse"), tcp_p_tip_m), base_p_hover]))[:, :2]
+        table_xy_ball = transform_points(table_T_base, ball_centres_m(base_T_tcp[None], tcp_p_tip_m))[0, :2]
+        low, high = table_xy_corner.min(axis=0) - START_MARGIN_M, table_xy_corner.max(axis=0) + START_MARGIN_M
+        outside_m = float(np.linalg.norm(table_xy_ball - np.clip(table_xy_ball, low, high)))
+        if outside_m > 0.0:
+            raise CalibrationError(
+                f"the ball is {outside_m * 1e3:.0f} mm away from the table corner of A, B and C, where the automatic "
+                "taps run, so the robot did not move: bring it a few centimetres above the corner B in freedrive, "
+                "then start them again")
 
     def _lift(self, tcp_p_tip_m: np.ndarray, base_n_up: np.ndarray, base_p_hover: np.ndarray) -> None:
         """Move straight along the table normal until the ball centre is at least as high as the hover point."""
