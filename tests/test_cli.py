@@ -258,6 +258,16 @@ def test_a_length_without_unit_that_means_metres_is_caught(bracket, capsys):
     assert "--sample-bound 1mm" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("bound", ["1e-9", "0.001mm", "1e-6"])
+def test_a_sample_bound_finer_than_any_robot_tap_is_refused_with_the_fix(bracket, capsys, bound):
+    """1e-6 for 1 mm, or 1 um: it was solved, undetermined or inconsistent after seconds, with cells and
+    likelihoods finer than the report's 0.1 um."""
+    folder, _, _ = bracket
+    assert main(replaced(solve_args(folder), "0.5mm", bound)) == 1
+    err = capsys.readouterr().err
+    assert "is implausible for a robot tap: no robot taps to within 0.01 mm" in err and "--sample-bound 1mm" in err
+
+
 @pytest.mark.parametrize("sigma", ["1", "0.6mm", "5"])
 def test_a_sigma_beyond_the_sample_bound_is_refused_with_the_fix(bracket, capsys, sigma):
     """A bare number is metres: '--sigma 1' would widen the intervals a thousandfold without a word."""

@@ -70,6 +70,9 @@ DEFAULT_MAX_SAMPLES = 40_000
 MIN_TAPS = 3
 MAX_TAPS = 1000  # more is a point cloud, not taps: this search keeps an interval per cell and tap
 MAX_SAMPLE_BOUND_M = 0.02  # larger bounds are a unit mistake (1 for 1 mm), not a robot
+# No robot taps that accurately (arms repeat to 0.03-0.1 mm, a tip calibration proposes 0.2 mm at least): a smaller
+# bound is a unit mistake (1e-6 for 1 mm, 1um); it also asks for cells and likelihoods finer than the report's 0.1 um.
+MIN_SAMPLE_BOUND_M = 1e-5
 MAX_BALL_DIAMETER_M = 0.05
 
 
@@ -167,6 +170,21 @@ def check_reach(base_p_taps: np.ndarray) -> None:
                          "beyond any robot arm's reach: the points must be in metres (millimetres read as metres?)")
 
 
+def check_sample_bound(sample_bound_m: float) -> None:
+    """InputError with the fix for a sample bound (m) that is no robot tap's: not a positive number, or outside
+    ``MIN_SAMPLE_BOUND_M`` to ``MAX_SAMPLE_BOUND_M`` (a unit mistake)."""
+    if not np.isfinite(sample_bound_m) or sample_bound_m <= 0:
+        raise InputError(f"the sample bound must be a positive length, not {sample_bound_m} m; take it from the "
+                         "tip calibration (typically 0.5-2 mm)")
+    if sample_bound_m > MAX_SAMPLE_BOUND_M:
+        raise InputError(f"a sample bound of {sample_bound_m * 1e3:g} mm is implausible for a robot tap; give it "
+                         "with its unit, e.g. --sample-bound 1mm")
+    if sample_bound_m < MIN_SAMPLE_BOUND_M:
+        raise InputError(f"a sample bound of {sample_bound_m * 1e3:g} mm is implausible for a robot tap: no robot "
+                         f"taps to within {MIN_SAMPLE_BOUND_M * 1e3:g} mm (arms repeat to 0.03-0.1 mm); give the "
+                         "tip calibration's bound with its unit, e.g. --sample-bound 1mm")
+
+
 def validate_inputs(base_p_taps: np.ndarray, ball_diameter_m: float, sample_bound_m: float, sigma_m: float,
                     max_cells: float) -> None:
     """Raise ``InputError`` with the fix for taps (N, 3, m), lengths (m) or a cell budget a solve cannot use."""
@@ -183,12 +201,7 @@ def validate_inputs(base_p_taps: np.ndarray, ball_diameter_m: float, sample_boun
     if len(bad):
         raise InputError(f"tap {bad[0] + 1} has a coordinate that is not a finite number; fix or remove it")
     check_reach(base_p_taps)
-    if not np.isfinite(sample_bound_m) or sample_bound_m <= 0:
-        raise InputError(f"the sample bound must be a positive length, not {sample_bound_m} m; take it from the "
-                         "tip calibration (typically 0.5-2 mm)")
-    if sample_bound_m > MAX_SAMPLE_BOUND_M:
-        raise InputError(f"a sample bound of {sample_bound_m * 1e3:g} mm is implausible for a robot tap; give it "
-                         "with its unit, e.g. --sample-bound 1mm")
+    check_sample_bound(sample_bound_m)
     if not np.isfinite(ball_diameter_m) or ball_diameter_m < 0:
         raise InputError(f"the ball diameter must be zero or positive, not {ball_diameter_m} m")
     if ball_diameter_m > MAX_BALL_DIAMETER_M:

@@ -34,7 +34,7 @@ from fixwizard.errors import InputError, MeshError, file_problem
 from fixwizard.fixture import Fixture, load_fixture
 from fixwizard.geometry.se3 import transform_points
 from fixwizard.points import load_points
-from fixwizard.solver.solve import MAX_BALL_DIAMETER_M, MAX_SAMPLE_BOUND_M, check_reach
+from fixwizard.solver.solve import MAX_BALL_DIAMETER_M, check_reach, check_sample_bound
 from fixwizard.solver.verify_search import (
     AllowedRegion,
     BoundBracket,
@@ -143,9 +143,7 @@ def verify(loaded: report.Report, fixture: Fixture, base_p_taps: np.ndarray, bal
     if not (math.isfinite(ball_m) and 0.0 <= ball_m <= MAX_BALL_DIAMETER_M):
         raise InputError(f"a {ball_m * 1e3:g} mm tip ball is implausible; give the diameter with its unit, e.g. "
                          "--ball-diameter 3mm")
-    if not (math.isfinite(bound_m) and 0.0 < bound_m <= MAX_SAMPLE_BOUND_M):
-        raise InputError(f"a sample bound of {bound_m * 1e3:g} mm is implausible for a robot tap; give it with its "
-                         "unit, e.g. --sample-bound 1mm")
+    check_sample_bound(bound_m)
     region = region_of(loaded)
     report_taps = _report_taps(loaded)
     with_report_taps = abs(ball_m - loaded.ball_diameter_m) <= SAME_BALL_M and len(report_taps) > 0
