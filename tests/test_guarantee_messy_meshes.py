@@ -11,6 +11,7 @@ import pytest
 import trimesh
 from scipy.spatial.transform import Rotation
 
+from descent import level_losing_the_true_cell
 from fixwizard.geometry.se3 import invert, make_transform, transform_points
 from fixwizard.mesh_hygiene import ZIP_SHARE
 from fixwizard.solver.cells import root_cells
@@ -146,27 +147,6 @@ def test_no_miss_and_no_false_inconsistent_on_messy_meshes(kind, seed):
         assert fixture.signed
 
 
-def _level_losing_the_true_cell(problem: SearchProblem, base_T_fix: np.ndarray, finest_m: float) -> int | None:
-    """Descend from the root keeping only the cell holding ``base_T_fix``, until its cells' position bound and
-    rotation chord at the fixture's radius are both below ``finest_m``: the level at which no cell holds it any
-    more, or None."""
-    cells, parents = root_cells(start_position_grid(problem)), None
-    for level in range(200):
-        parents = filter_cells(problem, cells, parents)
-        rotation = cells.rotation_grid.cell_of(parents.cells.rotation_level, Rotation.from_matrix(base_T_fix[:3, :3]))
-        position = parents.cells.position_grid.cell_of(parents.cells.position_level, base_T_fix[:3, 3])
-        mask = (parents.cells.rotation_cells == rotation[0]) & np.all(parents.cells.position_cells == position, axis=1)
-        if not np.any(mask):
-            return level
-        parents = parents.subset(mask)
-        family = parents.cells
-        chord_m = problem.fixture_radius_m * 2 * np.sin(float(np.max(family.distinct_rotations()[1])) / 2)
-        if family.position_bound_m < finest_m and chord_m < finest_m:
-            return None
-        cells = family.split_rotations() if rotation_splits_first(family, problem) else family.split_positions()
-    raise AssertionError("the descent did not reach cells that fine")
-
-
 @pytest.mark.parametrize("seed", range(4))
 @pytest.mark.parametrize("kind", ["slivers", "flipped facets"])
 def test_the_true_cell_survives_every_level_down_to_fine_cells_on_slivers_and_flipped_facets(kind, seed):
@@ -174,7 +154,7 @@ def test_the_true_cell_survives_every_level_down_to_fine_cells_on_slivers_and_fl
     facets err by tenths of a millimetre."""
     fixture, base_T_cad, taps, ball_diameter, sample_bound = messy_taps(kind, seed)
     problem = SearchProblem(fixture.oracle, fixture.radius_m, taps, ball_diameter / 2, sample_bound)
-    assert _level_losing_the_true_cell(problem, base_T_cad @ invert(fixture.fix_T_cad), 2e-5) is None
+    assert level_losing_the_true_cell(problem, base_T_cad @ invert(fixture.fix_T_cad), 2e-5) is None
 
 
 def test_taps_where_float32_distances_err_most_keep_the_true_cell_to_the_finest_level():
@@ -198,7 +178,7 @@ def test_taps_where_float32_distances_err_most_keep_the_true_cell_to_the_finest_
     base_T_cad = make_transform(Rotation.from_rotvec([0.1, 0.2, 0.3]), [0.3, 0.1, 0.2])
     problem = SearchProblem(fixture.oracle, fixture.radius_m, transform_points(base_T_cad, cad_p_taps), ball_radius,
                             bound)
-    assert _level_losing_the_true_cell(problem, base_T_cad @ invert(fixture.fix_T_cad), 1e-5) is None
+    assert level_losing_the_true_cell(problem, base_T_cad @ invert(fixture.fix_T_cad), 1e-5) is None
 
 
 @pytest.mark.parametrize("offset_in_band", [True, False])
@@ -233,7 +213,7 @@ def test_taps_beside_t_junctions_off_their_edges_keep_the_true_cell_down_to_subm
     problem = SearchProblem(oracle, fixture.radius_m, transform_points(base_T_cad, cad_p_taps), ball_radius, bound)
     closed_distances = oracle.signed_distance_m(cad_p_taps[:4] - fixture.cad_p_center)
     assert np.all(closed_distances < ball_radius - bound - 0.5 * lift_m)  # beyond the bound from the closed surface
-    lost_at = _level_losing_the_true_cell(problem, base_T_cad @ invert(fixture.fix_T_cad), 0.5 * lift_m)
+    lost_at = level_losing_the_true_cell(problem, base_T_cad @ invert(fixture.fix_T_cad), 0.5 * lift_m)
     assert (lost_at is None) is offset_in_band
 
 
