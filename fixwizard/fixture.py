@@ -19,7 +19,13 @@ from fixwizard.geometry.hull_cover import HullCover, hull_cover
 from fixwizard.geometry.meb import minimum_enclosing_ball
 from fixwizard.geometry.mesh_distance import MeshDistance
 from fixwizard.geometry.se3 import invert, make_transform, points_in_frames
-from fixwizard.mesh_format import FORMAT_NAMES, content_format
+from fixwizard.mesh_format import (
+    FORMAT_NAMES,
+    STL_HEADER_BYTES,
+    STL_TRIANGLE_BYTES,
+    binary_stl_size_mismatch,
+    content_format,
+)
 from fixwizard.mesh_hygiene import clean_mesh, refuse_far_vertices, refuse_non_finite
 from fixwizard.polygon_faces import refuse_concave_polygons
 
@@ -292,6 +298,13 @@ def _load_trimesh(path: Path) -> trimesh.Trimesh:
         raise MeshError(f"{path} holds a mesh in {FORMAT_NAMES[found]} format, not {FORMAT_NAMES[suffix]} as its name "
                         f"says (fixwizard reads a mesh by its suffix): rename it to {path.with_suffix(found).name}")
     refuse_concave_polygons(path)
+    mismatch = binary_stl_size_mismatch(path) if suffix == ".stl" else None
+    if mismatch is not None:
+        count, size = mismatch
+        raise MeshError(f"{path} is a binary STL whose header announces {count} triangles "
+                        f"({STL_HEADER_BYTES + STL_TRIANGLE_BYTES * count} bytes), but it holds {size} bytes: the "
+                        "file is cut short or has bytes added (an interrupted copy or download?); copy or export it "
+                        "again")
     try:
         with np.errstate(all="ignore"):  # absurd coordinates overflow in the reader; they are refused below
             mesh = _surface_of(trimesh.load(path, process=False))

@@ -30,3 +30,16 @@ def content_format(path: Path) -> str | None:
             continue
         return ".obj" if words[0].decode("latin-1") in OBJ_KEYWORDS else None
     return None
+
+
+def binary_stl_size_mismatch(path: Path) -> tuple[int, int] | None:
+    """(triangles its header announces, bytes it holds) of a binary STL whose size does not fit that count (cut
+    short, or bytes added after it); None for any other file. Binary by a NUL byte after the header: float32
+    coordinates and the attribute bytes are full of them, and an ASCII STL has none."""
+    with path.open("rb") as file:
+        head = file.read(HEAD_BYTES)
+    size = path.stat().st_size
+    if size < STL_HEADER_BYTES or b"\0" not in head[STL_HEADER_BYTES:]:
+        return None
+    count = struct.unpack("<I", head[80:84])[0]
+    return None if size == STL_HEADER_BYTES + STL_TRIANGLE_BYTES * count else (count, size)

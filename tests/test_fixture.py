@@ -97,6 +97,24 @@ def test_exports_that_look_odd_still_load(tmp_path, content):
     assert len(load_fixture(path).mesh.faces) == len(SHAPES["l_prism"]().faces)
 
 
+def _count_set(data: bytes, count: int) -> bytes:
+    return data[:80] + count.to_bytes(4, "little") + data[84:]
+
+
+@pytest.mark.parametrize("change", ["cut short", "bytes added", "no count", "count too large"])
+def test_a_binary_stl_whose_size_does_not_fit_its_triangle_count_is_called_damaged(tmp_path, change):
+    """An interrupted copy, bytes appended, or an exporter that wrote 0: it was refused as holding no triangles ("a
+    point cloud or an empty model?")."""
+    data = _exported("binary STL", header=b"solid part")
+    count = len(SHAPES["l_prism"]().faces)
+    path = tmp_path / "fixture.stl"
+    path.write_bytes({"cut short": data[:-30], "bytes added": data + b"\0" * 7, "no count": _count_set(data, 0),
+                      "count too large": _count_set(data, count + 3)}[change])
+    with pytest.raises(MeshError, match="binary STL whose header announces .* triangles .* the file is cut short or "
+                                        "has bytes added"):
+        load_fixture(path)
+
+
 def test_a_point_cloud_has_no_faces(tmp_path):
     path = tmp_path / "cloud.ply"
     trimesh.PointCloud(np.random.default_rng(0).random((50, 3)) * 0.1).export(path)
