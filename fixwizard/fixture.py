@@ -26,8 +26,8 @@ from fixwizard.mesh_format import (
     binary_stl_size_mismatch,
     content_format,
 )
-from fixwizard.mesh_hygiene import clean_mesh, refuse_far_vertices, refuse_non_finite
-from fixwizard.polygon_faces import refuse_concave_polygons
+from fixwizard.mesh_hygiene import ZIP_SHARE, clean_mesh, refuse_far_vertices, refuse_non_finite
+from fixwizard.polygon_faces import checked_polygon_faces
 
 METRES_PER_UNIT = {"m": 1.0, "mm": 1e-3}
 UNIT_NAMES = {"m": "metres", "mm": "millimetres"}
@@ -52,7 +52,7 @@ class Fixture:
     in the CAD frame (m). ``radius_m``: that ball's radius. ``warnings``: (code, message) pairs to pass on.
     ``meeting_faces``: the faces of bodies that cut through or touch another (``CleanMesh.meeting_faces``;
     None: none). ``surface_offset_m``: how far ``mesh``'s surface may lie from the file's (closed cracks,
-    ``CleanMesh.surface_offset_m``).
+    ``CleanMesh.surface_offset_m``, and polygon faces that are not flat, ``polygon_faces``).
     """
 
     path: Path
@@ -280,7 +280,9 @@ def _surface_of(loaded: object) -> object:
     return trimesh.util.concatenate([part for part in loaded.dump() if isinstance(part, trimesh.Trimesh)])
 
 
-def _load_trimesh(path: Path) -> trimesh.Trimesh:
+def _load_trimesh(path: Path) -> tuple[trimesh.Trimesh, float]:
+    """The file's triangles, and how far (its units) their surface may lie from another one spanning its polygon faces
+    (``polygon_faces.checked_polygon_faces``); ``MeshError`` saying what to do for a file that is none."""
     if path.is_dir():
         raise MeshError(f"{path} is a folder, not a mesh file; give the path of an STL, PLY or OBJ file in it")
     if not path.exists():
@@ -297,7 +299,7 @@ def _load_trimesh(path: Path) -> trimesh.Trimesh:
     if found is not None and found != suffix:
         raise MeshError(f"{path} holds a mesh in {FORMAT_NAMES[found]} format, not {FORMAT_NAMES[suffix]} as its name "
                         f"says (fixwizard reads a mesh by its suffix): rename it to {path.with_suffix(found).name}")
-    refuse_concave_polygons(path)
+    warp = checked_polygon_faces(path)
     mismatch = binary_stl_size_mismatch(path) if suffix == ".stl" else None
     if mismatch is not None:
         count, size = mismatch
@@ -316,7 +318,7 @@ def _load_trimesh(path: Path) -> trimesh.Trimesh:
                         "fixture's surface as a triangle mesh")
     refuse_non_finite(np.asarray(mesh.vertices), str(path))
     refuse_far_vertices(np.asarray(mesh.vertices), str(path))
-    return _identical_vertices_merged(mesh)
+    return _identical_vertices_merged(mesh), warp
 
 
 def _identical_vertices_merged(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
@@ -363,16 +365,29 @@ def _check_size(path: Path, mesh_m: trimesh.Trimesh, units: str) -> None:
                          likely)
 
 
-def fixture_from_mesh(mesh_m: trimesh.Trimesh, path: Path, units: str, sha256: str) -> Fixture:
+def _warped_polygons_warning(name: str, warp_m: float) -> tuple[str, str]:
+    return ("mesh_polygons_warped",
+            f"{name} has polygon faces that are not flat: their triangles, as fixwizard reads them, may lie up to "
+            f"{warp_m * 1e3:.3g} mm from the part's surface (another way across them), and the bounds allow for that "
+            "(they are looser). Export the mesh with triangulated faces (in Blender: Triangulate Faces), or as STL.")
+
+
+def fixture_from_mesh(mesh_m: trimesh.Trimesh, path: Path, units: str, sha256: str,
+                      polygon_warp_m: float = 0.0) -> Fixture:
     """A Fixture from a mesh already in metres (``path``, ``units`` and ``sha256`` describe its source), checked
-    and repaired by ``mesh_hygiene``."""
+    and repaired by ``mesh_hygiene``. ``polygon_warp_m``: how far the mesh's surface may lie from another one
+    spanning the file's polygon faces (``polygon_faces.checked_polygon_faces``), added to the surface's offset and
+    said where it is more than an export's rounding."""
     clean = clean_mesh(mesh_m, path.name)
     _check_size(path, clean.mesh, units)
     ball = minimum_enclosing_ball(clean.mesh.vertices)
+    warnings = clean.warnings
+    if polygon_warp_m > ZIP_SHARE * float(np.linalg.norm(clean.mesh.extents)):
+        warnings += (_warped_polygons_warning(path.name, polygon_warp_m),)
     return Fixture(path=path, units=units, mesh=clean.mesh, cad_p_center=ball.center, radius_m=ball.radius,
-                   sha256=sha256, signed=clean.signed, warnings=clean.warnings,
+                   sha256=sha256, signed=clean.signed, warnings=warnings,
                    meeting_faces=clean.meeting_faces if np.any(clean.meeting_faces) else None,
-                   surface_offset_m=clean.surface_offset_m)
+                   surface_offset_m=clean.surface_offset_m + polygon_warp_m)
 
 
 def warm_up_distance_queries() -> None:
@@ -390,6 +405,8 @@ def load_fixture(path: str | Path, units: str = "m") -> Fixture:
     path = Path(path)
     if units not in METRES_PER_UNIT:
         raise MeshError(f"mesh units must be 'm' or 'mm', not {units!r}")
-    mesh = _load_trimesh(path).copy()
+    mesh, warp = _load_trimesh(path)
+    mesh = mesh.copy()
     mesh.apply_scale(METRES_PER_UNIT[units])
-    return fixture_from_mesh(mesh, path, units, hashlib.sha256(path.read_bytes()).hexdigest())
+    return fixture_from_mesh(mesh, path, units, hashlib.sha256(path.read_bytes()).hexdigest(),
+                             warp * METRES_PER_UNIT[units])

@@ -3,8 +3,12 @@
 Faces of four or more corners: trimesh cuts every such polygon into a fan of triangles from its first corner, which
 is its own surface only where the polygon is convex. A concave one (the top of an L-shaped plate as Blender writes
 it without "Triangulate Faces") gets triangles reaching outside it, a surface the part does not have, which can
-exclude the true pose. OBJ corner number 0: OBJ counts vertices from 1 (negative numbers count back), and trimesh
-read a 0 as some other vertex without a word."""
+exclude the true pose. A convex polygon that is not flat (a corner off the plane of the others) is let through, but its
+fan is only one of the surfaces spanning its corners (the other diagonal of a warped quad, a curved patch): each lies
+within the slab of the polygon's plane that holds its corners, and over the same outline, so any two lie within the
+slab's width of each other, twice the largest corner's distance from the plane. The fixture carries that width as
+the distance its surface may lie from the part's (``Fixture.surface_offset_m``). OBJ corner number 0: OBJ counts
+vertices from 1 (negative numbers count back), and trimesh read a 0 as some other vertex without a word."""
 
 import re
 from collections.abc import Iterable
@@ -39,17 +43,31 @@ def _is_convex(corners: np.ndarray) -> bool:
     return bool(np.all(turns >= -STRAIGHT_SHARE * scale))
 
 
-def _refuse_first_concave(path: Path, vertices: np.ndarray, polygons: Iterable[tuple[str, np.ndarray]]) -> None:
+def _warp(corners: np.ndarray) -> float:
+    """How far apart two surfaces spanning a convex polygon (K, 3 corners in order) may lie: twice the largest
+    distance of a corner from the plane through their mean across the Newell normal, plus that distance's rounding
+    (a few eps of the coordinates, taken generously)."""
+    normal = np.cross(corners, np.roll(corners, -1, axis=0)).sum(axis=0)
+    heights = (corners - corners.mean(axis=0)) @ (normal / np.linalg.norm(normal))
+    return 2.0 * float(np.max(np.abs(heights))) + STRAIGHT_SHARE * float(np.max(np.abs(corners)))
+
+
+def _checked(path: Path, vertices: np.ndarray, polygons: Iterable[tuple[str, np.ndarray]]) -> float:
     """Raise ``MeshError`` for the first of the polygons (where in the file, corner rows of ``vertices``) that has
-    four or more corners and is not convex; polygons with a corner outside ``vertices`` are the reader's to refuse."""
+    four or more corners and is not convex; polygons with a corner outside ``vertices`` are the reader's to refuse.
+    Returns the largest ``_warp`` of the others (0.0 without any)."""
+    warp = 0.0
     for where, rows in polygons:
         if len(rows) < 4 or np.any(rows < 0) or np.any(rows >= len(vertices)):
             continue
-        if not _is_convex(vertices[rows]):
+        if _is_convex(vertices[rows]):
+            warp = max(warp, _warp(vertices[rows]))
+        else:
             raise MeshError(f"{path}: the face {where} is a polygon of {len(rows)} corners that is not convex; "
                             "fixwizard's reader would cut it into triangles reaching outside it, a surface the part "
                             "does not have. Export the mesh with triangulated faces (in Blender: Triangulate Faces), "
                             "or as STL")
+    return warp
 
 
 def _obj_polygons(text: bytes) -> tuple[np.ndarray, list[tuple[str, np.ndarray]]]:
@@ -102,9 +120,11 @@ def _face_naming_vertex_zero(text: bytes) -> int | None:
     return None if zero is None else text.count(b"\n", 0, zero.start()) + 1
 
 
-def refuse_concave_polygons(path: Path) -> None:
+def checked_polygon_faces(path: Path) -> float:
     """Raise ``MeshError`` naming the first face of the OBJ or PLY file at ``path`` that has four or more corners and
-    is not convex, or an OBJ face naming vertex 0 (see the module doc); other files pass, and so do other formats."""
+    is not convex, or an OBJ face naming vertex 0 (see the module doc); other files pass, and so do other formats.
+    Returns how far (the file's units) the surface trimesh reads may lie from another surface spanning its polygons:
+    the largest polygon's ``_warp`` (0.0 for a file of triangles, or of another format)."""
     suffix = path.suffix.lower()
     if suffix == ".obj":
         text = path.read_bytes()
@@ -112,6 +132,7 @@ def refuse_concave_polygons(path: Path) -> None:
         if line is not None:
             raise MeshError(f"{path}: the face on line {line} names vertex 0, which an OBJ file does not have (it "
                             "counts vertices from 1); export the mesh again from CAD")
-        _refuse_first_concave(path, *_obj_polygons(text))
-    elif suffix == ".ply":
-        _refuse_first_concave(path, *_ply_polygons(path))
+        return _checked(path, *_obj_polygons(text))
+    if suffix == ".ply":
+        return _checked(path, *_ply_polygons(path))
+    return 0.0

@@ -105,6 +105,29 @@ def cracked(mesh: trimesh.Trimesh, rng: np.random.Generator, length_m: float,
     return trimesh.Trimesh(np.vstack([vertices, vertices[corners] + directions]), faces, process=False)
 
 
+WARPED_BOX_QUADS = np.array([[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]])
+
+
+def warped_box_vertices(raise_m: float = 0.002) -> np.ndarray:
+    """The corners (8, 3, m) of a 100 x 60 x 30 mm box with the top corner at +x +y raised by ``raise_m``: its top
+    and two of its sides (``WARPED_BOX_QUADS``, wound outward) are quads that are not flat."""
+    vertices = np.array([[0, 0, 0], [0.1, 0, 0], [0.1, 0.06, 0], [0, 0.06, 0], [0, 0, 0.03], [0.1, 0, 0.03],
+                         [0.1, 0.06, 0.03], [0, 0.06, 0.03]])
+    vertices[6, 2] += raise_m
+    return vertices
+
+
+def quads_obj(vertices: np.ndarray, quads: np.ndarray) -> str:
+    """An OBJ file of quad faces, every digit of the vertices kept."""
+    return "".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in vertices.tolist()) + "".join(
+        "f " + " ".join(str(corner + 1) for corner in quad) + "\n" for quad in quads.tolist())
+
+
+def across_other_diagonals(vertices: np.ndarray, quads: np.ndarray) -> trimesh.Trimesh:
+    """The quads each cut along the diagonal trimesh does not cut them along (it fans from the first corner)."""
+    return trimesh.Trimesh(vertices, np.vstack([quads[:, [1, 2, 3]], quads[:, [1, 3, 0]]]), process=False)
+
+
 SHAPES = {"l_prism": l_prism, "polytope": lambda: random_polytope(7), "cube": cube, "brick": brick,
           "triangular_prism": triangular_prism, "cylinder": cylinder, "cone": cone}
 

@@ -1,7 +1,8 @@
 """The guarantee where the other trials do not tap: ball centres on edges, corners and vertices and in concave
 corners (every point of the surface at the ball's radius, not just beside faces), meshes far from their CAD origin,
 of 10 mm or 2 m, with non-manifold edges, shared faces, slivers, open shells, fine spheres and cylinders, the
-smallest sample bound fixwizard takes, and symmetric poses against every bound a solve reports.
+smallest sample bound fixwizard takes, an OBJ of warped quads whose part is cut across them the other way, and
+symmetric poses against every bound a solve reports.
 
 Taps: random points around the part projected onto the surface at the ball's radius (outside the solid), so each
 feature is tapped as often as its share of that offset surface: edges and vertices about as often as faces. 60 % of
@@ -16,11 +17,12 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from descent import level_losing_the_true_cell
+from fixwizard.fixture import load_fixture
 from fixwizard.geometry.se3 import invert, make_transform, transform_points
 from fixwizard.solver.search import SearchProblem
 from fixwizard.solver.solve import MIN_SAMPLE_BOUND_M, solve
 from fixwizard.synthetic import CONTACT_TOLERANCE_M, bounded_noise, closest_on_triangles
-from shapes import SHAPES, as_fixture
+from shapes import SHAPES, WARPED_BOX_QUADS, across_other_diagonals, as_fixture, quads_obj, warped_box_vertices
 
 AT_BOUND_SHARE = 0.6
 
@@ -166,6 +168,23 @@ def test_the_smallest_sample_bound_keeps_the_true_cell_down_to_cells_of_half_of_
     mesh = {"l_prism": SHAPES["l_prism"], "1 m bar": lambda: trimesh.creation.box((1.0, 0.012, 0.006)),
             "2 m polytope": EXPORTS["2 m"]}[name]()
     assert true_cell_kept(mesh, 0, MIN_SAMPLE_BOUND_M / 2, MIN_SAMPLE_BOUND_M)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_part_cut_across_its_warped_polygons_the_other_way_keeps_the_true_cell(tmp_path, seed):
+    """The OBJ of a box with a corner raised 2 mm (quads that are not flat, cut by trimesh along one diagonal), the
+    part cut along the other: taps on the part, all of them at the full 0.5 mm bound into or off it. With the
+    polygons' warp in every tap's band the true cell survives; without, these three descents lost it."""
+    vertices = warped_box_vertices()
+    path = tmp_path / "warped.obj"
+    path.write_text(quads_obj(vertices, WARPED_BOX_QUADS))
+    fixture = load_fixture(path)
+    rng = np.random.default_rng(seed)
+    centres, outward = ball_centres_anywhere(across_other_diagonals(vertices, WARPED_BOX_QUADS), 12, 0.0015, rng)
+    base_T_cad = make_transform(Rotation.random(random_state=seed), [0.4, 0.1, 0.2])
+    taps = transform_points(base_T_cad, centres + 0.0005 * rng.choice([-1.0, 1.0], (12, 1)) * outward)
+    problem = SearchProblem(fixture.oracle, fixture.radius_m, taps, 0.0015, 0.0005)
+    assert level_losing_the_true_cell(problem, base_T_cad @ invert(fixture.fix_T_cad), 2e-5) is None
 
 
 def _symmetries(name: str) -> list[np.ndarray]:
