@@ -32,15 +32,19 @@ STRAIGHT_SHARE = 16 * float(np.finfo(np.float64).eps)
 
 
 def _is_convex(corners: np.ndarray) -> bool:
-    """Whether a polygon (K, 3 corners in order) turns the same way at every corner about its Newell normal (so a fan
-    from any corner cuts it into its own pieces)."""
+    """Whether a polygon (K, 3 corners in order) turns the same way at every corner about its Newell normal, and once
+    round in all (so a fan from any corner cuts it into its own pieces): a star such as a pentagram turns the same
+    way at every corner but twice round, and its fan covers the points between its tips."""
     following = np.roll(corners, -1, axis=0)
     normal = np.cross(corners, following).sum(axis=0)
     incoming = corners - np.roll(corners, 1, axis=0)
     outgoing = following - corners
     turns = np.cross(incoming, outgoing) @ normal
-    scale = np.linalg.norm(incoming, axis=1) * np.linalg.norm(outgoing, axis=1) * float(np.linalg.norm(normal))
-    return bool(np.all(turns >= -STRAIGHT_SHARE * scale))
+    length = float(np.linalg.norm(normal))
+    scale = np.linalg.norm(incoming, axis=1) * np.linalg.norm(outgoing, axis=1) * length
+    # turning by the exterior angles: 2 pi once round, 4 pi or more for a star (3 pi between them is no rounding)
+    turning = float(np.sum(np.arctan2(turns / length, np.einsum("ij,ij->i", incoming, outgoing)))) if length else 0.0
+    return bool(np.all(turns >= -STRAIGHT_SHARE * scale)) and turning < 3.0 * np.pi
 
 
 def _warp(corners: np.ndarray) -> float:

@@ -117,10 +117,10 @@ def warped_box_vertices(raise_m: float = 0.002) -> np.ndarray:
     return vertices
 
 
-def quads_obj(vertices: np.ndarray, quads: np.ndarray) -> str:
-    """An OBJ file of quad faces, every digit of the vertices kept."""
+def polygons_obj(vertices: np.ndarray, polygons: np.ndarray) -> str:
+    """An OBJ file of polygon faces (rows of corner indices), every digit of the vertices kept."""
     return "".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in vertices.tolist()) + "".join(
-        "f " + " ".join(str(corner + 1) for corner in quad) + "\n" for quad in quads.tolist())
+        "f " + " ".join(str(corner + 1) for corner in polygon) + "\n" for polygon in polygons.tolist())
 
 
 def across_other_diagonals(vertices: np.ndarray, quads: np.ndarray) -> trimesh.Trimesh:

@@ -9,7 +9,7 @@ from fixwizard.errors import MeshError, MeshUnitsError
 from fixwizard.fixture import load_fixture
 from fixwizard.geometry.se3 import make_transform, transform_points
 from fixwizard.synthetic import closest_on_triangles, exact_distances_m, touching_ball_centres
-from shapes import SHAPES, WARPED_BOX_QUADS, across_other_diagonals, as_fixture, quads_obj, warped_box_vertices
+from shapes import SHAPES, WARPED_BOX_QUADS, across_other_diagonals, as_fixture, polygons_obj, warped_box_vertices
 
 
 def test_a_millimetre_mesh_loaded_as_metres_is_refused_with_the_fix(tmp_path):
@@ -286,6 +286,17 @@ def test_an_obj_of_convex_polygons_loads_as_its_surface(tmp_path):
     assert fixture.warnings == () and fixture.surface_offset_m < 1e-15  # flat: only the rounding of their planes
 
 
+def test_an_obj_with_a_star_polygon_face_is_refused_with_the_fix(tmp_path):
+    """A pentagram turns the same way at every corner, so it passed as convex; it goes twice round, and the fan
+    trimesh cuts it into covers the points between its tips (a surface the part does not have)."""
+    angles = np.pi / 2 + 2 * np.pi * np.arange(5) / 5
+    corners = 0.05 * np.column_stack([np.cos(angles), np.sin(angles), np.zeros(5)])
+    path = tmp_path / "star.obj"
+    path.write_text(polygons_obj(corners, np.array([[0, 2, 4, 1, 3]])))
+    with pytest.raises(MeshError, match="line 6 is a polygon of 5 corners that is not convex.*Triangulate Faces"):
+        load_fixture(path)
+
+
 @pytest.mark.parametrize("raise_m", [0.002, 2e-5])
 def test_polygon_faces_that_are_not_flat_widen_the_surface_offset_to_hold_every_way_across_them(tmp_path, raise_m):
     """A box whose top corner at +x +y is raised, its top and two sides quads that are not flat: trimesh cuts each
@@ -294,7 +305,7 @@ def test_polygon_faces_that_are_not_flat_widen_the_surface_offset_to_hold_every_
     pose was lost in 7 of 8 descents, ``test_guarantee_features``)."""
     vertices = warped_box_vertices(raise_m)
     path = tmp_path / "warped.obj"
-    path.write_text(quads_obj(vertices, WARPED_BOX_QUADS))
+    path.write_text(polygons_obj(vertices, WARPED_BOX_QUADS))
     fixture = load_fixture(path)
     other = across_other_diagonals(vertices, WARPED_BOX_QUADS)
     points = other.sample(2000, seed=1)

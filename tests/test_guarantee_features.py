@@ -22,7 +22,7 @@ from fixwizard.geometry.se3 import invert, make_transform, transform_points
 from fixwizard.solver.search import SearchProblem
 from fixwizard.solver.solve import MIN_SAMPLE_BOUND_M, solve
 from fixwizard.synthetic import CONTACT_TOLERANCE_M, bounded_noise, closest_on_triangles
-from shapes import SHAPES, WARPED_BOX_QUADS, across_other_diagonals, as_fixture, quads_obj, warped_box_vertices
+from shapes import SHAPES, WARPED_BOX_QUADS, across_other_diagonals, as_fixture, polygons_obj, warped_box_vertices
 
 AT_BOUND_SHARE = 0.6
 
@@ -177,7 +177,7 @@ def test_a_part_cut_across_its_warped_polygons_the_other_way_keeps_the_true_cell
     polygons' warp in every tap's band the true cell survives; without, these three descents lost it."""
     vertices = warped_box_vertices()
     path = tmp_path / "warped.obj"
-    path.write_text(quads_obj(vertices, WARPED_BOX_QUADS))
+    path.write_text(polygons_obj(vertices, WARPED_BOX_QUADS))
     fixture = load_fixture(path)
     rng = np.random.default_rng(seed)
     centres, outward = ball_centres_anywhere(across_other_diagonals(vertices, WARPED_BOX_QUADS), 12, 0.0015, rng)
