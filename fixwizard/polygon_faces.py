@@ -8,7 +8,8 @@ fan is only one of the surfaces spanning its corners (the other diagonal of a wa
 within the slab of the polygon's plane that holds its corners, and over the same outline, so any two lie within the
 slab's width of each other, twice the largest corner's distance from the plane. The fixture carries that width as
 the distance its surface may lie from the part's (``Fixture.surface_offset_m``). OBJ corner number 0: OBJ counts
-vertices from 1 (negative numbers count back), and trimesh read a 0 as some other vertex without a word."""
+vertices from 1 (negative numbers count back), and trimesh read a 0 as some other vertex without a word. An OBJ's
+lines are read as trimesh reads them: ended by LF or CR LF, a backslash at the end joining the next line to it."""
 
 import re
 from collections.abc import Iterable
@@ -20,8 +21,9 @@ from trimesh.exchange import ply
 from fixwizard.errors import MeshError
 
 _VERTEX_LINE = re.compile(rb"^[ \t]*v[ \t]+(\S+)[ \t]+(\S+)[ \t]+(\S+)", re.MULTILINE)
-_POLYGON_LINE = re.compile(rb"^[ \t]*f((?:[ \t]+\S+){4,})[ \t]*$", re.MULTILINE)
+_POLYGON_LINE = re.compile(rb"^[ \t]*f((?:[ \t]+\S+){4,})[ \t\r]*$", re.MULTILINE)  # CRLF line ends too
 _ZERO_TOKEN = re.compile(rb"[ \t][-+]?0+(?=[/ \t\r\n#]|$)")  # a number 0 in any line
+_CONTINUATION = re.compile(rb"\\[ \t]*\r?\n")  # a backslash ending a line joins the next one to it (the OBJ spec)
 _ZERO_CORNER = re.compile(rb"^[ \t]*f[ \t][^\n#]*?(?<=[ \t])[-+]?0+(?=[/ \t\r\n#]|$)", re.MULTILINE)
 PLY_INDEX_NAMES = ("vertex_indices", "vertex_index")  # what PLY exporters call a face's corner list
 # A corner whose turn is below this share of its edges' and the normal's lengths is straight: the rounding of the
@@ -74,9 +76,16 @@ def _checked(path: Path, vertices: np.ndarray, polygons: Iterable[tuple[str, np.
     return warp
 
 
-def _obj_polygons(text: bytes) -> tuple[np.ndarray, list[tuple[str, np.ndarray]]]:
-    """The vertices of an OBJ file's text and its faces of four or more corners (empty where it cannot be read:
-    trimesh's reader then says what is wrong)."""
+def _joined(text: bytes) -> bytes:
+    """An OBJ file's text with each line continued by a backslash joined to the next, as trimesh reads it; every
+    byte stays where it was (the backslash and the line break become spaces), so a position's line number is that of
+    the file (count the line breaks before it in the file's own text)."""
+    return _CONTINUATION.sub(lambda found: b" " * len(found.group()), text)
+
+
+def _obj_polygons(text: bytes, raw: bytes) -> tuple[np.ndarray, list[tuple[str, np.ndarray]]]:
+    """The vertices of an OBJ file's text (``_joined``) and its faces of four or more corners, named by their line in
+    the file's own text ``raw`` (empty where it cannot be read: trimesh's reader then says what is wrong)."""
     polygons = list(_POLYGON_LINE.finditer(text))
     vertex_lines = list(_VERTEX_LINE.finditer(text)) if polygons else []
     try:
@@ -87,7 +96,7 @@ def _obj_polygons(text: bytes) -> tuple[np.ndarray, list[tuple[str, np.ndarray]]
             defined = int(np.searchsorted(starts, polygon.start()))  # negative indices count back from here
             indices = [int(token.split(b"/")[0]) for token in polygon.group(1).split()]
             rows = np.array([index - 1 if index > 0 else defined + index for index in indices])
-            line = text.count(b"\n", 0, polygon.start()) + 1
+            line = raw.count(b"\n", 0, polygon.start()) + 1
             found.append((f"on line {line}", rows))
     except ValueError:
         return np.zeros((0, 3)), []
@@ -115,13 +124,13 @@ def _ply_polygons(path: Path) -> tuple[np.ndarray, list[tuple[str, np.ndarray]]]
                       if len(rows) >= 4]
 
 
-def _face_naming_vertex_zero(text: bytes) -> int | None:
-    """The number of the first line of an OBJ file's text that is a face with a corner numbered 0 (before any
-    comment), None when there is none."""
+def _face_naming_vertex_zero(text: bytes, raw: bytes) -> int | None:
+    """The number of the line of the file's own text ``raw`` where the first face of an OBJ file's text (``_joined``)
+    with a corner numbered 0 (before any comment) starts, None when there is none."""
     if _ZERO_TOKEN.search(text) is None:  # most files: no number 0 anywhere, found at the speed of a plain search
         return None
     zero = _ZERO_CORNER.search(text)
-    return None if zero is None else text.count(b"\n", 0, zero.start()) + 1
+    return None if zero is None else raw.count(b"\n", 0, zero.start()) + 1
 
 
 def checked_polygon_faces(path: Path) -> float:
@@ -131,12 +140,13 @@ def checked_polygon_faces(path: Path) -> float:
     the largest polygon's ``_warp`` (0.0 for a file of triangles, or of another format)."""
     suffix = path.suffix.lower()
     if suffix == ".obj":
-        text = path.read_bytes()
-        line = _face_naming_vertex_zero(text)
+        raw = path.read_bytes()
+        text = _joined(raw)
+        line = _face_naming_vertex_zero(text, raw)
         if line is not None:
             raise MeshError(f"{path}: the face on line {line} names vertex 0, which an OBJ file does not have (it "
                             "counts vertices from 1); export the mesh again from CAD")
-        return _checked(path, *_obj_polygons(text))
+        return _checked(path, *_obj_polygons(text, raw))
     if suffix == ".ply":
         return _checked(path, *_ply_polygons(path))
     return 0.0

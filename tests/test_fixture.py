@@ -273,6 +273,29 @@ def test_an_obj_with_a_concave_polygon_face_is_refused_with_the_fix(tmp_path):
         load_fixture(path)
 
 
+def test_a_concave_polygon_face_in_a_file_with_windows_line_ends_is_refused(tmp_path):
+    """CAD tools on Windows end lines with CR LF: the check of polygon faces skipped every line that ended so (its
+    pattern wanted the line's end right after the last corner), and the L-plate loaded with its notch covered."""
+    path = tmp_path / "plate.obj"
+    path.write_bytes(_prism_obj(L_OUTLINE, [list(range(8))]).replace("\n", "\r\n").encode())
+    with pytest.raises(MeshError, match="line 17 is a polygon of 8 corners that is not convex"):
+        load_fixture(path)
+
+
+@pytest.mark.parametrize("newline", ["\n", "\r\n"])
+def test_a_concave_polygon_face_continued_on_the_next_line_is_refused_too(tmp_path, newline):
+    """OBJ lets a backslash continue a line, and trimesh joins them: the L-plate's caps, each written over two lines,
+    passed the check line by line (no line a polygon of integers) and loaded with the notch covered."""
+    lines = []
+    for line in _prism_obj(L_OUTLINE, [list(range(8))]).splitlines():
+        words = line.split()
+        lines += [" ".join(words[:4]) + " \\", " " + " ".join(words[4:])] if len(words) > 5 else [line]
+    path = tmp_path / "plate.obj"
+    path.write_bytes(newline.join(lines).encode() + newline.encode())
+    with pytest.raises(MeshError, match="line 17 is a polygon of 8 corners that is not convex"):
+        load_fixture(path)
+
+
 def test_an_obj_of_convex_polygons_loads_as_its_surface(tmp_path):
     """The same L-plate with each cap cut into convex polygons (a pentagon with a straight corner, two quads) loads
     with the plate's own area and volume."""
@@ -338,7 +361,7 @@ def test_a_ply_with_a_concave_polygon_face_is_refused_with_the_fix(tmp_path, enc
         load_fixture(path)
 
 
-@pytest.mark.parametrize("face", ["f 0 1 2", "f 1 2 0/1/1", "f -0 1 2\r"])
+@pytest.mark.parametrize("face", ["f 0 1 2", "f 1 2 0/1/1", "f -0 1 2\r", "f 1 2 \\\n 0"])
 def test_an_obj_face_naming_vertex_zero_is_refused(tmp_path, face):
     """OBJ counts vertices from 1: trimesh read a 0 as another vertex and dropped one without a word."""
     path = tmp_path / "part.obj"
