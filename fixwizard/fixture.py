@@ -6,6 +6,7 @@ users is of the ``cad`` frame.
 """
 
 import hashlib
+import io
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -23,6 +24,7 @@ from fixwizard.mesh_format import (
     FORMAT_NAMES,
     STL_HEADER_BYTES,
     STL_TRIANGLE_BYTES,
+    UTF8_BOM,
     binary_stl_size_mismatch,
     content_format,
 )
@@ -280,6 +282,16 @@ def _surface_of(loaded: object) -> object:
     return trimesh.util.concatenate([part for part in loaded.dump() if isinstance(part, trimesh.Trimesh)])
 
 
+def _trimesh_load(path: Path) -> object:
+    """What trimesh reads from the file; an OBJ without the byte-order mark some Windows tools write first (trimesh
+    took it for part of the first line, and lost that line's vertex: every face then named the vertex after its
+    own, and the file was refused with "index out of bounds", or read as another surface)."""
+    data = path.read_bytes()
+    if path.suffix.lower() == ".obj" and data.startswith(UTF8_BOM):
+        return trimesh.load(io.BytesIO(data[len(UTF8_BOM):]), file_type="obj", process=False)
+    return trimesh.load(path, process=False)
+
+
 def _load_trimesh(path: Path) -> tuple[trimesh.Trimesh, float]:
     """The file's triangles, and how far (its units) their surface may lie from another one spanning its polygon faces
     (``polygon_faces.checked_polygon_faces``); ``MeshError`` saying what to do for a file that is none."""
@@ -309,7 +321,7 @@ def _load_trimesh(path: Path) -> tuple[trimesh.Trimesh, float]:
                         "again")
     try:
         with np.errstate(all="ignore"):  # absurd coordinates overflow in the reader; they are refused below
-            mesh = _surface_of(trimesh.load(path, process=False))
+            mesh = _surface_of(_trimesh_load(path))
     except Exception as error:  # trimesh raises many types for malformed files
         raise MeshError(f"{path} could not be read as a mesh ({error}); check that it is an STL, PLY or "
                         "OBJ export of the fixture") from error

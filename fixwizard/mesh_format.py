@@ -7,6 +7,7 @@ from pathlib import Path
 FORMAT_NAMES = {".stl": "STL", ".ply": "PLY", ".obj": "OBJ"}
 HEAD_BYTES = 4096
 STL_HEADER_BYTES, STL_TRIANGLE_BYTES = 84, 50  # binary STL: 80-byte header, uint32 count, 50 bytes per triangle
+UTF8_BOM = b"\xef\xbb\xbf"  # a byte-order mark some Windows tools put before a text file
 OBJ_KEYWORDS = {"v", "vn", "vt", "vp", "f", "l", "o", "g", "s", "mtllib", "usemtl"}
 
 
@@ -19,7 +20,7 @@ def content_format(path: Path) -> str | None:
     if size >= STL_HEADER_BYTES and size == STL_HEADER_BYTES + STL_TRIANGLE_BYTES * struct.unpack(
             "<I", head[80:84])[0]:
         return ".stl"  # binary, whatever its header says (it may start with "solid" too)
-    text = head.removeprefix(b"\xef\xbb\xbf").lstrip()
+    text = head.removeprefix(UTF8_BOM).lstrip()
     if text.startswith(b"ply") and text[3:4] in (b"\n", b"\r"):
         return ".ply"
     if text[:5].lower() == b"solid":

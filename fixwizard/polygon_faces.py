@@ -19,6 +19,7 @@ import numpy as np
 from trimesh.exchange import ply
 
 from fixwizard.errors import MeshError
+from fixwizard.mesh_format import UTF8_BOM
 
 _VERTEX_LINE = re.compile(rb"^[ \t]*v[ \t]+(\S+)[ \t]+(\S+)[ \t]+(\S+)", re.MULTILINE)
 _POLYGON_LINE = re.compile(rb"^[ \t]*f((?:[ \t]+\S+){4,})[ \t\r]*$", re.MULTILINE)  # CRLF line ends too
@@ -140,7 +141,7 @@ def checked_polygon_faces(path: Path) -> float:
     the largest polygon's ``_warp`` (0.0 for a file of triangles, or of another format)."""
     suffix = path.suffix.lower()
     if suffix == ".obj":
-        raw = path.read_bytes()
+        raw = path.read_bytes().removeprefix(UTF8_BOM)  # as fixture reads it: before it, the first vertex was lost
         text = _joined(raw)
         line = _face_naming_vertex_zero(text, raw)
         if line is not None:

@@ -97,6 +97,22 @@ def test_exports_that_look_odd_still_load(tmp_path, content):
     assert len(load_fixture(path).mesh.faces) == len(SHAPES["l_prism"]().faces)
 
 
+@pytest.mark.parametrize("spare_vertex", [False, True])
+def test_an_obj_whose_first_vertex_follows_a_byte_order_mark_loads_as_its_surface(tmp_path, spare_vertex):
+    """trimesh took the mark for part of the first line and lost its vertex: every face named the vertex after its
+    own, refused as "index out of bounds", or, with a vertex to spare at the end, read as another surface; the
+    check of polygon faces read the same wrong corners. Now the file's own box, and the warp of its quads."""
+    box = trimesh.creation.box((0.1, 0.06, 0.03))
+    vertices = np.vstack([box.vertices, [[0.2, 0.2, 0.2]]]) if spare_vertex else np.asarray(box.vertices)
+    path = tmp_path / "box.obj"
+    path.write_bytes(b"\xef\xbb\xbf" + _obj_text(vertices, box.faces).encode())
+    fixture = load_fixture(path)
+    assert fixture.mesh.area == pytest.approx(box.area, rel=1e-12) and fixture.signed and fixture.warnings == ()
+    warped = tmp_path / "warped.obj"
+    warped.write_bytes(b"\xef\xbb\xbf" + polygons_obj(warped_box_vertices(), WARPED_BOX_QUADS).encode())
+    assert load_fixture(warped).surface_offset_m == pytest.approx(0.001, rel=1e-3)
+
+
 def _count_set(data: bytes, count: int) -> bytes:
     return data[:80] + count.to_bytes(4, "little") + data[84:]
 
