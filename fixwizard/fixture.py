@@ -15,7 +15,7 @@ import igl
 import numpy as np
 import trimesh
 
-from fixwizard.errors import MeshError, MeshUnitsError
+from fixwizard.errors import MeshError, MeshUnitsError, quoted
 from fixwizard.geometry.hull_cover import HullCover, hull_cover
 from fixwizard.geometry.meb import minimum_enclosing_ball
 from fixwizard.geometry.mesh_distance import MeshDistance
@@ -24,11 +24,11 @@ from fixwizard.mesh_format import (
     FORMAT_NAMES,
     STL_HEADER_BYTES,
     STL_TRIANGLE_BYTES,
-    UTF8_BOM,
     binary_stl_size_mismatch,
     content_format,
 )
 from fixwizard.mesh_hygiene import ZIP_SHARE, clean_mesh, refuse_far_vertices, refuse_non_finite
+from fixwizard.obj_lines import face_triangles, reader_text, short_vertex_line
 from fixwizard.polygon_faces import checked_polygon_faces
 
 METRES_PER_UNIT = {"m": 1.0, "mm": 1e-3}
@@ -283,13 +283,22 @@ def _surface_of(loaded: object) -> object:
 
 
 def _trimesh_load(path: Path) -> object:
-    """What trimesh reads from the file; an OBJ without the byte-order mark some Windows tools write first (trimesh
-    took it for part of the first line, and lost that line's vertex: every face then named the vertex after its
-    own, and the file was refused with "index out of bounds", or read as another surface)."""
-    data = path.read_bytes()
-    if path.suffix.lower() == ".obj" and data.startswith(UTF8_BOM):
-        return trimesh.load(io.BytesIO(data[len(UTF8_BOM):]), file_type="obj", process=False)
-    return trimesh.load(path, process=False)
+    """The triangles trimesh reads from the file (``_surface_of``); an OBJ as ``obj_lines.reader_text`` gives it
+    (trimesh skipped indented lines, tabs after a keyword and the first line after a byte-order mark without a
+    word), checked to hold every triangle of its faces."""
+    if path.suffix.lower() != ".obj":
+        return _surface_of(trimesh.load(path, process=False))
+    text = reader_text(path.read_bytes())
+    short = short_vertex_line(text)
+    if short is not None:
+        raise MeshError(f"{path} has a vertex line with fewer than three coordinates ({quoted(short)}); export the "
+                        "mesh again from CAD")
+    loaded = _surface_of(trimesh.load(io.BytesIO(text), file_type="obj", process=False))
+    read, held = len(getattr(loaded, "faces", ())), face_triangles(text)
+    if read != held:
+        raise MeshError(f"{path}: its faces hold {held} triangles, of which the OBJ reader read {read}; export the "
+                        "mesh again from CAD, or as STL")
+    return loaded
 
 
 def _load_trimesh(path: Path) -> tuple[trimesh.Trimesh, float]:
@@ -321,7 +330,9 @@ def _load_trimesh(path: Path) -> tuple[trimesh.Trimesh, float]:
                         "again")
     try:
         with np.errstate(all="ignore"):  # absurd coordinates overflow in the reader; they are refused below
-            mesh = _surface_of(_trimesh_load(path))
+            mesh = _trimesh_load(path)
+    except MeshError:
+        raise
     except Exception as error:  # trimesh raises many types for malformed files
         raise MeshError(f"{path} could not be read as a mesh ({error}); check that it is an STL, PLY or "
                         "OBJ export of the fixture") from error

@@ -20,11 +20,11 @@ from trimesh.exchange import ply
 
 from fixwizard.errors import MeshError
 from fixwizard.mesh_format import UTF8_BOM
+from fixwizard.obj_lines import joined
 
 _VERTEX_LINE = re.compile(rb"^[ \t]*v[ \t]+(\S+)[ \t]+(\S+)[ \t]+(\S+)", re.MULTILINE)
 _POLYGON_LINE = re.compile(rb"^[ \t]*f((?:[ \t]+\S+){4,})[ \t\r]*$", re.MULTILINE)  # CRLF line ends too
 _ZERO_TOKEN = re.compile(rb"[ \t][-+]?0+(?=[/ \t\r\n#]|$)")  # a number 0 in any line
-_CONTINUATION = re.compile(rb"\\[ \t]*\r?\n")  # a backslash ending a line joins the next one to it (the OBJ spec)
 _ZERO_CORNER = re.compile(rb"^[ \t]*f[ \t][^\n#]*?(?<=[ \t])[-+]?0+(?=[/ \t\r\n#]|$)", re.MULTILINE)
 PLY_INDEX_NAMES = ("vertex_indices", "vertex_index")  # what PLY exporters call a face's corner list
 # A corner whose turn is below this share of its edges' and the normal's lengths is straight: the rounding of the
@@ -77,16 +77,9 @@ def _checked(path: Path, vertices: np.ndarray, polygons: Iterable[tuple[str, np.
     return warp
 
 
-def _joined(text: bytes) -> bytes:
-    """An OBJ file's text with each line continued by a backslash joined to the next, as trimesh reads it; every
-    byte stays where it was (the backslash and the line break become spaces), so a position's line number is that of
-    the file (count the line breaks before it in the file's own text)."""
-    return _CONTINUATION.sub(lambda found: b" " * len(found.group()), text)
-
-
 def _obj_polygons(text: bytes, raw: bytes) -> tuple[np.ndarray, list[tuple[str, np.ndarray]]]:
-    """The vertices of an OBJ file's text (``_joined``) and its faces of four or more corners, named by their line in
-    the file's own text ``raw`` (empty where it cannot be read: trimesh's reader then says what is wrong)."""
+    """The vertices of an OBJ file's text (``obj_lines.joined``) and its faces of four or more corners, named by their
+    line in the file's own text ``raw`` (empty where it cannot be read: trimesh's reader then says what is wrong)."""
     polygons = list(_POLYGON_LINE.finditer(text))
     vertex_lines = list(_VERTEX_LINE.finditer(text)) if polygons else []
     try:
@@ -126,8 +119,8 @@ def _ply_polygons(path: Path) -> tuple[np.ndarray, list[tuple[str, np.ndarray]]]
 
 
 def _face_naming_vertex_zero(text: bytes, raw: bytes) -> int | None:
-    """The number of the line of the file's own text ``raw`` where the first face of an OBJ file's text (``_joined``)
-    with a corner numbered 0 (before any comment) starts, None when there is none."""
+    """The number of the line of the file's own text ``raw`` where the first face of an OBJ file's text
+    (``obj_lines.joined``) with a corner numbered 0 (before any comment) starts, None when there is none."""
     if _ZERO_TOKEN.search(text) is None:  # most files: no number 0 anywhere, found at the speed of a plain search
         return None
     zero = _ZERO_CORNER.search(text)
@@ -142,7 +135,7 @@ def checked_polygon_faces(path: Path) -> float:
     suffix = path.suffix.lower()
     if suffix == ".obj":
         raw = path.read_bytes().removeprefix(UTF8_BOM)  # as fixture reads it: before it, the first vertex was lost
-        text = _joined(raw)
+        text = joined(raw)
         line = _face_naming_vertex_zero(text, raw)
         if line is not None:
             raise MeshError(f"{path}: the face on line {line} names vertex 0, which an OBJ file does not have (it "

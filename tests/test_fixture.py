@@ -113,6 +113,29 @@ def test_an_obj_whose_first_vertex_follows_a_byte_order_mark_loads_as_its_surfac
     assert load_fixture(warped).surface_offset_m == pytest.approx(0.001, rel=1e-3)
 
 
+@pytest.mark.parametrize("line, changed", [(0, "  v "), (0, "v\t"), (8, "  f "), (8, "f\t")])
+def test_an_obj_line_indented_or_with_a_tab_after_its_keyword_is_read(tmp_path, line, changed):
+    """trimesh read a vertex or face only from a line starting with "v " or "f ": such a vertex was skipped (every
+    later one moved up by one, the faces naming other corners: with a vertex to spare, a box read as 0.091 m2 of
+    another surface), such a face left a hole. The file's own box now."""
+    box = trimesh.creation.box((0.1, 0.06, 0.03))
+    lines = _obj_text(np.vstack([box.vertices, [[0.2, 0.2, 0.2]]]), box.faces).splitlines()
+    lines[line + (line > 0)] = changed + lines[line + (line > 0)][1:].lstrip()
+    path = tmp_path / "box.obj"
+    path.write_text("\n".join(lines) + "\n")
+    fixture = load_fixture(path)
+    assert fixture.mesh.area == pytest.approx(box.area, rel=1e-12) and fixture.signed and fixture.warnings == ()
+
+
+def test_an_obj_vertex_of_two_coordinates_is_refused(tmp_path):
+    """trimesh read 'v 1 2' as some other point (the box's surface changed)."""
+    box = trimesh.creation.box((0.1, 0.06, 0.03))
+    path = tmp_path / "box.obj"
+    path.write_text(_obj_text(box.vertices, box.faces).replace("\nf ", "\nv 0.1 0.2\nf ", 1))
+    with pytest.raises(MeshError, match=r"a vertex line with fewer than three coordinates \('v 0.1 0.2'\)"):
+        load_fixture(path)
+
+
 def _count_set(data: bytes, count: int) -> bytes:
     return data[:80] + count.to_bytes(4, "little") + data[84:]
 
