@@ -12,7 +12,9 @@ start of a line without its end. On open a torn last line is moved aside into ``
 kept) and the journal continues after the last complete record; a torn record followed on the same line by a
 complete one (journals of older versions appended after a failed write) is skipped and the records after it are
 kept. A complete line that fails its checksum is damage to an acknowledged record: an error naming the line, since
-fixwizard will not guess what it held. One writer at a time, enforced with a non-blocking ``flock``.
+fixwizard will not guess what it held; the last line too, unless it is no JSON at all (a power cut before its fsync
+kept the page with its end and lost the one with its start): that one is torn. One writer at a time, enforced with
+a non-blocking ``flock``.
 """
 
 import errno
@@ -268,6 +270,23 @@ def _after_torn(line: bytes) -> tuple[int, dict] | None:
     return None
 
 
+def _torn_last(line: bytes) -> bool:
+    """Whether the last line is a record that never finished: without its newline, or with bytes a power cut lost
+    before the line's end (no JSON at all, no complete record after a torn one). A last line that is JSON but fails
+    its checksum was written whole, so acknowledged: damage, refused like any other line."""
+    if not line.endswith(b"\n"):
+        return True
+    if _decode(line) is not None or _after_torn(line) is not None:
+        return False
+    try:
+        json.loads(line)
+    except ValueError:
+        return True
+    except RecursionError:  # nested deeper than any record: no torn write makes that
+        return False
+    return False
+
+
 def _header_of(kind: JournalKind, lines: list[bytes]) -> dict | None:
     """The header on the first line (with its newline), or None for a file that is no journal of ``kind``."""
     header = _decode(lines[0]) if lines and lines[0].endswith(b"\n") else None
@@ -293,8 +312,7 @@ def _read(kind: JournalKind, path: Path, data: bytes) -> _Read:
         raise kind.error(f"{path} is not a fixwizard {kind.noun} journal ({kind.schema}); choose a {kind.noun} file "
                          "the wizard wrote")
     torn_tail = None
-    if len(lines) > 1 and (not lines[-1].endswith(b"\n")
-                           or (_decode(lines[-1]) is None and _after_torn(lines[-1]) is None)):
+    if len(lines) > 1 and _torn_last(lines[-1]):
         torn_tail = (len(lines), lines.pop())
     records, torn = [], []
     for number, line in enumerate(lines[1:], start=2):

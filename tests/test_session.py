@@ -117,6 +117,31 @@ def test_damaged_middle_line_is_refused_naming_it(tmp_path):
         SamplingSession.open(path)
 
 
+def test_damaged_last_line_is_refused_naming_it_not_set_aside(tmp_path):
+    """A complete last record that still parses but fails its checksum was written whole (and acknowledged):
+    damage, refused like any other line, the journal left as it is."""
+    path = recorded(tmp_path, 3)
+    lines = path.read_bytes().splitlines(keepends=True)
+    lines[-1] = lines[-1].replace(b"0.4", b"0.5")
+    path.write_bytes(b"".join(lines))
+    with pytest.raises(SessionError, match="line 4 of the session .* is damaged"):
+        SamplingSession.open(path)
+    assert path.read_bytes() == b"".join(lines) and [p.name for p in tmp_path.iterdir()] == ["a.jsonl"]
+
+
+def test_a_last_line_whose_start_a_power_cut_lost_is_set_aside(tmp_path):
+    """A write cut by a power cut before its fsync can keep the page holding a line's end and lose the one with
+    its start (zeros): that line never parsed, was never acknowledged, and is set aside as torn."""
+    path = recorded(tmp_path, 3)
+    lines = path.read_bytes().splitlines(keepends=True)
+    lost = b"\0" * 40 + lines[-1][40:]
+    path.write_bytes(b"".join(lines[:-1]) + lost)
+    with SamplingSession.open(path) as resumed:
+        (note,) = resumed.recovered
+        assert note.line_number == 4 and note.moved_to.read_bytes() == lost
+        assert [tap.id for tap in resumed.taps] == [1, 2]
+
+
 def test_foreign_and_missing_files_are_refused(tmp_path):
     foreign = tmp_path / "notes.jsonl"
     foreign.write_text('{"hello": "world"}\n')
@@ -395,3 +420,12 @@ def test_a_real_full_disk_strands_nothing(small_disk):
     with SamplingSession.open(session.path) as resumed:
         assert resumed.recovered == ()
         assert [tap.id for tap in resumed.taps] == acknowledged == list(range(1, len(acknowledged) + 1))
+
+
+@pytest.mark.parametrize("last", [b'{"kind":"undo","id":NaN}\n', b"[" * 100_000 + b"\n"], ids=["nan", "nested"])
+def test_a_last_line_no_record_holds_is_refused(tmp_path, last):
+    """NaN or nesting beyond any record is no write cut short but damage: refused naming the line."""
+    path = recorded(tmp_path, 2)
+    path.write_bytes(path.read_bytes() + last)
+    with pytest.raises(SessionError, match="line 4 of the session .* is damaged"):
+        SamplingSession.open(path)
