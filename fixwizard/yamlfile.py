@@ -25,8 +25,9 @@ MAX_DOCUMENT_BYTES = 1_000_000
 
 
 class _Loader(yaml.SafeLoader):
-    """``yaml.safe_load``'s loader, except that an integer too large for a float reads as +-inf: where a number is
-    read, it is then refused as not finite, with that place's message (``float()`` of it would raise); and a key
+    """``yaml.safe_load``'s loader, except that an integer too large for a float reads as +-inf (also one of over
+    4300 digits, which Python refuses to convert): where a number is read, it is then refused as not finite, with
+    that place's message (``float()`` of it would raise); and a key
     given twice in one mapping is an error (PyYAML keeps the last one silently: a report with ``status`` twice
     would be read as whichever came last)."""
 
@@ -45,7 +46,10 @@ class _Loader(yaml.SafeLoader):
 
 
 def _int_or_infinity(loader: yaml.SafeLoader, node: yaml.ScalarNode) -> int | float:
-    value: int = loader.construct_yaml_int(node)
+    try:
+        value: int = loader.construct_yaml_int(node)
+    except ValueError:  # a decimal of over 4300 digits, which Python will not convert: far beyond any float
+        return -math.inf if str(node.value).lstrip().startswith("-") else math.inf
     return value if abs(value) <= sys.float_info.max else (math.inf if value > 0 else -math.inf)
 
 

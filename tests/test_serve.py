@@ -466,6 +466,17 @@ def test_a_report_folder_file_nested_too_deeply_to_read_is_skipped_and_the_other
     assert fw.is_usable("bracket") and fw.get_pose("bracket")["x"] and "bracket" in fw.list_fixtures()
 
 
+def test_a_report_holding_an_integer_of_thousands_of_digits_is_skipped_and_the_others_served(running, cell, caplog):
+    """Python refuses to read an integer of over 4300 digits: every call was an internal error while it lay there."""
+    fw = running.client()
+    text = re.sub(r"(?m)^(  position_m: \[)[^,]*", rf"\g<1>1{'0' * 5000}", (cell / "bracket-1.yaml").read_text(),
+                  count=1)
+    (cell / "huge.yaml").write_text(text.replace("name: bracket", "name: huge"))
+    with caplog.at_level(logging.INFO, logger="fixwizard.serve"):
+        assert fw.is_usable("bracket") and fw.get_pose("bracket")["x"] and "huge" not in fw.list_fixtures()
+    assert any(f"skipped {cell / 'huge.yaml'}" in record.getMessage() for record in caplog.records)
+
+
 def test_the_serve_command_refuses_a_log_that_is_one_of_its_inputs(cell, tmp_path, monkeypatch, capsys,
                                                                     stops_at_once):
     monkeypatch.chdir(tmp_path)  # a relative mesh path in a report is read from the current folder
