@@ -47,7 +47,11 @@ def _read_csv(text: str, path: Path) -> np.ndarray:
     """One ``x,y,z`` row per tap; a first row is a header only when none of its cells is or starts like a
     number (a typo in a first row of numbers is an error like in any other row)."""
     reader = csv.reader(io.StringIO(text))
-    lines = [(reader.line_num, row) for row in reader if any(cell.strip() for cell in row)]
+    try:
+        lines = [(reader.line_num, row) for row in reader if any(cell.strip() for cell in row)]
+    except csv.Error as error:  # a cell over the reader's field limit (128 kB)
+        raise InputError(f"line {reader.line_num} of {path} cannot be read as CSV ({error}): each line is a tap, "
+                         "x,y,z in metres") from None
     if lines and not any(_NUMBER_START.match(cell) for cell in lines[0][1]):
         lines = lines[1:]
     rows = [(f"tap {number} (line {line} of {path})", row) for number, (line, row) in enumerate(lines, start=1)]

@@ -99,6 +99,14 @@ def test_a_huge_row_is_quoted_in_part(tmp_path):
     assert len(str(caught.value)) < MESSAGE_LIMIT and str(caught.value).count("9") <= QUOTE_LIMIT
 
 
+def test_a_cell_longer_than_the_csv_reader_takes_is_refused_naming_its_line(tmp_path):
+    path = tmp_path / "taps.csv"
+    path.write_text(csv_text([*tap_rows()[:2], "0." + "1" * 200_000 + ",0.2,0.3"]))
+    with pytest.raises(InputError, match=r"line 3 of .*taps.csv") as caught:
+        load_points(path)
+    assert len(str(caught.value)) < MESSAGE_LIMIT
+
+
 def test_random_garbage_is_a_short_message_or_taps(tmp_path):
     rng = np.random.default_rng(7)
     alphabet = list("0123456789.,-e \n\t;:[]{}&*!#'\"xyzm") + ["\ufeff", "nan", "inf", "points_m:", "frame: base"]
