@@ -35,6 +35,7 @@ import os
 import re
 import socket
 import socketserver
+import stat
 import sys
 import threading
 import time
@@ -112,7 +113,10 @@ class FixtureService:
         the folder is gone or cannot be read."""
         with self._lock:
             try:
-                self.folder.stat()  # folder_state takes a missing folder for an empty one
+                if not stat.S_ISDIR(self.folder.stat().st_mode):  # folder_state takes it for an empty folder
+                    raise Refused(NO_REPORTS_FOLDER, f"fixwizard: the reports folder {self.folder} is a file, not a "
+                                  "folder (replaced?): put the folder back, or restart serve with --reports DIR of "
+                                  "the reports")
                 state = folder_state(self.folder)
             except FileNotFoundError:
                 raise Refused(NO_REPORTS_FOLDER, f"fixwizard: the reports folder {self.folder} is gone (moved or "

@@ -255,6 +255,18 @@ def test_a_reports_folder_that_is_gone_or_cannot_be_read_is_a_fault_saying_so(ru
     assert main(["serve", "--reports", str(cell), "--host", "127.0.0.1", "--port", "0"]) == 1  # nor at the start
 
 
+def test_a_reports_folder_replaced_by_a_file_is_a_fault_saying_so(running, cell):
+    """A file where the folder was (a copy gone wrong) is no empty folder: 'no report of bracket' hid why."""
+    fw = running.client()
+    cell.rename(cell.with_name("moved"))
+    cell.write_text("not a folder\n")
+    fault = fault_of(lambda: fw.get_pose("bracket"))
+    assert fault.faultCode == 7 and f"the reports folder {cell} is a file, not a folder" in fault.faultString
+    cell.unlink()
+    cell.with_name("moved").rename(cell)
+    assert fw.get_pose("bracket")["x"]
+
+
 def test_a_new_report_is_served_from_the_next_call_on(running, cell):
     fw = running.client()
     before = fw.get_pose("bracket")
