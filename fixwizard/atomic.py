@@ -3,8 +3,8 @@
 An output is never one of the inputs it was made from, a folder or a device; a symlink is written through
 to its target (the link stays); a leading ``~`` is the home folder, as in a shell. ``check_output`` says so
 before the work that leads to the output, with its folder's writability; the write itself goes through a flushed
-temporary file in the target's folder (``.<name>.<pid>.<random>.tmp``) and a rename. Temporary files of ours that
-a killed write left behind are removed by the next write of the same file.
+temporary file in the target's folder (``.<name>.<pid>.<random>.tmp``, a long name cut short) and a rename.
+Temporary files of ours that a killed write left behind are removed by the next write of the same file.
 """
 
 import os
@@ -20,6 +20,9 @@ from fixwizard.errors import InputError, file_problem
 LEGACY_TEMPORARY_AGE_S = 3600.0  # a temporary file without a process id is stale after this long
 TEMPORARY_RANDOM = "[a-z0-9_]{8}"  # the random part of ``tempfile.mkstemp`` names
 PROBE_BYTES = 4096  # written (and removed) to check that the output's folder takes a file
+# Bytes of the output's name kept in its temporary file's name: with the dot, the process id and the random part,
+# that name stays within the 255 bytes a file name may take, however long the output's own name.
+TEMPORARY_NAME_BYTES = 200
 
 
 def home_expanded(path: str | Path) -> str:
@@ -126,7 +129,8 @@ def write_bytes_atomic(path: str | Path, data: bytes) -> Path:
     path = output_target(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     _remove_stale_temporaries(path)
-    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
+    handle, temporary = tempfile.mkstemp(prefix=f".{_temporary_stem(path)}.{os.getpid()}.", suffix=".tmp",
+                                         dir=path.parent)
     try:
         os.fchmod(handle, _file_mode(path))
         with os.fdopen(handle, "wb") as stream:
@@ -156,10 +160,17 @@ def _file_mode(path: Path) -> int:
     return 0o666 & ~umask
 
 
+def _temporary_stem(path: Path) -> str:
+    """The output's name as its temporary files hold it: cut to ``TEMPORARY_NAME_BYTES`` (a character cut in two
+    keeps its bytes, as the file system takes them)."""
+    name = os.fsencode(path.name)
+    return path.name if len(name) <= TEMPORARY_NAME_BYTES else os.fsdecode(name[:TEMPORARY_NAME_BYTES])
+
+
 def _remove_stale_temporaries(path: Path) -> None:
     """Remove ``.<name>.<pid>.<random>.tmp`` files of ``path`` whose process is gone (a killed write), and
     ``.<name>.<random>.tmp`` ones (older versions) older than an hour."""
-    ours = re.compile(rf"\.{re.escape(path.name)}\.(?:(\d+)\.)?{TEMPORARY_RANDOM}\.tmp")
+    ours = re.compile(rf"\.{re.escape(_temporary_stem(path))}\.(?:(\d+)\.)?{TEMPORARY_RANDOM}\.tmp")
     for entry in os.scandir(path.parent):
         match = ours.fullmatch(entry.name)
         if match is None or not entry.is_file(follow_symlinks=False):

@@ -221,6 +221,17 @@ def test_a_killed_write_leaves_a_temporary_file_that_the_next_write_removes(tmp_
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(p.name for p in (path, young, live, other))
 
 
+def test_a_file_name_as_long_as_the_disk_takes_is_written(tmp_path):
+    """Its temporary file's name, the name with a dot, the process and a random part added, was too long for the
+    disk: the write failed after the work (a whole solve), though the check before it had passed."""
+    path = tmp_path / ("é" * 100 + "r" * 50 + ".yaml")  # 255 bytes, the most a file name takes
+    killed = tmp_path / f".{'é' * 100}.{2**22 + 1}.abcd_123.tmp"  # a killed write's (beyond Linux's largest pid)
+    killed.write_text("partial")
+    assert check_output(path) == path
+    write_text_atomic(path, "whole\n")
+    assert path.read_text() == "whole\n" and list(tmp_path.iterdir()) == [path]
+
+
 def test_a_write_keeps_the_mode_of_the_file_it_replaces(tmp_path):
     path = tmp_path / "report.yaml"
     path.write_text("old")
