@@ -47,9 +47,10 @@ def output_target(path: str | Path) -> Path:
     if str(path).endswith(("/", os.sep)):
         raise InputError(f"{path} ends with '/', so it names a folder; give the path of a file in it, e.g. "
                          f"{Path(path) / 'report.yaml'}")
-    target = Path(os.path.realpath(home_expanded(path)))
+    expanded = home_expanded(path)
+    target = Path(os.path.realpath(expanded))
     try:
-        mode = target.stat().st_mode
+        mode = os.stat(expanded).st_mode  # through its links: /proc/self/fd/1 of a pipe has no real path to stat
     except (FileNotFoundError, NotADirectoryError):  # a new file (its folder is checked apart)
         return target
     except OSError as error:

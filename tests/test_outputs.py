@@ -232,6 +232,18 @@ def test_a_file_name_as_long_as_the_disk_takes_is_written(tmp_path):
     assert path.read_text() == "whole\n" and list(tmp_path.iterdir()) == [path]
 
 
+def test_standard_output_as_the_output_is_called_a_special_file(tmp_path):
+    """``-o /dev/stdout`` into a pipe: its link names no real path, and the folder check said '/proc/PID/fd/...'
+    does not exist."""
+    reading, writing = os.pipe()
+    try:
+        with pytest.raises(InputError, match="is a device or special file"):
+            check_output(f"/proc/self/fd/{writing}")
+    finally:
+        os.close(reading)
+        os.close(writing)
+
+
 def test_a_write_keeps_the_mode_of_the_file_it_replaces(tmp_path):
     path = tmp_path / "report.yaml"
     path.write_text("old")
