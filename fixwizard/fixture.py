@@ -339,9 +339,22 @@ def _load_trimesh(path: Path) -> tuple[trimesh.Trimesh, float]:
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise MeshError(f"{path} holds no triangles (a point cloud or an empty model?); export the "
                         "fixture's surface as a triangle mesh")
+    _refuse_missing_corners(mesh, path)
     refuse_non_finite(np.asarray(mesh.vertices), str(path))
     refuse_far_vertices(np.asarray(mesh.vertices), str(path))
     return _identical_vertices_merged(mesh), warp
+
+
+def _refuse_missing_corners(mesh: trimesh.Trimesh, path: Path) -> None:
+    """MeshError for a face naming a vertex the file does not have (a damaged PLY): past the last one, or negative,
+    which numpy would read as counted from the end, another vertex."""
+    faces, count = np.asarray(mesh.faces, np.int64), len(mesh.vertices)
+    bad = np.flatnonzero(np.any((faces < 0) | (faces >= count), axis=1))
+    if len(bad):
+        row = faces[bad[0]]
+        corner = int(row[(row < 0) | (row >= count)][0])
+        raise MeshError(f"{path}: face {bad[0] + 1} names vertex {corner}, but the file has {count} vertices, "
+                        "numbered from 0 (a damaged or cut-short export); export the mesh again from CAD")
 
 
 def _identical_vertices_merged(mesh: trimesh.Trimesh) -> trimesh.Trimesh:

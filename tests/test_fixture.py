@@ -400,6 +400,18 @@ def test_a_ply_with_a_concave_polygon_face_is_refused_with_the_fix(tmp_path, enc
         load_fixture(path)
 
 
+@pytest.mark.parametrize("corner", [7, -1])
+def test_a_ply_face_naming_a_vertex_the_file_does_not_have_is_refused(tmp_path, corner):
+    """A PLY counts vertices from 0: a corner past the last one ended in an IndexError traceback, and -1 was read
+    as the last vertex without a word."""
+    path = tmp_path / "part.ply"
+    path.write_text("ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+                    "element face 2\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n0.1 0 0\n0 0.1 0\n"
+                    f"0 0 0.1\n3 0 1 2\n3 0 1 {corner}\n")
+    with pytest.raises(MeshError, match=f"face 2 names vertex {corner}, but the file has 4 vertices, numbered from 0"):
+        load_fixture(path)
+
+
 @pytest.mark.parametrize("face", ["f 0 1 2", "f 1 2 0/1/1", "f -0 1 2\r", "f 1 2 \\\n 0"])
 def test_an_obj_face_naming_vertex_zero_is_refused(tmp_path, face):
     """OBJ counts vertices from 1: trimesh read a 0 as another vertex and dropped one without a word."""
