@@ -205,10 +205,15 @@ def verdict_lines(result: VerifyResult) -> list[str]:
 
 
 def report_lines(loaded: report.Report, now_age_s: float) -> list[str]:
-    """What report is checked: fixture, status, age and SIMULATED."""
+    """What report is checked: fixture, status, age (or how far in the future it is dated: a wrong clock) and
+    SIMULATED."""
     simulated = "SIMULATED " if loaded.simulated else ""
     region = region_of(loaded)
-    return [(f"{simulated}report {loaded.path} of '{loaded.name}': {loaded.status}, {age_text(now_age_s)} old, "
+    if now_age_s < -report.FUTURE_TOLERANCE_S:
+        age = f"dated {age_text(-now_age_s)} in the future (check the clocks of the PCs)"
+    else:
+        age = f"{age_text(max(now_age_s, 0.0))} old"
+    return [(f"{simulated}report {loaded.path} of '{loaded.name}': {loaded.status}, {age}, "
              f"guaranteed within {region.position_m * 1e3:.2f} mm and {math.degrees(region.rotation_rad):.2f} deg")]
 
 

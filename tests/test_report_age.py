@@ -1,0 +1,26 @@
+"""A report's age as `verify` states it: a report dated in the future is said to be so, with the clocks to check,
+never a negative age."""
+
+from pathlib import Path
+
+from fixwizard import report
+from fixwizard.workflow.verify import report_lines
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "report.yaml"
+
+
+def test_a_report_dated_in_the_future_is_said_so_with_the_clocks_to_check():
+    loaded = report.load(EXAMPLE)
+    (line,) = report_lines(loaded, -3 * 86400.0)
+    assert "dated 3.0 days in the future (check the clocks of the PCs)" in line and "-3.0" not in line
+
+
+def test_a_report_a_little_ahead_of_this_clock_is_no_age_below_zero():
+    """Clocks of two PCs may differ by up to report.FUTURE_TOLERANCE_S: such a report is 0 s old."""
+    (line,) = report_lines(report.load(EXAMPLE), -report.FUTURE_TOLERANCE_S / 2)
+    assert ", 0 s old," in line
+
+
+def test_an_old_report_is_said_old():
+    (line,) = report_lines(report.load(EXAMPLE), 2.5 * 3600.0)
+    assert ", 2.5 h old," in line
