@@ -21,6 +21,7 @@ import errno
 import fcntl
 import json
 import os
+import stat
 import zlib
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -122,6 +123,10 @@ class Journal:
             handle = os.open(path, os.O_RDWR | os.O_APPEND)
         except OSError as problem:
             raise error(f"cannot open the {noun}: {file_problem(problem)}") from problem
+        if not stat.S_ISREG(os.fstat(handle).st_mode):  # reading a pipe would wait for a writer forever
+            os.close(handle)
+            raise error(f"{path} is not a regular file (a pipe or a device), so it is no {noun} journal; give a "
+                        ".jsonl file the wizard wrote")
         _lock(kind, handle, path)
         try:
             data = path.read_bytes()
@@ -194,9 +199,12 @@ def replay(kind: JournalKind, path: str | Path, replayed: Callable[[Journal], T]
 
 def read_unfinished(kind: JournalKind, path: Path) -> tuple[dict, list[dict]] | None:
     """An unfinished journal's header and the records that decode (after a torn one on the same line, if need be),
-    read without opening it for writing; None when ``path`` cannot be read, is no journal of ``kind`` or ends with
-    its closed record (told from that last line alone: a folder of finished journals is listed quickly)."""
+    read without opening it for writing; None when ``path`` cannot be read (or is no regular file), is no journal of
+    ``kind`` or ends with its closed record (told from that last line alone: a folder of finished journals is listed
+    quickly)."""
     try:
+        if not stat.S_ISREG(path.stat().st_mode):  # a pipe: reading it would wait for a writer forever
+            return None
         lines = path.read_bytes().splitlines(keepends=True)
     except OSError:
         return None

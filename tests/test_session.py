@@ -151,6 +151,16 @@ def test_foreign_and_missing_files_are_refused(tmp_path):
         SamplingSession.open(tmp_path / "missing.jsonl")
 
 
+def test_a_pipe_named_like_a_session_is_refused_and_never_listed(tmp_path):
+    """Reading a pipe waits for a writer that never comes: resume and the start screen's list hung on one."""
+    recorded(tmp_path, 2)
+    pipe = tmp_path / "pipe.jsonl"
+    os.mkfifo(pipe)
+    assert find_unfinished(tmp_path) == [tmp_path / "a.jsonl"]
+    with pytest.raises(SessionError, match="pipe.jsonl is not a regular file"):
+        SamplingSession.open(pipe)
+
+
 def test_existing_session_is_not_overwritten(tmp_path):
     path = recorded(tmp_path, 1)
     with pytest.raises(SessionError, match="exists already"):
