@@ -84,5 +84,10 @@ def load_document(path: Path, schema: str | tuple[str, ...], what: str, error: t
     found = data.get("schema") if isinstance(data, dict) else None
     accepted = (schema,) if isinstance(schema, str) else schema
     if found not in accepted:
+        family = accepted[0].rsplit("/", 1)[0] + "/"
+        if isinstance(found, str) and found.startswith(family):
+            raise error(f"{path} is a {what} of a version this fixwizard does not read ({quoted(found)}; it reads "
+                        f"{', '.join(accepted)}): it was written by another fixwizard; update fixwizard, or use the "
+                        "version that wrote it")
         raise error(f"{path} is not a {what}: expected 'schema: {accepted[0]}', found {quoted(found)}.{hint}")
     return data

@@ -185,7 +185,8 @@ V2_START = ("schema: fixwizard.report/2\nsimulated: false\nstatus: unique\ncreat
 
 @pytest.mark.parametrize("text, match", [
     ("just words", "not a fixwizard report"),
-    ("schema: fixwizard.report/3\n", "expected 'schema: fixwizard.report/2'"),
+    ("schema: fixwizard.report/3\n", "a fixwizard report of a version this fixwizard does not read "
+     r"\('fixwizard.report/3'; it reads fixwizard.report/2, fixwizard.report/1\): .*update fixwizard"),
     ("schema: fixwizard.report/1\nstatus: great\n", "status"),
     (V2_START + "pose: null\n", "needs 'pose'"),
     (V2_START.replace("simulated: false", "simulated: maybe"), "'simulated' must be true or false"),
