@@ -46,6 +46,16 @@ def one_line(text: str) -> str:
     return _NOT_ONE_LINE.sub(lambda match: "\ufffd" if match.group() >= "\ud800" else repr(match.group())[1:-1], text)
 
 
+def other_version(path: object, what: str, found: object, reads: tuple[str, ...]) -> str | None:
+    """What to say of a file whose ``schema`` is ``found``, when it is one of ``reads``' family (``fixwizard.report/3``
+    for ``fixwizard.report/2``) but of a version this fixwizard does not read; None for any other ``found``."""
+    if not (isinstance(found, str) and found.startswith(reads[0].rsplit("/", 1)[0] + "/")):
+        return None
+    return (f"{path} is a {what} of a version this fixwizard does not read ({quoted(found)}; it reads "
+            f"{', '.join(reads)}): it was written by another fixwizard; update fixwizard, or use the version that "
+            "wrote it")
+
+
 def file_problem(error: OSError, path: object = None) -> str:
     """What a file system error (on ``path`` when the error does not name a file) means for a person and
     what to do about it, in one clause."""

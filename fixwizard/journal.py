@@ -31,7 +31,7 @@ from typing import Self, TypeVar
 
 import numpy as np
 
-from fixwizard.errors import InputError, file_problem
+from fixwizard.errors import InputError, file_problem, other_version
 
 T = TypeVar("T")
 
@@ -317,6 +317,10 @@ def _read(kind: JournalKind, path: Path, data: bytes) -> _Read:
     lines = data.splitlines(keepends=True)
     header = _header_of(kind, lines)
     if header is None:
+        found = (_decode(lines[0]) or {}).get("schema") if lines else None
+        newer = other_version(path, f"{kind.noun} journal", found, (kind.schema,))
+        if newer is not None:
+            raise kind.error(newer)
         raise kind.error(f"{path} is not a fixwizard {kind.noun} journal ({kind.schema}); choose a {kind.noun} file "
                          "the wizard wrote")
     torn_tail = None

@@ -7,7 +7,7 @@ from typing import Any
 
 import yaml
 
-from fixwizard.errors import InputError, file_problem, quoted
+from fixwizard.errors import InputError, file_problem, other_version, quoted
 
 
 def yaml_problem(error: yaml.YAMLError) -> str:
@@ -84,10 +84,8 @@ def load_document(path: Path, schema: str | tuple[str, ...], what: str, error: t
     found = data.get("schema") if isinstance(data, dict) else None
     accepted = (schema,) if isinstance(schema, str) else schema
     if found not in accepted:
-        family = accepted[0].rsplit("/", 1)[0] + "/"
-        if isinstance(found, str) and found.startswith(family):
-            raise error(f"{path} is a {what} of a version this fixwizard does not read ({quoted(found)}; it reads "
-                        f"{', '.join(accepted)}): it was written by another fixwizard; update fixwizard, or use the "
-                        "version that wrote it")
+        newer = other_version(path, what, found, accepted)
+        if newer is not None:
+            raise error(newer)
         raise error(f"{path} is not a {what}: expected 'schema: {accepted[0]}', found {quoted(found)}.{hint}")
     return data

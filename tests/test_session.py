@@ -1,11 +1,13 @@
 """The sampling session journal: every acknowledged tap survives a crash, undo is journaled, resume works."""
 
 import errno
+import json
 import os
 import select
 import signal
 import subprocess
 import sys
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -159,6 +161,19 @@ def test_a_pipe_named_like_a_session_is_refused_and_never_listed(tmp_path):
     assert find_unfinished(tmp_path) == [tmp_path / "a.jsonl"]
     with pytest.raises(SessionError, match="pipe.jsonl is not a regular file"):
         SamplingSession.open(pipe)
+
+
+def test_a_session_of_another_fixwizard_version_is_said_to_be_one(tmp_path):
+    path = recorded(tmp_path, 1)
+    header, *records = path.read_bytes().splitlines(keepends=True)
+    record = json.loads(header)
+    record["schema"] = "fixwizard.session/2"
+    record.pop("crc")
+    record["crc"] = f"{zlib.crc32(json.dumps(record, sort_keys=True, separators=(',', ':')).encode()):08x}"
+    path.write_bytes(json.dumps(record).encode() + b"\n" + b"".join(records))
+    with pytest.raises(SessionError, match=r"a session journal of a version this fixwizard does not read "
+                                           r"\('fixwizard.session/2'; it reads fixwizard.session/1\)"):
+        SamplingSession.open(path)
 
 
 def test_existing_session_is_not_overwritten(tmp_path):
