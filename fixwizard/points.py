@@ -84,12 +84,17 @@ def load_points(path: str | Path) -> np.ndarray:
     if path.suffix.lower() in MESH_SUFFIXES:
         raise InputError(f"{path} is a mesh, not a points file (YAML or CSV of the taps): are the arguments in the "
                          "wrong order? (solve MESH POINTS, identify POINTS MESH...)")
+    too_large = ("a points file holds the taps (at most 1000, under 100 kB), not a point cloud; give the file of the "
+                 "tapped ball centres")
     try:
         size = path.stat().st_size
         if size > MAX_POINTS_FILE_BYTES:
-            raise InputError(f"{path} holds {size / 1e6:.1f} MB: a points file holds the taps (at most 1000, under "
-                             "100 kB), not a point cloud; give the file of the tapped ball centres")
-        text = path.read_text(encoding="utf-8-sig")
+            raise InputError(f"{path} holds {size / 1e6:.1f} MB: {too_large}")
+        with path.open("rb") as stream:  # a pipe has no size to look at: read no more than the most a file holds
+            data = stream.read(MAX_POINTS_FILE_BYTES + 1)
+        if len(data) > MAX_POINTS_FILE_BYTES:
+            raise InputError(f"{path} holds more than {MAX_POINTS_FILE_BYTES / 1e6:g} MB: {too_large}")
+        text = data.decode("utf-8-sig")
     except OSError as error:
         raise InputError(f"cannot read the points file: {file_problem(error, path)}") from error
     except UnicodeDecodeError as error:

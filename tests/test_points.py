@@ -1,6 +1,8 @@
 """The POINTS file as spreadsheets and editors write it: byte-order marks, headers, typos in any row, and
 YAML built to blow up. Every tap counts or the file is refused naming the row; messages stay short."""
 
+import os
+import threading
 import time
 
 import numpy as np
@@ -163,6 +165,33 @@ def test_a_point_cloud_is_refused_by_its_size_before_it_is_read(tmp_path, suffix
     with pytest.raises(InputError, match=r"holds \d+\.\d MB: a points file holds the taps .* not a point cloud"):
         load_points(path)
     assert time.perf_counter() - started < 0.5
+
+
+def test_a_point_cloud_piped_in_is_refused_after_its_first_megabyte(tmp_path):
+    """A pipe (``solve MESH /dev/stdin``) has no size to look at: the whole stream was read, then parsed for
+    minutes."""
+    reading, writing = os.pipe()
+    cloud = ("points_m:\n" + "- [0.1, 0.2, 0.3]\n" * 200_000).encode()  # 3.6 MB
+    feeder = threading.Thread(target=_feed, args=(writing, cloud), daemon=True)
+    feeder.start()
+    try:
+        started = time.perf_counter()
+        with pytest.raises(InputError, match=r"holds more than 1 MB: a points file holds the taps .* point cloud"):
+            load_points(f"/proc/self/fd/{reading}")
+        assert time.perf_counter() - started < 0.5
+    finally:
+        os.close(reading)
+        feeder.join(timeout=10)
+
+
+def _feed(handle: int, data: bytes) -> None:
+    """Write ``data`` into a pipe until the reader closes it."""
+    try:
+        os.write(handle, data)
+    except BrokenPipeError:
+        pass
+    finally:
+        os.close(handle)
 
 
 def test_true_or_false_is_no_coordinate(tmp_path):
