@@ -71,10 +71,13 @@ def load_document(path: Path, schema: str | tuple[str, ...], what: str, error: t
     ``error`` names the ``what`` otherwise, also for a file over ``MAX_DOCUMENT_BYTES``, refused before it is read."""
     try:
         size = path.stat().st_size
-        if size > MAX_DOCUMENT_BYTES:
-            raise error(f"{path} holds {size / 1e6:.1f} MB, more than any {what} (at most "
-                        f"{MAX_DOCUMENT_BYTES / 1e6:g} MB): it is no {what}; give the file fixwizard wrote")
-        data = parse_yaml(path.read_text(encoding="utf-8-sig"))
+        with path.open("rb") as stream:  # a pipe has no size to look at: read no more than any document holds
+            text = stream.read(MAX_DOCUMENT_BYTES + 1) if size <= MAX_DOCUMENT_BYTES else b""
+        if size > MAX_DOCUMENT_BYTES or len(text) > MAX_DOCUMENT_BYTES:
+            held = f"{size / 1e6:.1f} MB" if size > MAX_DOCUMENT_BYTES else f"more than {MAX_DOCUMENT_BYTES / 1e6:g} MB"
+            raise error(f"{path} holds {held}, more than any {what} (at most {MAX_DOCUMENT_BYTES / 1e6:g} MB): it is "
+                        f"no {what}; give the file fixwizard wrote")
+        data = parse_yaml(text.decode("utf-8-sig"))
     except OSError as problem:
         raise error(f"cannot read the {what}: {file_problem(problem, path)}") from problem
     except UnicodeDecodeError as problem:

@@ -7,6 +7,7 @@ import os
 import shutil
 import subprocess
 import tempfile
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -70,6 +71,23 @@ def small_disk(tmp_path) -> Path:
         pytest.skip(f"cannot mount a small tmpfs here: {result.stderr.decode().strip()}")
     yield mount_point
     subprocess.run(["umount", "-l", str(mount_point)], check=True)
+
+
+def piped(handle: int, data: bytes) -> threading.Thread:
+    """A thread writing ``data`` into the pipe end ``handle`` (then closing it) until the reader closes its end; join
+    it once the reading end is closed."""
+
+    def feed() -> None:
+        try:
+            os.write(handle, data)
+        except BrokenPipeError:
+            pass
+        finally:
+            os.close(handle)
+
+    feeder = threading.Thread(target=feed, daemon=True)
+    feeder.start()
+    return feeder
 
 
 def fill_disk(folder: Path) -> Path:

@@ -2,12 +2,12 @@
 YAML built to blow up. Every tap counts or the file is refused naming the row; messages stay short."""
 
 import os
-import threading
 import time
 
 import numpy as np
 import pytest
 
+from conftest import piped
 from fixwizard.errors import QUOTE_LIMIT, InputError
 from fixwizard.points import load_points
 from fixwizard.report import load as load_report
@@ -172,8 +172,7 @@ def test_a_point_cloud_piped_in_is_refused_after_its_first_megabyte(tmp_path):
     minutes."""
     reading, writing = os.pipe()
     cloud = ("points_m:\n" + "- [0.1, 0.2, 0.3]\n" * 200_000).encode()  # 3.6 MB
-    feeder = threading.Thread(target=_feed, args=(writing, cloud), daemon=True)
-    feeder.start()
+    feeder = piped(writing, cloud)
     try:
         started = time.perf_counter()
         with pytest.raises(InputError, match=r"holds more than 1 MB: a points file holds the taps .* point cloud"):
@@ -182,16 +181,6 @@ def test_a_point_cloud_piped_in_is_refused_after_its_first_megabyte(tmp_path):
     finally:
         os.close(reading)
         feeder.join(timeout=10)
-
-
-def _feed(handle: int, data: bytes) -> None:
-    """Write ``data`` into a pipe until the reader closes it."""
-    try:
-        os.write(handle, data)
-    except BrokenPipeError:
-        pass
-    finally:
-        os.close(handle)
 
 
 def test_true_or_false_is_no_coordinate(tmp_path):

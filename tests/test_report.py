@@ -2,6 +2,7 @@
 guarantee, atomic writing, and loading with checks, also of fixwizard.report/1 files."""
 
 import datetime as dt
+import os
 import re
 from pathlib import Path
 
@@ -10,6 +11,7 @@ import pytest
 import yaml
 from scipy.spatial.transform import Rotation
 
+from conftest import piped
 from fixwizard import report
 from fixwizard.errors import InputError
 from fixwizard.fixture import load_fixture
@@ -176,6 +178,18 @@ def test_a_version_1_report_still_loads(tmp_path):
     assert loaded.created == dt.datetime(2026, 11, 24, 4, 28, 12, tzinfo=dt.UTC)
     assert loaded.position_bound_m == pytest.approx(0.004182796099050545)
     assert loaded.base_T_cad[:3, 3] == pytest.approx([0.4500388342801127, -0.12033487023360534, 0.01998762907265287])
+
+
+def test_a_stream_piped_in_as_a_report_is_refused_after_its_first_megabyte(tmp_path):
+    """``export <(ssh cell cat ...)`` gives a pipe, which has no size to check first: it was read and parsed whole."""
+    reading, writing = os.pipe()
+    feeder = piped(writing, b"x: [" + b"0.1, " * 1_000_000 + b"0]\n")
+    try:
+        with pytest.raises(InputError, match="holds more than 1 MB, more than any fixwizard report"):
+            report.load(f"/proc/self/fd/{reading}")
+    finally:
+        os.close(reading)
+        feeder.join(timeout=10)
 
 
 V2_START = ("schema: fixwizard.report/2\nsimulated: false\nstatus: unique\ncreated: '2026-01-02T03:04:05+00:00'\n"
