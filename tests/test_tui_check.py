@@ -3,6 +3,7 @@ report, tap the suggested points with the simulated hands, check: untouched it i
 has moved; every tap is journaled; a changed mesh and a missing report are explained."""
 
 import asyncio
+import datetime as dt
 import json
 import shutil
 from pathlib import Path
@@ -298,3 +299,21 @@ def test_a_report_whose_mesh_changed_is_explained_and_nothing_is_tapped(tmp_path
 
     asyncio.run(run())
     assert np.isfinite(calibrated[0]["bounds"]["position_m"])
+
+
+def test_a_report_dated_in_the_future_is_said_so_not_given_a_negative_age(tmp_path, calibrated):
+    """A clock gone backwards (or another PC's clock ahead): the check said the report was '-3.0 days old'."""
+    cell, tip = context_for(tmp_path, calibrated)
+    data = dict(calibrated[0])
+    data["created"] = (dt.datetime.now(dt.UTC) + dt.timedelta(days=3)).isoformat(timespec="seconds")
+    report.write(tmp_path / "reports" / "demo_bracket-1.yaml", data)
+
+    async def run():
+        app = CheckHost(lambda: CheckScreen(cell, tip))
+        async with app.run_test(size=SIZE) as pilot:
+            screen = app.screen
+            await until(pilot, lambda: "in the future" in text_of(screen, "#check-report"))
+            assert "dated 3.0 days in the future (check the clocks of the PCs)" in text_of(screen, "#check-report")
+            assert "-3.0" not in text_of(screen, "#check-report")
+
+    asyncio.run(run())

@@ -209,12 +209,15 @@ def report_lines(loaded: report.Report, now_age_s: float) -> list[str]:
     SIMULATED."""
     simulated = "SIMULATED " if loaded.simulated else ""
     region = region_of(loaded)
-    if now_age_s < -report.FUTURE_TOLERANCE_S:
-        age = f"dated {age_text(-now_age_s)} in the future (check the clocks of the PCs)"
-    else:
-        age = f"{age_text(max(now_age_s, 0.0))} old"
-    return [(f"{simulated}report {loaded.path} of '{loaded.name}': {loaded.status}, {age}, "
+    return [(f"{simulated}report {loaded.path} of '{loaded.name}': {loaded.status}, {age_words(now_age_s)}, "
              f"guaranteed within {region.position_m * 1e3:.2f} mm and {math.degrees(region.rotation_rad):.2f} deg")]
+
+
+def age_words(now_age_s: float) -> str:
+    """A report's age (s) in words: "3.2 h old", or how far in the future it is dated (a wrong clock)."""
+    if now_age_s < -report.FUTURE_TOLERANCE_S:
+        return f"dated {age_text(-now_age_s)} in the future (check the clocks of the PCs)"
+    return f"{age_text(max(now_age_s, 0.0))} old"
 
 
 def age_text(age_s: float) -> str:

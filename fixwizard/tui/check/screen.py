@@ -41,7 +41,7 @@ from fixwizard.workflow.verify import (
     SUGGESTED_TAPS,
     CheckPoint,
     VerifyResult,
-    age_text,
+    age_words,
     fixture_of,
     suggest_check_points,
     verdict_lines,
@@ -139,7 +139,7 @@ class CheckScreen(Screen[None]):
         assert base_T_cad is not None and loaded.position_bound_m is not None  # only reports with a pose are offered
         age = (dt.datetime.now(dt.UTC) - loaded.created).total_seconds()
         self.query_one("#check-report", Static).update(
-            f"Report {loaded.path.name}: {loaded.status}, {age_text(age)} old; the fixture is within "
+            f"Report {loaded.path.name}: {loaded.status}, {age_words(age)}; the fixture is within "
             f"{loaded.position_bound_m * 1e3:.1f} mm and {loaded.rotation_bound_deg or 0.0:.1f} deg of its pose.")
         self.query_one("#check-suggest", Static).update("Loading the fixture's mesh...")
         self._show_taps()
