@@ -44,9 +44,12 @@ def fixture_choices(fixtures_dir: Path) -> list[FixtureChoice]:
 
 
 def calibration_choices(calibrations_dir: Path) -> list[CalibrationChoice]:
-    """Every ``*.yaml`` in ``calibrations_dir``: readable ones newest first, then unreadable ones."""
+    """Every regular ``*.yaml`` file in ``calibrations_dir`` (a pipe would wait for a writer): readable ones newest
+    first, then unreadable ones."""
     readable, unreadable = [], []
     for path in sorted(calibrations_dir.glob("*.yaml")) if calibrations_dir.is_dir() else []:
+        if not path.is_file():
+            continue
         try:
             readable.append(CalibrationChoice(path, load_calibration(path)))
         except CalibrationFileError as error:
