@@ -4,6 +4,7 @@ folders): the start screen, a whole new tip calibration, cancel, protective stop
 import asyncio
 import contextlib
 import dataclasses
+import datetime
 import shutil
 from collections.abc import AsyncIterator
 from pathlib import Path
@@ -20,6 +21,7 @@ from fixwizard.tui import keys
 from fixwizard.tui.app import FixwizardApp
 from fixwizard.tui.cell import Cell, SavedCalibration
 from fixwizard.tui.launch import robot_host, simulated_cell, ur_cell
+from fixwizard.tui.start import sessions as start_sessions
 from fixwizard.tui.start.screen import NEW, StartScreen
 from fixwizard.tui.start.sessions import start_session
 from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF
@@ -649,3 +651,22 @@ def test_robot_addresses_are_ip_addresses_or_host_names(typed, host):
             robot_host(typed)
     else:
         assert robot_host(typed) == host
+
+
+def test_two_wizards_starting_a_session_of_one_fixture_in_the_same_second_get_one_each(tmp_path, monkeypatch):
+    """The name holds the time to the second: the second wizard was told its session 'exists already; resume it',
+    though the first one held it."""
+    class Frozen(datetime.datetime):
+        @classmethod
+        def now(cls, tz=None):
+            return cls(2026, 12, 6, 16, 30, 0)
+
+    monkeypatch.setattr(start_sessions, "datetime", Frozen)
+    context = wizard(tmp_path)
+    calibration_path = REPO / "calibrations" / "example_matlab_logo.yaml"
+    tip = SavedCalibration(load_calibration(calibration_path), calibration_path)
+    first, second = (start_session(context, demo_fixture(), tip) for _ in range(2))
+    assert [first.path.name, second.path.name] == ["demo_bracket-20261206-163000.jsonl",
+                                                   "demo_bracket-20261206-163000-2.jsonl"]
+    first.release()
+    second.release()

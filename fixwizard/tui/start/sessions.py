@@ -2,6 +2,7 @@
 robot, or an unfinished one resumed with the fixture and calibration its header names. Blocking (files,
 mesh loading): call from a worker thread."""
 
+import itertools
 from datetime import datetime
 from pathlib import Path
 
@@ -20,14 +21,17 @@ from fixwizard.workflow.session import (
 
 
 def start_session(cell: Cell, fixture: Fixture, tip: SavedCalibration) -> SamplingSession:
-    """Create ``sessions_dir/<fixture>-<time>.jsonl`` for ``fixture`` and the tip calibration."""
+    """Create ``sessions_dir/<fixture>-<time>.jsonl`` for ``fixture`` and the tip calibration (``-2``, ``-3`` ... after
+    the time when another wizard on this folder started one in the same second)."""
     calibration = tip.calibration
     fixture_info = {"name": fixture.path.stem, "path": str(fixture.path.resolve()), "units": fixture.units,
                     "sha256": fixture.sha256}
     tip_info = {"name": calibration.name, "calibration": str(tip.path.resolve()),
                 "tcp_p_tip_m": calibration.tcp_p_tip_m.tolist(), "ball_diameter_m": calibration.ball_diameter_m,
                 "sample_bound_m": calibration.sample_bound_m}
-    path = cell.sessions_dir / f"{fixture.path.stem}-{datetime.now():%Y%m%d-%H%M%S}{SUFFIX}"
+    stem = f"{fixture.path.stem}-{datetime.now():%Y%m%d-%H%M%S}"
+    path = next(path for path in (cell.sessions_dir / f"{stem}{'' if number == 1 else f'-{number}'}{SUFFIX}"
+                                  for number in itertools.count(1)) if not path.exists())
     return SamplingSession.create(path, fixture_info, tip_info, robot=cell.robot_name)
 
 
