@@ -19,7 +19,7 @@ from fixwizard.robot.sim_hands import SimulatedHands
 from fixwizard.solver.solve import solve
 from fixwizard.tui.app import FixwizardApp
 from fixwizard.tui.cell import Cell, SavedCalibration
-from fixwizard.tui.check.screen import CheckScreen
+from fixwizard.tui.check.screen import CheckScreen, checkable_reports
 from fixwizard.tui.launch import simulated_cell
 from fixwizard.tui.start.screen import StartScreen
 from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF
@@ -119,7 +119,7 @@ def test_freedrive_comes_back_after_a_check_tap_only_when_it_ended_as_planned(tm
     cell, tip = context_for(tmp_path, calibrated)
 
     async def run():
-        app = CheckHost(lambda: CheckScreen(cell, tip))
+        app = CheckHost(lambda: CheckScreen(cell, tip, checkable_reports(cell.reports_dir)))
         async with app.run_test(size=SIZE) as pilot:
             screen = app.screen
             await until(pilot, lambda: screen.fixture is not None and not screen.busy
@@ -153,7 +153,7 @@ def test_four_suggested_taps_tell_whether_the_fixture_moved_and_what_to_do_next(
     cell, tip = context_for(tmp_path, calibrated, push_m)
 
     async def run():
-        app = CheckHost(lambda: CheckScreen(cell, tip))
+        app = CheckHost(lambda: CheckScreen(cell, tip, checkable_reports(cell.reports_dir)))
         async with app.run_test(size=SIZE) as pilot:
             screen = app.screen
             await until(pilot, lambda: "Tap 3-5 points spread over the fixture" in text_of(screen, "#check-suggest"))
@@ -190,7 +190,7 @@ def test_two_taps_that_fit_are_too_few_and_the_verdict_says_to_tap_more(tmp_path
     cell, tip = context_for(tmp_path, calibrated)
 
     async def run():
-        app = CheckHost(lambda: CheckScreen(cell, tip))
+        app = CheckHost(lambda: CheckScreen(cell, tip, checkable_reports(cell.reports_dir)))
         async with app.run_test(size=SIZE) as pilot:
             screen = app.screen
             await tap_suggested(pilot, screen, 2)
@@ -242,7 +242,7 @@ def test_esc_asks_before_leaving_taps_that_are_not_checked(tmp_path, calibrated)
     cell, tip = context_for(tmp_path, calibrated)
 
     async def run():
-        app = CheckHost(lambda: CheckScreen(cell, tip))
+        app = CheckHost(lambda: CheckScreen(cell, tip, checkable_reports(cell.reports_dir)))
         async with app.run_test(size=SIZE) as pilot:
             screen = app.screen
             await tap_suggested(pilot, screen, 1)
@@ -265,7 +265,7 @@ def test_without_reports_the_check_says_to_calibrate_first(tmp_path, calibrated)
     (tmp_path / "reports" / "demo_bracket-1.yaml").unlink()
 
     async def run():
-        app = CheckHost(lambda: CheckScreen(cell, tip))
+        app = CheckHost(lambda: CheckScreen(cell, tip, checkable_reports(cell.reports_dir)))
         async with app.run_test(size=SIZE) as pilot:
             screen = app.screen
             await pilot.pause()
@@ -289,7 +289,7 @@ def test_a_report_whose_mesh_changed_is_explained_and_nothing_is_tapped(tmp_path
     report.write(tmp_path / "reports" / "demo_bracket-1.yaml", data)
 
     async def run():
-        app = CheckHost(lambda: CheckScreen(cell, tip))
+        app = CheckHost(lambda: CheckScreen(cell, tip, checkable_reports(cell.reports_dir)))
         async with app.run_test(size=SIZE) as pilot:
             screen = app.screen
             await until(pilot, lambda: "not the one the report" in text_of(screen, "#check-suggest"))
@@ -309,7 +309,7 @@ def test_a_report_dated_in_the_future_is_said_so_not_given_a_negative_age(tmp_pa
     report.write(tmp_path / "reports" / "demo_bracket-1.yaml", data)
 
     async def run():
-        app = CheckHost(lambda: CheckScreen(cell, tip))
+        app = CheckHost(lambda: CheckScreen(cell, tip, checkable_reports(cell.reports_dir)))
         async with app.run_test(size=SIZE) as pilot:
             screen = app.screen
             await until(pilot, lambda: "in the future" in text_of(screen, "#check-report"))

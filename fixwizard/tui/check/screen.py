@@ -11,6 +11,7 @@ Robot calls, loading the mesh and the check run in worker threads. Dismisses wit
 import datetime as dt
 import threading
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any, ClassVar, TypeVar
 
 import numpy as np
@@ -54,6 +55,12 @@ COLUMNS = ("#", "x mm", "y mm", "z mm", "off surface mm")
 CHECKS_FOLDER = "checks"
 
 
+def checkable_reports(reports_dir: Path) -> dict[str, report.Report]:
+    """The newest report with a pose of each fixture in ``reports_dir``, by fixture name. Reads every report (about
+    10 ms each): call from a worker thread."""
+    return {name: loaded for name, loaded in scan(reports_dir).newest.items() if loaded.pose_to_use() is not None}
+
+
 class CheckScreen(Screen[None]):
     """Check a calibrated fixture with a few new taps, on the cell's robot with the stored tip calibration ``tip``."""
 
@@ -70,13 +77,12 @@ class CheckScreen(Screen[None]):
                   "ball 5-10 mm above the surface, then tap) and check: the taps either fit the report's pose, or "
                   "prove the fixture has moved. Esc goes back to the start screen.")
 
-    def __init__(self, cell: Cell, tip: SavedCalibration) -> None:
+    def __init__(self, cell: Cell, tip: SavedCalibration, reports: dict[str, report.Report]) -> None:
         super().__init__()
         self.cell = cell
         self.tip = tip
         self.calibration = tip.calibration
-        self.reports = {name: loaded for name, loaded in scan(cell.reports_dir).newest.items()
-                        if loaded.pose_to_use() is not None}
+        self.reports = reports  # checkable_reports of the cell's folder
         self.busy = False
         self.loaded: report.Report | None = None
         self.fixture: Fixture | None = None

@@ -17,8 +17,9 @@ from textual.widgets import Button, Input, Select, Static
 from fixwizard.demo import DEMO_MESH
 from fixwizard.errors import FixwizardError, MeshError, MeshUnitsError, quoted
 from fixwizard.fixture import Fixture, load_fixture
+from fixwizard.report import Report
 from fixwizard.tui.cell import Cell, NewSession, Resumed, SavedCalibration, StartChoice
-from fixwizard.tui.check.screen import CheckScreen
+from fixwizard.tui.check.screen import CheckScreen, checkable_reports
 from fixwizard.tui.dismiss import dismiss_when_on_top
 from fixwizard.tui.launch import switch_to_simulated, switch_to_ur_arm
 from fixwizard.tui.start.choices import (
@@ -293,7 +294,13 @@ class StartScreen(Screen[StartChoice]):
         if choice.calibration is None:
             self.notify("That tip calibration cannot be read; choose another.", severity="warning")
             return
-        self.app.push_screen(CheckScreen(self.cell, SavedCalibration(choice.calibration, choice.path)))
+        cell, tip = self.cell, SavedCalibration(choice.calibration, choice.path)
+
+        def open_check(reports: dict[str, Report]) -> None:
+            if self.app.screen is self:  # the button pressed twice opens one check
+                self.app.push_screen(CheckScreen(cell, tip, reports))
+
+        in_thread(self, lambda: checkable_reports(cell.reports_dir), open_check)  # off the event loop: ~10 ms a report
 
     def _continue(self) -> None:
         session_value = str(self.query_one("#session", Select).value) if self._sessions else NEW
