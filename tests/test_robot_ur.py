@@ -685,6 +685,31 @@ def test_a_crashed_link_process_leaves_the_wizard_running(robot, controller, kil
     assert robot.status().mode == "ready"
 
 
+@pytest.mark.parametrize("field", ["actual_TCP_pose", "actual_TCP_force", "output_double_register_17"])
+def test_rtde_data_that_is_not_a_number_drops_the_link_mid_tap(robot, controller, field):
+    """NaN from the RTDE stream mid-tap (a pose, a force, the tap's travel): nothing of it is recorded or trusted;
+    the link is down, so the watchdog stops the arm before the error, as for a lost link."""
+    tap = TapInThread(robot, controller, **FAST_TAP)
+    assert wait_until(lambda: robot.status().mode == "moving")
+    controller.garble(field)
+    error = tap.join(3.0)
+    assert isinstance(error, ConnectionLost), error
+    assert "not a number" in str(error) and "The tap was not recorded" in str(error)
+    assert_arm_stands(controller)
+
+
+def test_a_pose_that_is_not_a_number_is_never_moved_from(robot, controller):
+    """The flange pose reads NaN: the wizard gets no pose, and a move (whose distance, deadline and end check would
+    all be NaN) is refused without a program sent."""
+    controller.garble("actual_TCP_pose")
+    assert wait_until(lambda: not robot.status().connected)
+    with pytest.raises(ConnectionLost):
+        robot.base_T_tcp()
+    with pytest.raises(ConnectionLost):
+        robot.move_linear(flange_above_surface(0.02))
+    assert [name for name, _, _ in controller.programs()] == ["setup"]
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("stall_s", [0.2, 0.4, 1.0, 3.0])
 def test_the_tap_travel_holds_on_the_controller_when_the_pc_stalls(start_controller, connect, stall_s):

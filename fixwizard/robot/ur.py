@@ -66,6 +66,7 @@ CONNECT_DEADLINE_S = 10.0  # the link process's start, every port, every client 
 COMMAND_DEADLINE_S = 5.0  # a command that does not move (freedrive, unlock)
 MOTION_SLACK_S = 5.0  # a motion's deadline: its own duration plus this
 LINK_STALE_S = 0.75  # no new sample in the shared state for this long: the link process stalled
+LOST_ANSWER_WAIT_S = 0.3  # a link process that saw its connection drop answers with the cause within this
 DASHBOARD_STOP_TIMEOUT_S = 1.0
 POLL_S = 0.005
 LOCK_TIMEOUT_S = 2 * COMMAND_DEADLINE_S
@@ -218,6 +219,7 @@ class URRobot:
             raise self._abandon(link, f"fixwizard's robot link process is gone{context}") from None
         deadline = time.monotonic() + deadline_s
         step, contact = command, None
+        lost_seen_at = 0.0  # when the link process was first seen to have lost its connection
         while True:
             try:
                 ready = link.conn.poll(POLL_S)
@@ -246,8 +248,13 @@ class URRobot:
                 link.process.join(EXIT_WAIT_S)  # its pipe closes just before it is gone: wait for its exit code
                 problem = f"fixwizard's robot link process ended unexpectedly{context} ({_exit_text(link.process)})"
             elif watch_state and self._fresh(link) is None:
-                problem = (f"no data from the robot for {LINK_STALE_S:g} s{context} (the network dropped, or this "
-                           "computer stalled)")
+                if not link.shared.read()[2]:
+                    problem = (f"no data from the robot for {LINK_STALE_S:g} s{context} (the network dropped, or "
+                               "this computer stalled)")
+                else:  # the link process saw its connection drop: its answer, coming, names the cause
+                    lost_seen_at = lost_seen_at or time.monotonic()
+                    if time.monotonic() - lost_seen_at > LOST_ANSWER_WAIT_S:
+                        problem = f"the link to the robot dropped{context}"
             elif time.monotonic() > deadline:
                 problem = (f"the robot at {self.host} did not answer within {deadline_s:.0f} s{context} while "
                            f"fixwizard was waiting for {step}: check that the controller is running and that "

@@ -14,6 +14,7 @@ Protocol: the wizard sends ``(command, args)``; this process answers ``("done", 
 for the wizard's timeout message) and ``("contact", TapResult)`` (a tap's contact is recorded).
 """
 
+import math
 import os
 import random
 import socket
@@ -429,7 +430,8 @@ class Link:
             self._shared.publish({"lost": 1.0})
 
     def _publish_loop(self) -> None:
-        """Publish every new RTDE sample; the link is lost once the stream closes or goes quiet."""
+        """Publish every new RTDE sample; the link is lost once the stream closes, goes quiet or sends a value that
+        is not a finite number (nothing of such a sample is published: no NaN pose, force or tap result)."""
         receive = self._receive
         last_timestamp, last_at = None, time.monotonic()
         while self._lost is None:
@@ -442,7 +444,11 @@ class Link:
                     return
                 if timestamp != last_timestamp:
                     last_timestamp, last_at = timestamp, now
-                    self._shared.publish(self._sample(receive, now))
+                    sample = self._sample(receive, now)
+                    if garbled := [name for name, value in sample.items() if not math.isfinite(value)]:
+                        self._lose(f"the controller's RTDE data holds a value that is not a number ({garbled[0]})")
+                        return
+                    self._shared.publish(sample)
                 elif now - last_at > STALE_STATE_S:
                     self._lose(f"no RTDE data from the controller for {STALE_STATE_S:g} s")
                     return

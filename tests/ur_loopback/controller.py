@@ -49,8 +49,8 @@ class LoopbackController:
     Stand-ins for the cell and its operator: ``when`` (a fault on an event), ``protective_stop``,
     ``unlock_on_pendant``, ``emergency_stop``, ``safeguard_stop``, ``release_emergency_stop``, ``power_on``,
     ``set_remote_control``, ``move_by_hand``; for the network: ``go_offline``, ``go_online``,
-    ``drop_connections``, ``freeze_link``, ``thaw_link``, ``silence``, ``delay_programs``. Queries return copies of
-    what the controller saw and did.
+    ``drop_connections``, ``freeze_link``, ``thaw_link``, ``silence``, ``delay_programs``, ``garble``. Queries
+    return copies of what the controller saw and did.
     """
 
     def __init__(self, base_T_flange: np.ndarray | None = None, surface_z_m: float = 0.0,
@@ -83,6 +83,7 @@ class LoopbackController:
         self._input_written_at: dict[str, float] = {}
         self._program_started_at = 0.0
         self._silent: set[str] = set()
+        self._garbled: set[str] = set()
         self._program_delay_s = 0.0
         self._frozen = threading.Event()
         self._was_in_contact = False
@@ -132,6 +133,12 @@ class LoopbackController:
         but never answered (the RTDE and dashboard ports) or never acted on (the script port)."""
         with self._lock:
             self._silent.add(port)
+
+    def garble(self, name: str) -> None:
+        """From now on every number of the RTDE output ``name`` (``actual_TCP_pose``, ...) goes out as NaN: garbage
+        from a controller or a client library gone wrong."""
+        with self._lock:
+            self._garbled.add(name)
 
     def delay_programs(self, delay_s: float) -> None:
         """From now on a program sent to the script port starts ``delay_s`` after it arrived (a busy controller
@@ -368,7 +375,9 @@ class LoopbackController:
                 "speed_scaling": 1.0, "target_speed_fraction": 1.0,
                 **self._registers.outputs,
             }
-            return [values[name] if name in values else _zero(field_type(name)) for name in names]
+            outputs = [values[name] if name in values else _zero(field_type(name)) for name in names]
+            return [_nan_like(value) if name in self._garbled else value
+                    for name, value in zip(names, outputs, strict=True)]
 
     def _write_inputs(self, values: dict) -> None:
         if self._frozen.is_set():
@@ -455,3 +464,8 @@ def _zero(rtde_type: str):
     """A zero value of an RTDE type, for fields the fake does not model."""
     count = int(TYPE_FORMATS[rtde_type][:-1] or 1)
     return 0 if count == 1 else [0] * count
+
+
+def _nan_like(value):
+    """NaN in place of a number or of every number of a vector."""
+    return [float("nan")] * len(value) if isinstance(value, list) else float("nan")
