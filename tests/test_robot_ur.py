@@ -450,6 +450,36 @@ def test_a_move_into_something_stops_at_its_force_limit_and_goes_back(start_cont
     robot.move_linear(flange_above_surface(0.02), speed_m_s=0.05)  # nothing to unlock: the next move runs
 
 
+def test_a_move_whose_way_back_meets_something_stops_there_at_the_force_limit(start_controller, connect):
+    """The move is blocked by the surface; on its way back up, something has come over the arm 3 mm above the
+    flange: the way back stops where the force has grown by the move's limit again, far below the controller's
+    protective stop, and the error says the arm may press on what it met."""
+    controller = start_controller(base_T_flange=flange_above_surface(0.01))
+    robot = connect()
+    controller.when("blocked", "reach_over_the_arm", 0.003)
+    with pytest.raises(RobotError, match=r"^the arm met something on its way back to where the move began "
+                                         r"\((5[0-9]|6[0-9]) N\) and stopped there: it may press on it: turn "
+                                         "freedrive on and move the arm clear by hand"):
+        robot.move_linear(flange_above_surface(-0.02), speed_m_s=0.05)
+    assert controller.peak_contact_force_n() < MOVE_FORCE_LIMIT_N + 20.0
+    assert robot.status().mode == "ready"
+    assert_arm_stands(controller)
+
+
+def test_a_tap_whose_retract_meets_something_stops_there_and_keeps_the_contact(robot, controller):
+    """Something comes over the arm 4 mm above the flange while the tap stands in contact: the retract stops where
+    the force has grown by the move's limit, and the recorded contact is kept."""
+    controller.when("settled", "reach_over_the_arm", 0.004)
+    with pytest.raises(RobotError, match=r"^the arm met something on its way back to where the tap began "
+                                         r"\((5[0-9]|6[0-9]) N\) and stopped there; the contact was recorded: it "
+                                         "may press on it") as raised:
+        robot.tap(**FAST_TAP)
+    np.testing.assert_allclose(raised.value.tap_result.base_T_tcp_contact, controller.contact_poses()[-1], atol=2e-6)
+    assert controller.peak_contact_force_n() < MOVE_FORCE_LIMIT_N + 20.0
+    assert robot.status().mode == "ready"
+    assert_arm_stands(controller)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("stall_s", [0.3, 1.0])
 def test_the_move_force_limit_holds_on_the_controller_when_the_pc_stalls(start_controller, connect, stall_s):

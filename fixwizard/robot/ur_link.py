@@ -49,6 +49,7 @@ from fixwizard.robot.ur_script import (
     PHASE_NO_GO,
     PHASE_NOT_SETTLED,
     PHASE_REGISTER,
+    PHASE_RETURN_BLOCKED,
     PHASE_SETTLED,
     PHASE_STOPPED,
     PHASE_TOO_FAR,
@@ -232,6 +233,8 @@ class Link:
             raise move_too_far(distance_m)
         if state.phase == PHASE_BLOCKED:
             raise MoveBlocked(state.peak_force_n)
+        if state.phase == PHASE_RETURN_BLOCKED:
+            raise _return_blocked("move", state)
         if state.phase != PHASE_DONE:
             raise self._diagnose(context, state)
         remaining_m = float(np.linalg.norm(np.asarray(target[:3]) - state.base_T_tcp[:3, 3]))
@@ -354,6 +357,8 @@ class Link:
             return result
         if phase == PHASE_NO_CONTACT:
             raise NoContact(max_travel_m)
+        if phase == PHASE_RETURN_BLOCKED:
+            raise _return_blocked("tap", state, recorded=result is not None)
         if phase == PHASE_STOPPED or (self._stop_requested() and phase not in FINAL_PHASES):
             if result is None:
                 raise MotionStopped("tap")
@@ -537,6 +542,15 @@ class Link:
 
     def _step(self, what: str) -> None:
         self._conn.send(("step", what))
+
+
+def _return_blocked(motion: str, state: ControllerState, recorded: bool = False) -> RobotError:
+    """The error of a ``motion`` (tap, move) whose way back met something and stopped there (``state``: its end),
+    saying whether a tap's contact was ``recorded``."""
+    kept = "; the contact was recorded" if recorded else ""
+    return RobotError(f"the arm met something on its way back to where the {motion} began "
+                      f"({state.peak_force_n:.0f} N) and stopped there{kept}: it may press on it: turn freedrive on "
+                      "and move the arm clear by hand, then retry")
 
 
 def _exit_with(parent_pid: int) -> None:

@@ -10,7 +10,8 @@ limit (the controller's trajectory cannot pass it, at the requested speed), stop
 the contact force reaches the limit. A PC that stalls or dies cannot take the tap further; it only stops
 feeding the watchdog, and the controller ends the program. A move refuses, on the controller, a target farther
 than ``MAX_MOVE_TRAVEL_M`` from where the flange stands, and stops and goes back where the force on the tool
-has grown by ``MOVE_FORCE_LIMIT_N`` on its way.
+has grown by ``MOVE_FORCE_LIMIT_N`` on its way. The way back of both (a tap's retract, a blocked move's return)
+stops where the force grows by ``MOVE_FORCE_LIMIT_N`` again.
 
 Registers (integers unless told; the RTDE I/O interface's range 18-22, ur_rtde's receive range 12-19 for doubles):
   input 18   kick counter the link rewrites every ``KICK_PERIOD_S``; the programs' watchdog variable
@@ -19,7 +20,7 @@ Registers (integers unless told; the RTDE I/O interface's range 18-22, ur_rtde's
   output 18  run id of the program that runs or ran last
   output 19  its phase: ``PHASE_*``
   output double 17, 18, 19  tap: travel to contact (m, along the tool z axis), peak force (N), settle time (s);
-                            a blocked move: the force's growth it stopped at (N) in 18
+                            a blocked move or way back: the force's growth it stopped at (N) in 18
 
 Poses are UR pose vectors ``[x, y, z, rx, ry, rz]`` of the flange (each program sets the TCP offset to zero)
 in the base frame: m and rad. Speeds m/s, accelerations m/s^2, forces N, times s.
@@ -51,8 +52,9 @@ PHASE_TOO_FAR = 7  # move: the target is farther than MAX_MOVE_TRAVEL_M from the
 PHASE_BLOCKED = 8  # move: the force grew by MOVE_FORCE_LIMIT_N on the way; back where it began
 PHASE_WAITING = 9  # started, waiting for REQUEST_GO; nothing moved
 PHASE_NO_GO = 10  # no REQUEST_GO within GO_TIMEOUT_S: ended without moving
+PHASE_RETURN_BLOCKED = 11  # tap, move: the way back met something (the force grew by MOVE_FORCE_LIMIT_N); stopped
 FINAL_PHASES = {PHASE_DONE, PHASE_NO_CONTACT, PHASE_STOPPED, PHASE_NOT_SETTLED, PHASE_TOO_FAR, PHASE_BLOCKED,
-                PHASE_NO_GO}
+                PHASE_NO_GO, PHASE_RETURN_BLOCKED}
 
 ACCELERATION_M_S2 = 0.5
 STOP_DECELERATION_M_S2 = 10.0
@@ -66,7 +68,10 @@ GO_TIMEOUT_S = 1.0
 
 
 # A tap's and a move's way back: ``retract_and_finish(phase)`` moves the flange back to where the program began
-# (a STOP on the way stops it there) and ends the program with ``phase``.
+# and ends the program with ``phase``. A STOP on the way stops it there; so does something it meets on the way:
+# the force on the tool (the program's ``return_force_n()``) grown by ``return_force_limit_n`` over the least it
+# has been since the way back began (the contact it leaves eases off first), ``PHASE_RETURN_BLOCKED`` with that
+# growth in the peak-force register.
 _RETURN_TO_START = """\
   global start = get_actual_tcp_pose()
   global back = False
@@ -76,11 +81,22 @@ _RETURN_TO_START = """\
   end
   def retract_and_finish(phase):
     retracting = run retract()
+    least_n = return_force_n()
     while not back:
       if requested(REQUEST_STOP):
         kill retracting
         stopl(STOP_DECELERATION_M_S2)
         finish(PHASE_STOPPED)
+      end
+      force = return_force_n()
+      if force < least_n:
+        least_n = force
+      end
+      if force - least_n >= return_force_limit_n:
+        kill retracting
+        stopl(STOP_DECELERATION_M_S2)
+        write_output_float_register(PEAK_FORCE_REGISTER, force - least_n)
+        finish(PHASE_RETURN_BLOCKED)
       end
       sync()
     end
@@ -101,14 +117,19 @@ def tap_program(run_id: int, watchdog_hz: float, max_travel_m: float, speed_m_s:
     return _program("tap", run_id, watchdog_hz, {
         "max_travel_m": max_travel_m, "speed_m_s": speed_m_s, "force_limit_n": force_limit_n,
         "settle_speed_m_s": SETTLE_SPEED_M_S, "settle_window_s": SETTLE_WINDOW_S,
-        "settle_timeout_s": SETTLE_TIMEOUT_S, "retract_speed_m_s": RETRACT_SPEED_M_S}, _RETURN_TO_START + """\
-  global limit = pose_trans(start, p[0, 0, max_travel_m, 0, 0, 0])
-  global at_limit = False
-  global peak_n = 0.0
+        "settle_timeout_s": SETTLE_TIMEOUT_S, "retract_speed_m_s": RETRACT_SPEED_M_S,
+        "return_force_limit_n": MOVE_FORCE_LIMIT_N}, """\
   def force_n():
     wrench = get_tcp_force()
     return sqrt(wrench[0] * wrench[0] + wrench[1] * wrench[1] + wrench[2] * wrench[2])
   end
+  def return_force_n():
+    return force_n()
+  end
+""" + _RETURN_TO_START + """\
+  global limit = pose_trans(start, p[0, 0, max_travel_m, 0, 0, 0])
+  global at_limit = False
+  global peak_n = 0.0
   def record_peak():
     # URScript has no max()
     force = force_n()
@@ -181,12 +202,11 @@ def move_program(run_id: int, watchdog_hz: float, target: Sequence[float], speed
     return _program("move", run_id, watchdog_hz, {"target": pose_literal(target), "speed_m_s": speed_m_s,
                                                   "max_travel_m": MAX_MOVE_TRAVEL_M,
                                                   "force_limit_n": MOVE_FORCE_LIMIT_N,
+                                                  "return_force_limit_n": MOVE_FORCE_LIMIT_N,
                                                   "retract_speed_m_s": RETRACT_SPEED_M_S}, """\
   if point_dist(get_actual_tcp_pose(), target) > max_travel_m:
     finish(PHASE_TOO_FAR)
   end
-""" + _RETURN_TO_START + """\
-  global arrived = False
   # the force sensor is not zeroed (a tap checks its reading before zeroing): the change since the start counts
   global force_at_start = get_tcp_force()
   def force_change_n():
@@ -196,6 +216,11 @@ def move_program(run_id: int, watchdog_hz: float, target: Sequence[float], speed
     z = wrench[2] - force_at_start[2]
     return sqrt(x * x + y * y + z * z)
   end
+  def return_force_n():
+    return force_change_n()
+  end
+""" + _RETURN_TO_START + """\
+  global arrived = False
   thread motion():
     movel(target, a=acceleration_m_s2, v=speed_m_s)
     arrived = True
@@ -249,7 +274,7 @@ def _program(name: str, run_id: int, watchdog_hz: float, parameters: dict[str, f
                  "SETTLE_REGISTER": SETTLE_REGISTER, "PHASE_SETTLED": PHASE_SETTLED, "PHASE_DONE": PHASE_DONE,
                  "PHASE_NO_CONTACT": PHASE_NO_CONTACT, "PHASE_STOPPED": PHASE_STOPPED,
                  "PHASE_NOT_SETTLED": PHASE_NOT_SETTLED, "PHASE_TOO_FAR": PHASE_TOO_FAR,
-                 "PHASE_BLOCKED": PHASE_BLOCKED}
+                 "PHASE_BLOCKED": PHASE_BLOCKED, "PHASE_RETURN_BLOCKED": PHASE_RETURN_BLOCKED}
     lines = [f"def fixwizard_{name}():", f"  # fixwizard {name}, run {run_id}: see fixwizard/robot/ur_script.py",
              f"  rtde_set_watchdog(\"input_int_register_{KICK_REGISTER}\", {_number(watchdog_hz)}, \"stop\")",
              f"  global run_id = {run_id}",

@@ -57,13 +57,14 @@ class LinearMove:
 
 @dataclass
 class SimulatedArm:
-    """Flange pose, active tool offset, tool tip (the centre of a ball of ``ball_radius_m``; 0: a point) and contact
-    surface (the plane ``z = surface_z_m``)."""
+    """Flange pose, active tool offset, tool tip (the centre of a ball of ``ball_radius_m``; 0: a point), contact
+    surface (the plane ``z = surface_z_m``) and a ceiling over the flange (``z = ceiling_z_m``; none: inf)."""
 
     base_T_flange: np.ndarray
     flange_p_tip_m: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 0.1]))
     surface_z_m: float = 0.0
     ball_radius_m: float = 0.0
+    ceiling_z_m: float = np.inf  # something over the arm: the flange meets it from below at this height (m)
     flange_T_tcp: np.ndarray = field(default_factory=lambda: np.eye(4))
     sensor_bias_n: np.ndarray = field(default_factory=lambda: np.array([1.5, -2.0, 4.0]))
     sensor_zero_n: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -91,8 +92,10 @@ class SimulatedArm:
         return max(self.surface_z_m - (tip_z - self.ball_radius_m), 0.0)
 
     def contact_force_n(self) -> np.ndarray:
-        """Force of the surface on the tool (base frame, N): along the surface normal, +z."""
-        return np.array([0.0, 0.0, SURFACE_STIFFNESS_N_M * self.penetration_m()])
+        """Force of the surface on the tool (base frame, N): along the surface normal, +z; and of the ceiling
+        on the flange, -z."""
+        above_ceiling_m = max(self.base_T_flange[2, 3] - self.ceiling_z_m, 0.0)
+        return np.array([0.0, 0.0, SURFACE_STIFFNESS_N_M * (self.penetration_m() - above_ceiling_m)])
 
     def in_contact(self) -> bool:
         return self.penetration_m() > 0.0

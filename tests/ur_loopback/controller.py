@@ -48,7 +48,7 @@ class LoopbackController:
 
     Stand-ins for the cell and its operator: ``when`` (a fault on an event), ``protective_stop``,
     ``unlock_on_pendant``, ``emergency_stop``, ``safeguard_stop``, ``release_emergency_stop``, ``power_on``,
-    ``set_remote_control``, ``move_by_hand``; for the network: ``go_offline``, ``go_online``,
+    ``set_remote_control``, ``move_by_hand``, ``reach_over_the_arm``; for the network: ``go_offline``, ``go_online``,
     ``drop_connections``, ``freeze_link``, ``thaw_link``, ``silence``, ``delay_programs``, ``garble``. Queries
     return copies of what the controller saw and did.
     """
@@ -205,6 +205,12 @@ class LoopbackController:
             self._remote_control = on
             if not on:
                 self._end_program()
+
+    def reach_over_the_arm(self, clearance_m: float) -> None:
+        """Something (a hand, an arm) comes over the flange, ``clearance_m`` above it, and stays: the flange meets
+        it from below (a ceiling at that height)."""
+        with self._lock:
+            self._arm.ceiling_z_m = float(self._arm.base_T_flange[2, 3]) + clearance_m
 
     def move_by_hand(self, base_T_flange: np.ndarray) -> None:
         """The operator moves the arm in freedrive (raises ``RuntimeError`` if freedrive is off)."""

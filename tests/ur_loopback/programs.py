@@ -36,7 +36,7 @@ RUN_REGISTER, PHASE_REGISTER, REQUEST_REGISTER = 18, 19, 19
 TRAVEL_REGISTER, PEAK_FORCE_REGISTER, SETTLE_REGISTER = 17, 18, 19
 REQUEST_STOP, REQUEST_RETRACT, REQUEST_GO = 1, 2, 3
 PHASE_RUNNING, PHASE_SETTLED, PHASE_DONE, PHASE_NO_CONTACT, PHASE_STOPPED, PHASE_NOT_SETTLED = 1, 2, 3, 4, 5, 6
-PHASE_TOO_FAR, PHASE_BLOCKED, PHASE_WAITING, PHASE_NO_GO = 7, 8, 9, 10
+PHASE_TOO_FAR, PHASE_BLOCKED, PHASE_WAITING, PHASE_NO_GO, PHASE_RETURN_BLOCKED = 7, 8, 9, 10, 11
 
 
 class Registers:
@@ -163,7 +163,7 @@ class FixwizardProgram:
                 arm.halt()
                 return self._finish(PHASE_STOPPED)
             if not arm.moving():
-                yield from self._retract(start, PHASE_NO_CONTACT)
+                yield from self._retract(start, PHASE_NO_CONTACT, self._force_n)
                 return
             yield
         arm.halt()
@@ -187,14 +187,21 @@ class FixwizardProgram:
             if self._requested(REQUEST_STOP):
                 return self._finish(PHASE_STOPPED)
             yield
-        yield from self._retract(start, PHASE_DONE)
+        yield from self._retract(start, PHASE_DONE, self._force_n)
 
-    def _retract(self, start: np.ndarray, phase: int) -> Iterator[None]:
+    def _retract(self, start: np.ndarray, phase: int, return_force_n: Callable[[], float]) -> Iterator[None]:
         self._linear(start, self.parameters["retract_speed_m_s"])
+        least_n = return_force_n()
         while self.arm.moving():
             if self._requested(REQUEST_STOP):
                 self.arm.halt()
                 return self._finish(PHASE_STOPPED)
+            force = return_force_n()
+            least_n = min(least_n, force)
+            if force - least_n >= self.parameters["return_force_limit_n"]:
+                self.arm.halt()
+                self.registers.write_double(PEAK_FORCE_REGISTER, force - least_n)
+                return self._finish(PHASE_RETURN_BLOCKED)
             yield
         self._finish(phase)
 
@@ -218,7 +225,7 @@ class FixwizardProgram:
                 arm.halt()
                 self.registers.write_double(PEAK_FORCE_REGISTER, force_change_n())
                 self.on_event("blocked")
-                yield from self._retract(start, PHASE_BLOCKED)
+                yield from self._retract(start, PHASE_BLOCKED, force_change_n)
                 return
             yield
         self._finish(PHASE_DONE)
