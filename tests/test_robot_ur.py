@@ -631,6 +631,24 @@ def test_protective_stop_after_the_contact_keeps_the_recorded_contact(robot, con
     assert robot.tap(**FAST_TAP).travel_m == pytest.approx(earlier.travel_m, abs=2e-4)
 
 
+@pytest.mark.parametrize("motion", ["tap", "move", "retract"])
+def test_a_program_paused_on_the_pendant_is_stopped_so_that_play_moves_nothing(start_controller, connect, motion):
+    """Pause on the teach pendant mid-tap, mid-move or mid-retract: fixwizard's program is stopped before the error
+    is shown, so the play button afterwards moves nothing."""
+    controller = start_controller(base_T_flange=flange_above_surface(0.03))
+    robot = connect()
+    if motion == "move":
+        call = lambda: robot.move_linear(flange_above_surface(0.08), speed_m_s=0.05)  # noqa: E731
+    else:
+        call = lambda: robot.tap(max_travel_m=0.05, speed_m_s=0.05)  # noqa: E731
+    controller.when({"tap": "tap", "move": "movel", "retract": "settled"}[motion], "pause_on_pendant")
+    outcome = MotionInThread(call, controller).join(5.0)
+    assert isinstance(outcome, RobotError) and "paused" in str(outcome), outcome
+    controller.play_on_pendant()
+    assert_arm_stands(controller)
+    robot.move_linear(flange_above_surface(0.03), speed_m_s=0.05)  # the next motion runs
+
+
 @pytest.mark.parametrize("source", ["robot", "system"])
 def test_emergency_stop_raises_until_released_and_powered_on(robot, controller, source):
     controller.emergency_stop(source)

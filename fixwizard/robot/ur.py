@@ -337,6 +337,8 @@ class URRobot:
             return "freedrive"
         if self._moving.is_set():
             return "moving"
+        if state.program_paused:
+            return "program paused"
         return "program running" if state.program_running else "ready"
 
     # --- helpers ---

@@ -372,10 +372,19 @@ class Link:
     # --- state ---
 
     def _fresh_state(self, context: str) -> ControllerState:
-        """The latest sample; ``LinkLost`` once the link is down."""
+        """The latest sample; ``LinkLost`` once the link is down. A paused program while one of fixwizard's runs
+        is stopped first (play would take its motion on after the error), and the error says so."""
         state = self._shared.read()[0]
         if self._lost is not None or state is None:
             raise self._link_lost(context, self._lost or "no RTDE data")
+        if state.program_paused and self._current_run is not None:
+            self._current_run = None
+            self._dashboard_command("stop")
+            self._wait(lambda sample: not (sample.program_paused or sample.program_running), PROGRAM_END_TIMEOUT_S,
+                       context)
+            raise RobotError(f"fixwizard's program on the robot was paused{context} (pause on the teach pendant, or "
+                             "the dashboard's pause): fixwizard stopped it, so play does not take its motion on: "
+                             "check the cell, then retry")
         return state
 
     def _ready_state(self, context: str) -> ControllerState:

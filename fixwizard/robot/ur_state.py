@@ -28,6 +28,7 @@ SAFETY_BIT_SAFEGUARD_STOP = 4
 SAFETY_BITS_EMERGENCY_STOP = (5, 6, 7)  # system, robot, any emergency stop
 SAFETY_BITS_FAULT = (8, 9)
 RUNTIME_PLAYING = 2
+RUNTIME_PAUSED_STATES = {3, 4, 5}  # pausing, paused, resuming: the program waits for play (pendant or dashboard)
 
 _FIELDS = ("received_at", "timestamp", "x", "y", "z", "rx", "ry", "rz", "speed_m_s", "force_n", "robot_mode",
            "safety_mode", "safety_status_bits", "runtime_state", "run_id", "phase", "travel_m", "peak_force_n",
@@ -79,6 +80,11 @@ class ControllerState:
     @property
     def program_running(self) -> bool:
         return self.runtime_state == RUNTIME_PLAYING
+
+    @property
+    def program_paused(self) -> bool:
+        """A program is paused (or pausing, or resuming): play on the pendant would take it on where it stopped."""
+        return self.runtime_state in RUNTIME_PAUSED_STATES
 
     @property
     def ready_to_move(self) -> bool:

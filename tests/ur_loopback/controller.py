@@ -38,7 +38,7 @@ SAFETY_STATUS_BITS = {"NORMAL": 1 << 0, "PROTECTIVE_STOP": (1 << 2) | (1 << 10),
                       "SYSTEM_EMERGENCY_STOP": (1 << 5) | (1 << 7) | (1 << 10),
                       "ROBOT_EMERGENCY_STOP": (1 << 6) | (1 << 7) | (1 << 10)}
 EMERGENCY_STOPS = {"robot": "ROBOT_EMERGENCY_STOP", "system": "SYSTEM_EMERGENCY_STOP"}
-RUNTIME_STOPPED, RUNTIME_PLAYING = 1, 2
+RUNTIME_STOPPED, RUNTIME_PLAYING, RUNTIME_PAUSED = 1, 2, 4
 POWER_ON_BIT, PROGRAM_RUNNING_BIT = 1 << 0, 1 << 1
 
 
@@ -48,9 +48,9 @@ class LoopbackController:
 
     Stand-ins for the cell and its operator: ``when`` (a fault on an event), ``protective_stop``,
     ``unlock_on_pendant``, ``emergency_stop``, ``safeguard_stop``, ``release_emergency_stop``, ``power_on``,
-    ``set_remote_control``, ``move_by_hand``, ``reach_over_the_arm``; for the network: ``go_offline``, ``go_online``,
-    ``drop_connections``, ``freeze_link``, ``thaw_link``, ``silence``, ``delay_programs``, ``garble``. Queries
-    return copies of what the controller saw and did.
+    ``set_remote_control``, ``move_by_hand``, ``reach_over_the_arm``, ``pause_on_pendant``, ``play_on_pendant``;
+    for the network: ``go_offline``, ``go_online``, ``drop_connections``, ``freeze_link``, ``thaw_link``,
+    ``silence``, ``delay_programs``, ``garble``. Queries return copies of what the controller saw and did.
     """
 
     def __init__(self, base_T_flange: np.ndarray | None = None, surface_z_m: float = 0.0,
@@ -66,6 +66,9 @@ class LoopbackController:
             self._arm.flange_T_tcp = transform(tcp_offset)
         self._registers = Registers()
         self._program: FixwizardProgram | None = None
+        self._pause_requested = False
+        self._paused = False  # the running program waits for play, its motion (if any) kept in _paused_move
+        self._paused_move = None
         self._programs: list[FixwizardProgram] = []
         self._unsafe_programs: list[str] = []
         self._compile_errors: list[str] = []
@@ -212,6 +215,18 @@ class LoopbackController:
         with self._lock:
             self._arm.ceiling_z_m = float(self._arm.base_T_flange[2, 3]) + clearance_m
 
+    def pause_on_pendant(self) -> None:
+        """The operator presses pause on the teach pendant (or a client sends the dashboard's ``pause``): from the
+        next cycle the arm halts where it is and the program waits, its motion kept, until play resumes it."""
+        with self._lock:
+            self._pause_requested = True
+
+    def play_on_pendant(self) -> None:
+        """The operator presses play: a paused program goes on with its motion where it left off."""
+        with self._lock:
+            if self._paused:
+                self._paused, self._arm.move = False, self._paused_move
+
     def move_by_hand(self, base_T_flange: np.ndarray) -> None:
         """The operator moves the arm in freedrive (raises ``RuntimeError`` if freedrive is off)."""
         with self._lock:
@@ -228,6 +243,7 @@ class LoopbackController:
             return self._arm.freedrive
 
     def program_running(self) -> bool:
+        """Whether a program runs or is paused."""
         with self._lock:
             return self._program is not None and self._program.running
 
@@ -287,6 +303,7 @@ class LoopbackController:
 
     def _end_program(self) -> None:
         self._arm.halt()
+        self._paused = False
         if self._program is not None:
             self._program.stop()
 
@@ -312,6 +329,10 @@ class LoopbackController:
 
     def _cycle(self, dt: float, now: float) -> None:
         self._time_s += dt
+        if self._pause_requested and self._program is not None and self._program.running and not self._paused:
+            self._paused, self._paused_move = True, self._arm.move
+            self._arm.halt()
+        self._pause_requested = False
         self._arm.step(dt)
         in_contact = self._arm.in_contact()
         if in_contact and not self._was_in_contact:
@@ -322,7 +343,7 @@ class LoopbackController:
         if self._arm.force_mode is None and contact_force_n > COLLISION_FORCE_N:
             self.protective_stop()
         program = self._program
-        if program is None or not program.running:
+        if program is None or not program.running or self._paused:
             return
         watchdog_hz = program.watchdog_min_frequency_hz
         last_input = max(self._input_written_at.get(program.watchdog_variable, 0.0), self._program_started_at)
@@ -368,6 +389,7 @@ class LoopbackController:
     def _read_outputs(self, names: list[str]) -> list:
         with self._lock:
             running = self._program is not None and self._program.running
+            runtime_state = RUNTIME_STOPPED if not running else RUNTIME_PAUSED if self._paused else RUNTIME_PLAYING
             values = {
                 "timestamp": self._time_s,
                 "actual_TCP_pose": self._arm.tcp_pose(), "target_TCP_pose": self._arm.tcp_pose(),
@@ -375,9 +397,9 @@ class LoopbackController:
                 "actual_TCP_force": self._arm.tcp_force(), "ft_raw_wrench": self._arm.tcp_force(),
                 "robot_mode": ROBOT_MODE[self._robot_mode], "safety_mode": SAFETY_MODE[self._safety],
                 "safety_status": SAFETY_MODE[self._safety], "safety_status_bits": SAFETY_STATUS_BITS[self._safety],
-                "runtime_state": RUNTIME_PLAYING if running else RUNTIME_STOPPED,
+                "runtime_state": runtime_state,
                 "robot_status_bits": (POWER_ON_BIT if self._robot_mode == "RUNNING" else 0)
-                | (PROGRAM_RUNNING_BIT if running else 0),
+                | (PROGRAM_RUNNING_BIT if running and not self._paused else 0),
                 "speed_scaling": 1.0, "target_speed_fraction": 1.0,
                 **self._registers.outputs,
             }
@@ -424,12 +446,16 @@ class LoopbackController:
             if command == "safetymode":
                 return f"Safetymode: {self._safety}"
             if command == "programState":
-                return f"{'PLAYING' if running else 'STOPPED'} <unnamed>"
+                state = "STOPPED" if not running else "PAUSED" if self._paused else "PLAYING"
+                return f"{state} <unnamed>"
             if command == "running":
                 return f"Program running: {'true' if running else 'false'}"
             if command == "stop":
                 self._end_program()
                 return "Stopped"
+            if command == "pause":
+                self.pause_on_pendant()
+                return "Pausing program"
             if command.startswith("popup "):
                 return "showing popup"
             if command == "close popup":
