@@ -53,6 +53,7 @@ from fixwizard.robot.ur_script import (
 from fixwizard.robot.ur_state import ControllerState
 from ur_loopback import flange_above_surface, private_loopback_host
 from ur_loopback.arm import COLLISION_FORCE_N, SURFACE_STIFFNESS_N_M
+from ur_loopback.link_faults import serve_with_a_bug_in_the_move
 from ur_loopback.programs import unknown_functions
 
 HOST = private_loopback_host()
@@ -731,6 +732,19 @@ def test_a_crashed_link_process_leaves_the_wizard_running(robot, controller, kil
     assert_arm_stands(controller)
     robot.connect()
     assert robot.status().mode == "ready"
+
+
+def test_a_bug_in_the_link_mid_move_stops_the_arm_before_the_error(controller, connect, monkeypatch):
+    """An unexpected exception in the link process while its move runs (a bug, or ur_rtde raising something else
+    than RuntimeError): the link counts as lost, so its kicks stop and the watchdog has stopped the arm by the time
+    the error is shown."""
+    monkeypatch.setattr("fixwizard.robot.ur.serve", serve_with_a_bug_in_the_move)
+    robot = connect()
+    with pytest.raises(ConnectionLost, match="robot link failed while trying to move_linear .ValueError.*a bug "
+                                             "while the move runs.*watchdog stopped the arm"):
+        robot.move_linear(flange_above_surface(0.058), speed_m_s=0.05)
+    assert_arm_stands(controller)
+    assert not robot.status().connected
 
 
 @pytest.mark.parametrize("field", ["actual_TCP_pose", "actual_TCP_force", "output_double_register_17"])

@@ -110,9 +110,12 @@ def serve(host: str, watchdog_hz: float, conn: Connection, shared: SharedState, 
         except RobotError as error:
             answer = ("error", *pack_error(error))
         except Exception as error:  # noqa: BLE001 - a bug: the wizard shows it rather than losing the link silently
-            message = (f"fixwizard's robot link failed while trying to {command} ({error!r}): reconnect; if it "
-                       "happens again, report it")
-            answer = ("error", "RobotError", message, None)
+            # nothing this link does can be trusted now, and a program of its may still move: it stops kicking, so
+            # the controller's watchdog ends that program, and the wizard waits for that before it shows the error
+            link._lose(f"a bug while trying to {command} ({error!r})")
+            message = (f"fixwizard's robot link failed while trying to {command} ({error!r}; if it happens again, "
+                       "report it)")
+            answer = ("error", "LinkLost", message, None)
         conn.send(answer)
         if command == "close":
             os._exit(0)

@@ -1,0 +1,19 @@
+"""Faults inside fixwizard's UR link process: targets that ``fixwizard.robot.ur.URRobot`` starts in place of
+``ur_link.serve`` (the test patches ``fixwizard.robot.ur.serve``), so the link process itself goes wrong."""
+
+from fixwizard.robot import ur_link
+
+
+def serve_with_a_bug_in_the_move(*args) -> None:
+    """``ur_link.serve`` whose move raises an unexpected exception (a bug in fixwizard or ur_rtde, not a
+    ``RuntimeError``) once its program has the go and moves."""
+
+    until_ended = ur_link.Link._until_ended
+
+    def until_ended_with_a_bug(link, run_id, timeout_s, context, what):
+        if what == "the move":
+            raise ValueError("a bug while the move runs")
+        return until_ended(link, run_id, timeout_s, context, what)
+
+    ur_link.Link._until_ended = until_ended_with_a_bug
+    ur_link.serve(*args)
