@@ -12,6 +12,7 @@ import random
 import re
 import signal
 import socket
+import subprocess
 import sys
 import threading
 import time
@@ -719,6 +720,37 @@ def test_a_frozen_link_shows_disconnected_within_a_second_and_stops_the_arm(robo
     controller.freeze_link()  # the inputs are lost too: the controller's watchdog ends freedrive
     assert wait_until(lambda: not controller.program_running(), timeout_s=1.5)
     assert controller.watchdog_trips() == 1
+
+
+WIZARD_THAT_MOVES = """
+import sys, time
+from fixwizard.robot.ur import URRobot
+from ur_loopback import flange_above_surface
+robot = URRobot(sys.argv[1])
+robot.connect()
+print(robot.link_pid, flush=True)
+robot.move_linear(flange_above_surface(0.3), speed_m_s=0.05)
+"""
+
+
+@pytest.mark.slow
+def test_the_wizard_s_process_killed_mid_move_stops_the_arm_and_its_link(controller):
+    """kill -9 of the wizard's process while a 6 s move runs: its link process ends with it, so the watchdog
+    stops the arm within a second, and no link process is left behind."""
+    wizard = subprocess.Popen([sys.executable, "-c", WIZARD_THAT_MOVES, HOST], stdout=subprocess.PIPE, text=True,
+                              env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    try:
+        link_pid = int(wizard.stdout.readline())
+        assert wait_until(lambda: controller.program_running() and [name for name, _, _ in controller.programs()]
+                          == ["setup", "move"], timeout_s=5.0)
+        wizard.kill()
+        assert wait_until(lambda: not controller.program_running(), timeout_s=1.5)
+        assert_arm_stands(controller)
+        assert wait_until(lambda: not os.path.exists(f"/proc/{link_pid}"), timeout_s=1.0)
+    finally:
+        wizard.kill()
+        wizard.wait()
+        wizard.stdout.close()
 
 
 @pytest.mark.parametrize("kill", [signal.SIGSEGV, signal.SIGKILL])
