@@ -352,6 +352,19 @@ def test_freedrive_lets_the_operator_move_the_arm_and_blocks_motion(robot, contr
 # --- tapping and moving ---
 
 
+def test_a_second_client_is_refused_and_starts_nothing_on_the_arm(robot, controller, connect):
+    """A second fixwizard connects while the first one's freedrive runs: the controller gives it no RTDE inputs
+    (they are the first one's), so it cannot feed a watchdog or send a request; it sends no program, and its
+    failure only stops what runs (the dashboard's stop, the safe side)."""
+    robot.freedrive(True)
+    with pytest.raises(ConnectionLost, match="RTDE inputs"):
+        connect()
+    assert [name for name, _, _ in controller.programs()] == ["setup", "freedrive"]
+    assert wait_until(lambda: not controller.program_running())
+    robot.freedrive(False)
+    robot.move_linear(flange_above_surface(0.02))  # the first one goes on
+
+
 def test_a_tap_records_the_contact_pose_the_controller_produced(robot, controller):
     base_T_start = robot.base_T_tcp()
     result = robot.tap(max_travel_m=0.02, speed_m_s=0.01, force_limit_n=10.0)
