@@ -817,6 +817,20 @@ def test_a_pose_that_is_not_a_number_is_never_moved_from(robot, controller):
     assert [name for name, _, _ in controller.programs()] == ["setup"]
 
 
+def test_a_link_stalled_longer_than_the_watchdog_says_this_computer_stalled(start_controller, connect):
+    """The link process frozen (SIGSTOP) for 0.6 s mid-move, longer than the watchdog's 0.5 s (a real controller
+    has ended the move by then) but shorter than the wizard's 0.75 s: the link says that this computer stalled,
+    not that the controller sent nothing, and the arm stands."""
+    controller = start_controller(base_T_flange=flange_above_surface(0.03))
+    robot = connect()
+    move = MotionInThread(lambda: robot.move_linear(flange_above_surface(0.13), speed_m_s=0.05), controller)
+    assert wait_until(lambda: robot.status().mode == "moving")
+    stall_link(robot, 0.6)
+    error = move.join(5.0)
+    assert isinstance(error, ConnectionLost) and "this computer stalled" in str(error), error
+    assert_arm_stands(controller)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("stall_s", [0.2, 0.4, 1.0, 3.0])
 def test_the_tap_travel_holds_on_the_controller_when_the_pc_stalls(start_controller, connect, stall_s):

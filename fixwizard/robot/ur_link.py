@@ -448,14 +448,20 @@ class Link:
 
     def _publish_loop(self) -> None:
         """Publish every new RTDE sample; the link is lost once the stream closes, goes quiet or sends a value that
-        is not a finite number (nothing of such a sample is published: no NaN pose, force or tap result)."""
+        is not a finite number (nothing of such a sample is published: no NaN pose, force or tap result), or once
+        this process itself did not run for as long as the stream may go quiet (the watchdog may have fired)."""
         receive = self._receive
         last_timestamp, last_at = None, time.monotonic()
+        looked_at = last_at
         while self._lost is None:
             try:
                 connected = receive.isConnected()
                 timestamp = receive.getTimestamp()
                 now = time.monotonic()
+                if now - looked_at > STALE_STATE_S:  # this process did not run: nothing said the controller is quiet
+                    self._lose(f"this computer stalled: fixwizard's robot link did not run for {now - looked_at:.1f} s")
+                    return
+                looked_at = now
                 if not connected:
                     self._lose("the controller closed the RTDE connection")
                     return
