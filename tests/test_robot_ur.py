@@ -625,6 +625,15 @@ def test_protective_stop_during_a_tap_blocks_until_unlocked_on_the_pendant(robot
     np.testing.assert_allclose(result.base_T_tcp_contact, controller.contact_poses()[-1], atol=2e-6)
 
 
+def test_protective_stop_as_a_move_starts_is_named_and_nothing_moves(robot, controller):
+    before = controller.flange_pose()
+    controller.when("movel", "protective_stop")
+    with pytest.raises(ProtectiveStop, match="protective stop during the move"):
+        robot.move_linear(flange_above_surface(0.05))
+    np.testing.assert_allclose(controller.flange_pose(), before, atol=1e-9)
+    assert_arm_stands(controller)
+
+
 def test_protective_stop_after_the_contact_keeps_the_recorded_contact(robot, controller):
     base_T_start = robot.base_T_tcp()
     earlier = robot.tap(**FAST_TAP)

@@ -98,11 +98,11 @@ class FixwizardProgram:
         self._steps = self._started(getattr(self, f"_{name}")())
 
     def step(self, dt: float) -> None:
-        """One cycle; the program ends when its twin returns."""
+        """One cycle; the program ends when its twin returns, or where a fault its event set off stopped it."""
         self._dt = dt
         try:
             next(self._steps)
-        except StopIteration:
+        except (StopIteration, _Stopped):
             self.running = False
 
     def stop(self) -> None:
@@ -112,6 +112,13 @@ class FixwizardProgram:
         self.arm.freedrive = False
 
     # --- the scripts' helpers ---
+
+    def _event(self, event: str) -> None:
+        """Tell the controller; a fault that event sets off (a stop, ``when``) ends the program right there, as
+        on a controller, which runs no statement of a stopped program."""
+        self.on_event(event)
+        if not self.running:
+            raise _Stopped
 
     def _requested(self, request: int) -> bool:
         return self.registers.input_int(REQUEST_REGISTER) == self.run_id * 8 + request
@@ -124,7 +131,7 @@ class FixwizardProgram:
 
     def _linear(self, base_T_target: np.ndarray, speed_m_s: float) -> None:
         self.arm.move_linear(base_T_target, speed_m_s)
-        self.on_event("movel")
+        self._event("movel")
 
     # --- the programs ---
 
@@ -152,10 +159,10 @@ class FixwizardProgram:
             return float((arm.base_T_flange[:3, 3] - start[:3, 3]) @ start[:3, 2])
 
         arm.zero_sensor()
-        self.on_event("zero_ftsensor")
+        self._event("zero_ftsensor")
         yield
         self._linear(limit, p["speed_m_s"])
-        self.on_event("tap")
+        self._event("tap")
         while self._force_n() < p["force_limit_n"]:
             self.max_travel_m = max(self.max_travel_m, travel_m())
             peak_n = max(peak_n, self._force_n())
@@ -182,7 +189,7 @@ class FixwizardProgram:
         self.registers.write_double(PEAK_FORCE_REGISTER, peak_n)
         self.registers.write_double(SETTLE_REGISTER, waited_s)
         self.registers.write_int(PHASE_REGISTER, PHASE_SETTLED)
-        self.on_event("settled")
+        self._event("settled")
         while not self._requested(REQUEST_RETRACT):
             if self._requested(REQUEST_STOP):
                 return self._finish(PHASE_STOPPED)
@@ -224,7 +231,7 @@ class FixwizardProgram:
             if force_change_n() >= p["force_limit_n"]:
                 arm.halt()
                 self.registers.write_double(PEAK_FORCE_REGISTER, force_change_n())
-                self.on_event("blocked")
+                self._event("blocked")
                 yield from self._retract(start, PHASE_BLOCKED, force_change_n)
                 return
             yield
@@ -237,11 +244,15 @@ class FixwizardProgram:
     def _freedrive(self) -> Iterator[None]:
         self.arm.halt()
         self.arm.freedrive = True
-        self.on_event("freedrive")
+        self._event("freedrive")
         while not self._requested(REQUEST_STOP):
             yield
         self.arm.freedrive = False
         self._finish(PHASE_DONE)
+
+
+class _Stopped(Exception):
+    """The program was stopped in the middle of a cycle."""
 
 
 def _value(text: str) -> float | list[float]:
