@@ -197,6 +197,22 @@ def test_every_program_calls_only_functions_urscript_has(program):
     assert unknown_functions(program) == set()
 
 
+@pytest.mark.parametrize("write", [lambda: tap_program(7, 2.0, 1.0, 0.01, 10.0),
+                                   lambda: tap_program(7, 2.0, 0.02, 0.5, 10.0),
+                                   lambda: tap_program(7, 2.0, 0.02, 0.01, 1e3),
+                                   lambda: tap_program(7, 2.0, 0.02, float("nan"), 10.0),
+                                   lambda: move_program(7, 2.0, [0.4, -0.1, 0.2, 3.14, 0.0, 0.0], 2.0),
+                                   lambda: move_program(7, 2.0, [0.4, float("nan"), 0.2, 3.14, 0.0, 0.0], 0.05),
+                                   lambda: move_program(7, 2.0, [0.4, -0.1, 0.2], 0.05),
+                                   lambda: freedrive_program(7, 0.1),
+                                   lambda: setup_program(7, float("nan"))])
+def test_no_program_is_written_beyond_the_safe_limits(write):
+    """The last gate before the controller: whatever the link is asked (a caller that skipped the wizard's checks),
+    no program with a tap, a speed or a watchdog beyond the safe ranges, or a target that is not a pose, is written."""
+    with pytest.raises(RobotError, match="safe range|not a finite UR pose|watchdog of"):
+        write()
+
+
 def test_numbers_in_programs_are_written_without_exponents_and_read_back_equal():
     """Python writes a rotation vector's 1e-17 or a slow tap's 5e-05 with an exponent, for which URScript's manual
     has no form; every float is written positionally, the same value to the last bit."""

@@ -287,6 +287,7 @@ class Link:
             raise NotInRemoteControl()
         run_id = self._next_run
         self._next_run = self._next_run % (1 << 24) + 1
+        program = program_for(run_id)  # refuses limits beyond the safe ranges before anything is asked of the robot
         self._request(run_id, 0)
         self._current_run = run_id
         if self._stop_requested():
@@ -294,7 +295,7 @@ class Link:
             raise MotionStopped(what)
         try:
             assert self._script is not None, "connect opens the script port first"
-            self._script.sendall(program_for(run_id).encode())
+            self._script.sendall(program.encode())
         except OSError as error:
             raise self._link_lost(context, f"sending fixwizard's program to port {SCRIPT_PORT} failed "
                                   f"({error.strerror or error})") from error

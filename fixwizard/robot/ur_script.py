@@ -26,11 +26,19 @@ Poses are UR pose vectors ``[x, y, z, rx, ry, rz]`` of the flange (each program 
 in the base frame: m and rad. Speeds m/s, accelerations m/s^2, forces N, times s.
 """
 
+import math
 import numbers
 from collections.abc import Sequence
 from decimal import Decimal
 
-from fixwizard.robot.base import MAX_MOVE_TRAVEL_M, MOVE_FORCE_LIMIT_N
+from fixwizard.robot.base import (
+    MAX_LINEAR_SPEED_M_S,
+    MAX_MOVE_TRAVEL_M,
+    MOVE_FORCE_LIMIT_N,
+    RobotError,
+    check_limit,
+    check_tap_request,
+)
 
 KICK_REGISTER = 18
 REQUEST_REGISTER = 19
@@ -65,6 +73,7 @@ SETTLE_TIMEOUT_S = 2.0
 # A program ends unmoved when the link's go has not come this long after it started (controller time); the link
 # gives it within a few controller cycles, and a link that stalls longer than the watchdog's period stops it anyway.
 GO_TIMEOUT_S = 1.0
+MIN_WATCHDOG_HZ = 2.0  # every program's watchdog stops it at most 0.5 s after the link's last kick
 
 
 # A tap's and a move's way back: ``retract_and_finish(phase)`` moves the flange back to where the program began
@@ -113,7 +122,9 @@ def request_value(run_id: int, request: int) -> int:
 def tap_program(run_id: int, watchdog_hz: float, max_travel_m: float, speed_m_s: float,
                 force_limit_n: float) -> str:
     """Approach along the tool z axis at ``speed_m_s`` until the contact force reaches ``force_limit_n``, at
-    most ``max_travel_m``; wait for the contact to settle, report it (``PHASE_SETTLED``), retract on request."""
+    most ``max_travel_m``; wait for the contact to settle, report it (``PHASE_SETTLED``), retract on request.
+    ``RobotError`` for limits beyond ``base``'s safe ranges: no such program is ever written."""
+    check_tap_request(max_travel_m, speed_m_s, force_limit_n)
     return _program("tap", run_id, watchdog_hz, {
         "max_travel_m": max_travel_m, "speed_m_s": speed_m_s, "force_limit_n": force_limit_n,
         "settle_speed_m_s": SETTLE_SPEED_M_S, "settle_window_s": SETTLE_WINDOW_S,
@@ -198,7 +209,11 @@ def move_program(run_id: int, watchdog_hz: float, target: Sequence[float], speed
     """A straight-line move of the flange to the UR pose ``target`` at ``speed_m_s``; none at all if ``target``
     is farther than ``MAX_MOVE_TRAVEL_M`` from the flange (a wrong calibration or units: the controller holds
     the bound, whatever the PC computed). Where the force on the tool has grown by ``MOVE_FORCE_LIMIT_N`` since
-    the start, the move stops, reports that change and goes back to where it began (``PHASE_BLOCKED``)."""
+    the start, the move stops, reports that change and goes back to where it began (``PHASE_BLOCKED``).
+    ``RobotError`` for a speed beyond ``MAX_LINEAR_SPEED_M_S`` or a target that is not six finite numbers."""
+    check_limit("linear speed", speed_m_s, MAX_LINEAR_SPEED_M_S, "mm/s", 1e3)
+    if len(target) != 6 or not all(math.isfinite(value) for value in target):
+        raise RobotError(f"the move's target {list(target)} is not a finite UR pose: this is a bug; report it")
     return _program("move", run_id, watchdog_hz, {"target": pose_literal(target), "speed_m_s": speed_m_s,
                                                   "max_travel_m": MAX_MOVE_TRAVEL_M,
                                                   "force_limit_n": MOVE_FORCE_LIMIT_N,
@@ -265,7 +280,11 @@ def setup_program(run_id: int, watchdog_hz: float) -> str:
 def _program(name: str, run_id: int, watchdog_hz: float, parameters: dict[str, float | str], body: str) -> str:
     """One program: its parameters as globals, the watchdog armed before anything else, then the run id,
     zero TCP offset, the shared helpers, the wait for the link's go (an end if a stop is requested before it or
-    the go does not come), and ``body`` (two-space indented URScript)."""
+    the go does not come), and ``body`` (two-space indented URScript). ``RobotError`` for a watchdog slower than
+    ``MIN_WATCHDOG_HZ``."""
+    if not watchdog_hz >= MIN_WATCHDOG_HZ:
+        raise RobotError(f"a watchdog of {watchdog_hz} Hz would let the arm run on too long after fixwizard's last "
+                         f"message (at least {MIN_WATCHDOG_HZ:g} Hz): this is a bug; report it")
     constants = {"acceleration_m_s2": ACCELERATION_M_S2, "STOP_DECELERATION_M_S2": STOP_DECELERATION_M_S2,
                  "go_timeout_s": GO_TIMEOUT_S, "REQUEST_GO": REQUEST_GO, "PHASE_RUNNING": PHASE_RUNNING,
                  "PHASE_NO_GO": PHASE_NO_GO,
