@@ -9,10 +9,9 @@ misses its deadline is killed and reported as ``LinkLost``.
 Safety lives on the controller (``fixwizard.robot.ur_script``): every motion is a program whose first
 statement arms the RTDE watchdog, and a tap's travel, speed and force limits (a move's travel and force) are
 the program's own, so a PC that stalls, crashes or loses the link cannot take a tap past its travel limit or
-press harder than a limit, and the arm stops
-``1 / watchdog_hz`` s after the link's last message. An error about a lost link is raised only once that time
-(plus ``WATCHDOG_MARGIN_S``) has passed since the link process's last watchdog kick, so nothing moves after
-the operator sees it.
+press harder than a limit, and the arm stops at most ``WATCHDOG_PERIODS / watchdog_hz`` s after the link's last
+message. An error about a lost link is raised only once that time (plus ``WATCHDOG_MARGIN_S``) has passed since
+the link process's last watchdog kick, so nothing moves after the operator sees it.
 
 Poses are 4x4 float64 ``base_T_tcp`` transforms of the flange in the robot base frame (m): the programs set
 the controller's TCP offset to zero. Speeds m/s, forces N, times s (``time.monotonic``).
@@ -61,7 +60,10 @@ from fixwizard.robot.ur_state import (
 # The arm stops when fixwizard sends nothing for 1 / WATCHDOG_HZ seconds: long enough that a busy PC does
 # not stop a tap, short enough to stop within 0.5 s.
 WATCHDOG_HZ = 2.0
-WATCHDOG_MARGIN_S = 0.4  # a controller's cycle and braking, and its scheduling, after the watchdog period
+# A controller checks the watchdog once a period for an update within it, so it fires one to two periods after the
+# last kick (a CB3 URSim: 0.5 s on a bare RTDE connection, 1.0 s with I/O and dashboard clients, at 2 Hz).
+WATCHDOG_PERIODS = 2
+WATCHDOG_MARGIN_S = 0.4  # a controller's cycle and braking, and its scheduling, after the watchdog fired
 CONNECT_DEADLINE_S = 10.0  # the link process's start, every port, every client and the first data
 COMMAND_DEADLINE_S = 5.0  # a command that does not move (freedrive, unlock)
 MOTION_SLACK_S = 5.0  # a motion's deadline: its own duration plus this
@@ -271,15 +273,16 @@ class URRobot:
         link.kill()
         threading.Thread(target=_dashboard_stop, args=(self.host,), name="ur-dashboard-stop", daemon=True).start()
         if last_kick_at:  # a program may have been running on those kicks: wait until its watchdog fired
-            stopped_by = last_kick_at + 1.0 / self.watchdog_hz + WATCHDOG_MARGIN_S
+            stopped_by = last_kick_at + WATCHDOG_PERIODS / self.watchdog_hz + WATCHDOG_MARGIN_S
             time.sleep(max(stopped_by - time.monotonic(), 0.0))
         link.process.join(EXIT_WAIT_S)
         if not last_kick_at:  # nothing was ever sent that could move the arm
             error = LinkLost(f"{problem}: check that the robot is powered on and reachable, then reconnect")
         else:
-            error = LinkLost(f"{problem}. The robot's watchdog stopped the arm {1.0 / self.watchdog_hz:g} s after "
-                             "fixwizard's last message: check the network cable and switch between this computer "
-                             "and the robot, then reconnect")
+            within_s = WATCHDOG_PERIODS / self.watchdog_hz
+            error = LinkLost(f"{problem}. The robot's watchdog stopped the arm within {within_s:g} s of fixwizard's "
+                             "last message: check the network cable and switch between this computer and the robot, "
+                             "then reconnect")
         if tap_result is not None:
             error.tap_result = tap_result
         return error

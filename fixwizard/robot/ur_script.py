@@ -73,7 +73,7 @@ SETTLE_TIMEOUT_S = 2.0
 # A program ends unmoved when the link's go has not come this long after it started (controller time); the link
 # gives it within a few controller cycles, and a link that stalls longer than the watchdog's period stops it anyway.
 GO_TIMEOUT_S = 1.0
-MIN_WATCHDOG_HZ = 2.0  # every program's watchdog stops it at most 0.5 s after the link's last kick
+MIN_WATCHDOG_HZ = 2.0  # a watchdog period of 0.5 s: every program stops within 1 s of the link's last kick
 
 
 # A tap's and a move's way back: ``retract_and_finish(phase)`` moves the flange back to where the program began
