@@ -57,8 +57,8 @@ from fixwizard.robot.ur_state import (
     SharedState,
 )
 
-# The arm stops when fixwizard sends nothing for 1 / WATCHDOG_HZ seconds: long enough that a busy PC does
-# not stop a tap, short enough to stop within 0.5 s.
+# The watchdog's period, 1 / WATCHDOG_HZ seconds without a message from fixwizard: long enough that a busy PC does
+# not stop a tap, short enough that the arm stops within 1 s (below).
 WATCHDOG_HZ = 2.0
 # A controller checks the watchdog once a period for an update within it, so it fires one to two periods after the
 # last kick (a CB3 URSim: 0.5 s on a bare RTDE connection, 1.0 s with I/O and dashboard clients, at 2 Hz).
