@@ -880,7 +880,8 @@ def test_the_tap_travel_holds_on_the_controller_when_the_pc_stalls(start_control
     time.sleep(random.uniform(0.0, 0.3))
     stall_link(robot, stall_s)
     outcome = tap.join(5.0)
-    assert max(controller.tap_travels()) <= 0.02 + TRAVEL_SLACK_M
+    # a stall before the program was sent: the link says it stalled and sends nothing (no tap program at all)
+    assert max(controller.tap_travels(), default=0.0) <= 0.02 + TRAVEL_SLACK_M
     assert isinstance(outcome, (NoContact, ConnectionLost))
     if isinstance(outcome, ConnectionLost):
         assert "no surface" not in str(outcome)
