@@ -214,7 +214,8 @@ class RobotTipCalibration:
         """Tap from every hover pose of ``plan`` not yet recorded, lifting to the approach height first."""
         recorded, total = self._poses[step], len(plan)
         first = len(recorded)
-        base_n_up = self._coarse_frame(None)[:3, 2]
+        base_T_table = self._coarse_frame(None)
+        base_n_up = base_T_table[:3, 2]
         tip = self.pivot_fit().tcp_p_tip_m
         base_p_hover = ball_centres_m(plan, tip)
 
@@ -226,7 +227,7 @@ class RobotTipCalibration:
             where = f"{STEP_TITLES[step]}, tap {index + 1} of {total}"
             if index == first:
                 unless_cancelled()
-                self._check_above_corner(_call(where, self.robot.base_T_tcp), tip, base_p_hover)
+                self._check_above_corner(_call(where, self.robot.base_T_tcp), base_T_table, tip, base_p_hover)
                 _call(where, self._lift, tip, base_n_up, base_p_hover[index])
             unless_cancelled()
             _call(where, self.robot.move_linear, plan[index])
@@ -236,11 +237,12 @@ class RobotTipCalibration:
             if progress is not None:
                 progress(step, len(recorded), total)
 
-    def _check_above_corner(self, base_T_tcp: np.ndarray, tcp_p_tip_m: np.ndarray, base_p_hover: np.ndarray) -> None:
+    def _check_above_corner(self, base_T_tcp: np.ndarray, base_T_table: np.ndarray, tcp_p_tip_m: np.ndarray,
+                            base_p_hover: np.ndarray) -> None:
         """CalibrationError unless the ball is above the table corner of A, B, C and the planned hover points
         (``START_MARGIN_M`` around it, seen along the table normal): after a calibration was continued, the arm may
         have been moved anywhere, and the way to the first hover point runs at the approach height."""
-        table_T_base = invert(self._coarse_frame(None))
+        table_T_base = invert(base_T_table)
         table_xy_corner = transform_points(table_T_base, np.vstack(
             [ball_centres_m(self.poses("table_coarse"), tcp_p_tip_m), base_p_hover]))[:, :2]
         table_xy_ball = transform_points(table_T_base, ball_centres_m(base_T_tcp[None], tcp_p_tip_m))[0, :2]
