@@ -46,11 +46,12 @@ def calibrated():
                               SAMPLE_BOUND_M / 3, simulated=True), cell
 
 
-def context_for(tmp_path, calibrated, push_m: float = 0.0) -> tuple[Cell, SavedCalibration]:
-    """The calibrated cell (its fixture pushed along x by ``push_m``), its report in reports/, the true tip."""
+def context_for(tmp_path, calibrated, push_m: float = 0.0, **report_changes) -> tuple[Cell, SavedCalibration]:
+    """The calibrated cell (its fixture pushed along x by ``push_m``), its report (with ``report_changes``) in
+    reports/, the true tip."""
     data, cell = calibrated
     (tmp_path / "reports").mkdir(exist_ok=True)
-    report.write(tmp_path / "reports" / "demo_bracket-1.yaml", data)
+    report.write(tmp_path / "reports" / "demo_bracket-1.yaml", {**data, **report_changes})
     base_T_cad = cell.truth.base_T_cad.copy()
     base_T_cad[0, 3] += push_m
     checked = SimulatedCell.with_fixture(cell.fixture, seed=5, base_T_cad=base_T_cad,
@@ -74,6 +75,11 @@ class CheckHost(ScreenHost):
 
     def show_error(self, error: Exception) -> None:
         self.errors.append(error)
+
+
+def check_host(cell: Cell, tip: SavedCalibration) -> CheckHost:
+    """The check screen of ``cell``'s reports, alone."""
+    return CheckHost(lambda: CheckScreen(cell, tip, checkable_reports(cell.reports_dir)))
 
 
 def text_of(screen, selector: str) -> str:
@@ -119,7 +125,7 @@ def test_freedrive_comes_back_after_a_check_tap_only_when_it_ended_as_planned(tm
     cell, tip = context_for(tmp_path, calibrated)
 
     async def run():
-        app = CheckHost(lambda: CheckScreen(cell, tip, checkable_reports(cell.reports_dir)))
+        app = check_host(cell, tip)
         async with app.run_test(size=SIZE) as pilot:
             screen = app.screen
             await until(pilot, lambda: screen.fixture is not None and not screen.busy
@@ -153,7 +159,7 @@ def test_four_suggested_taps_tell_whether_the_fixture_moved_and_what_to_do_next(
     cell, tip = context_for(tmp_path, calibrated, push_m)
 
     async def run():
-        app = CheckHost(lambda: CheckScreen(cell, tip, checkable_reports(cell.reports_dir)))
+        app = check_host(cell, tip)
         async with app.run_test(size=SIZE) as pilot:
             screen = app.screen
             await until(pilot, lambda: "Tap 3-5 points spread over the fixture" in text_of(screen, "#check-suggest"))
@@ -190,7 +196,7 @@ def test_two_taps_that_fit_are_too_few_and_the_verdict_says_to_tap_more(tmp_path
     cell, tip = context_for(tmp_path, calibrated)
 
     async def run():
-        app = CheckHost(lambda: CheckScreen(cell, tip, checkable_reports(cell.reports_dir)))
+        app = check_host(cell, tip)
         async with app.run_test(size=SIZE) as pilot:
             screen = app.screen
             await tap_suggested(pilot, screen, 2)
@@ -242,7 +248,7 @@ def test_esc_asks_before_leaving_taps_that_are_not_checked(tmp_path, calibrated)
     cell, tip = context_for(tmp_path, calibrated)
 
     async def run():
-        app = CheckHost(lambda: CheckScreen(cell, tip, checkable_reports(cell.reports_dir)))
+        app = check_host(cell, tip)
         async with app.run_test(size=SIZE) as pilot:
             screen = app.screen
             await tap_suggested(pilot, screen, 1)
@@ -265,7 +271,7 @@ def test_without_reports_the_check_says_to_calibrate_first(tmp_path, calibrated)
     (tmp_path / "reports" / "demo_bracket-1.yaml").unlink()
 
     async def run():
-        app = CheckHost(lambda: CheckScreen(cell, tip, checkable_reports(cell.reports_dir)))
+        app = check_host(cell, tip)
         async with app.run_test(size=SIZE) as pilot:
             screen = app.screen
             await pilot.pause()
@@ -281,15 +287,12 @@ def test_without_reports_the_check_says_to_calibrate_first(tmp_path, calibrated)
 
 
 def test_a_report_whose_mesh_changed_is_explained_and_nothing_is_tapped(tmp_path, calibrated):
-    cell, tip = context_for(tmp_path, calibrated)
-    data = dict(calibrated[0])
     mesh = tmp_path / "bracket.stl"
     mesh.write_bytes(demo_fixture().path.read_bytes() + b"\0")
-    data["fixture"] = {**data["fixture"], "mesh": str(mesh)}
-    report.write(tmp_path / "reports" / "demo_bracket-1.yaml", data)
+    cell, tip = context_for(tmp_path, calibrated, fixture={**calibrated[0]["fixture"], "mesh": str(mesh)})
 
     async def run():
-        app = CheckHost(lambda: CheckScreen(cell, tip, checkable_reports(cell.reports_dir)))
+        app = check_host(cell, tip)
         async with app.run_test(size=SIZE) as pilot:
             screen = app.screen
             await until(pilot, lambda: "not the one the report" in text_of(screen, "#check-suggest"))
@@ -303,13 +306,11 @@ def test_a_report_whose_mesh_changed_is_explained_and_nothing_is_tapped(tmp_path
 
 def test_a_report_dated_in_the_future_is_said_so_not_given_a_negative_age(tmp_path, calibrated):
     """A clock gone backwards (or another PC's clock ahead): the check said the report was '-3.0 days old'."""
-    cell, tip = context_for(tmp_path, calibrated)
-    data = dict(calibrated[0])
-    data["created"] = (dt.datetime.now(dt.UTC) + dt.timedelta(days=3)).isoformat(timespec="seconds")
-    report.write(tmp_path / "reports" / "demo_bracket-1.yaml", data)
+    in_3_days = dt.datetime.now(dt.UTC) + dt.timedelta(days=3)
+    cell, tip = context_for(tmp_path, calibrated, created=in_3_days.isoformat(timespec="seconds"))
 
     async def run():
-        app = CheckHost(lambda: CheckScreen(cell, tip, checkable_reports(cell.reports_dir)))
+        app = check_host(cell, tip)
         async with app.run_test(size=SIZE) as pilot:
             screen = app.screen
             await until(pilot, lambda: "in the future" in text_of(screen, "#check-report"))
