@@ -54,7 +54,7 @@ from fixwizard.robot.ur_script import (
 from fixwizard.robot.ur_state import ControllerState
 from ur_loopback import flange_above_surface, private_loopback_host
 from ur_loopback.arm import COLLISION_FORCE_N, SURFACE_STIFFNESS_N_M
-from ur_loopback.link_faults import serve_with_a_bug_in_the_move
+from ur_loopback.link_faults import serve_whose_first_run_id_is_the_last_one_run, serve_with_a_bug_in_the_move
 from ur_loopback.programs import unknown_functions
 
 HOST = private_loopback_host()
@@ -689,6 +689,25 @@ def test_a_program_paused_on_the_pendant_is_stopped_so_that_play_moves_nothing(s
     robot.move_linear(flange_above_surface(0.03), speed_m_s=0.05)  # the next motion runs
 
 
+def test_a_program_left_paused_is_stopped_on_connecting_before_anything_is_sent(controller, connect):
+    """A fixwizard move paused on the pendant as its link died: the next link stops it with the dashboard's stop
+    before it sends a program (a controller need not replace a paused program by a new one, and the new link's
+    kicks would keep the old program's watchdog content), so play afterwards moves nothing."""
+    target = flange_above_surface(0.2)
+    program = move_program(5, 10.0, [*target[:3, 3], np.pi, 0.0, 0.0], 0.05)
+    controller.when("movel", "pause_on_pendant")
+    with socket.create_connection((HOST, 30003)) as script_port:
+        script_port.sendall(program.encode())
+        assert wait_until(lambda: [name for name, _, _ in controller.programs()] == ["move"])
+        controller.write_input_int(REQUEST_REGISTER, request_value(5, REQUEST_GO))
+        assert wait_until(controller.program_paused)
+    connect()
+    assert "stop" in controller.dashboard_commands()
+    assert [name for name, _, _ in controller.programs()] == ["move", "setup"]
+    controller.play_on_pendant()
+    assert_arm_stands(controller)
+
+
 @pytest.mark.parametrize("source", ["robot", "system"])
 def test_emergency_stop_raises_until_released_and_powered_on(robot, controller, source):
     controller.emergency_stop(source)
@@ -828,6 +847,20 @@ def test_a_bug_in_the_link_mid_move_stops_the_arm_before_the_error(controller, c
         robot.move_linear(flange_above_surface(0.058), speed_m_s=0.05)
     assert_arm_stands(controller)
     assert not robot.status().connected
+
+
+def test_a_new_link_never_takes_the_last_run_s_id_for_its_own_program(controller, connect, monkeypatch):
+    """A link's random first run id equal to the one the run register still shows (the last program run): the link
+    would take that run's end for its own move's while its program, started a moment later by a busy controller,
+    got the go and moved after the error. The link skips that id: the move runs as asked."""
+    monkeypatch.setattr("fixwizard.robot.ur.serve", serve_whose_first_run_id_is_the_last_one_run)
+    robot = connect()
+    controller.delay_programs(0.3)
+    target = flange_above_surface(0.03)
+    robot.move_linear(target, speed_m_s=0.1)
+    np.testing.assert_allclose(controller.flange_pose(), target, atol=1e-6)
+    run_ids = [run_id for _, run_id, _ in controller.programs()]
+    assert len(set(run_ids)) == len(run_ids) == 2
 
 
 @pytest.mark.parametrize("field", ["actual_TCP_pose", "actual_TCP_force", "output_double_register_17"])

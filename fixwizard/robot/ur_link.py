@@ -144,8 +144,9 @@ class Link:
     # --- commands ---
 
     def connect(self) -> None:
-        """Open every client, wait for the first RTDE data; stop a program left running (an earlier link's,
-        before its watchdog fired, or anyone's) before anything else."""
+        """Open every client, wait for the first RTDE data; stop a program left running or paused (an earlier
+        link's, before its watchdog fired or paused on the pendant as its link died, or anyone's) before anything
+        else."""
         import dashboard_client
         import rtde_io
         import rtde_receive
@@ -174,10 +175,11 @@ class Link:
                 raise self._link_lost(" while connecting", self._lost or "the controller sent no RTDE data "
                                       f"within {FIRST_DATA_TIMEOUT_S:g} s")
             time.sleep(POLL_S)
-        if state.program_running:
+        if state.program_running or state.program_paused:  # paused: play would take its motion on
             self._step("stopping the program that was running on the robot")
             self._dashboard_command("stop")
-            self._wait(lambda sample: not sample.program_running, PROGRAM_END_TIMEOUT_S, " while connecting")
+            self._wait(lambda sample: not (sample.program_running or sample.program_paused), PROGRAM_END_TIMEOUT_S,
+                       " while connecting")
         if state.ready_to_move:
             self._step(f"fixwizard's set-up program to start (port {SCRIPT_PORT})")
             self._stop_mark = self._stop_count.value
@@ -285,8 +287,7 @@ class Link:
         through ``_stop_loop``, which the program heeds before it moves."""
         if not self._open(DASHBOARD, self._dashboard.isInRemoteControl):
             raise NotInRemoteControl()
-        run_id = self._next_run
-        self._next_run = self._next_run % (1 << 24) + 1
+        run_id = self._new_run_id(self._fresh_state(context).run_id)
         program = program_for(run_id)  # refuses limits beyond the safe ranges before anything is asked of the robot
         self._request(run_id, 0)
         self._current_run = run_id
@@ -323,6 +324,17 @@ class Link:
             raise RobotError(f"fixwizard's {what} started on the robot but did not get fixwizard's go within "
                              f"{GO_TIMEOUT_S:g} s{context} (this computer was too busy to answer), so nothing moved: "
                              "retry")
+        return run_id
+
+    def _new_run_id(self, stale_run_id: int) -> int:
+        """The next run id, never ``stale_run_id`` (the run register's value now: an earlier link's last run, whose
+        id this link's random first one may equal). ``_start`` takes the register showing its run id for its
+        program running, so a match there would give the go to a program that had not started yet while this link
+        took the stale run's end for its own."""
+        run_id = self._next_run
+        if run_id == stale_run_id:
+            run_id = run_id % (1 << 24) + 1
+        self._next_run = run_id % (1 << 24) + 1
         return run_id
 
     def _until_ended(self, run_id: int, timeout_s: float, context: str, what: str) -> ControllerState:

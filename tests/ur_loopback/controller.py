@@ -253,6 +253,11 @@ class LoopbackController:
         with self._lock:
             return self._program is not None and self._program.running
 
+    def program_paused(self) -> bool:
+        """Whether a program waits for play."""
+        with self._lock:
+            return self._paused
+
     def programs(self) -> list[tuple[str, int, str | None]]:
         """Every fixwizard program run so far: name, run id and the variable its watchdog watches."""
         with self._lock:

@@ -17,3 +17,18 @@ def serve_with_a_bug_in_the_move(*args) -> None:
 
     ur_link.Link._until_ended = until_ended_with_a_bug
     ur_link.serve(*args)
+
+
+def serve_whose_first_run_id_is_the_last_one_run(*args) -> None:
+    """``ur_link.serve`` whose first run id after connecting equals the one the controller's run register holds
+    (the last program run, an earlier link's or the set-up program's): the 1 in 16 million chance of a random
+    first id made certain."""
+
+    connect = ur_link.Link.connect
+
+    def connect_then_reuse_the_last_run_id(link) -> None:
+        connect(link)
+        link._next_run = link._shared.read()[0].run_id
+
+    ur_link.Link.connect = connect_then_reuse_the_last_run_id
+    ur_link.serve(*args)
