@@ -37,6 +37,7 @@ from fixwizard.robot.base import MOVE_FORCE_LIMIT_N
 from fixwizard.robot.ur import URRobot
 from fixwizard.robot.ur_link import PROGRAM_START_TIMEOUT_S
 from fixwizard.robot.ur_script import (
+    BACK_OFF_M,
     GO_TIMEOUT_S,
     KICK_REGISTER,
     MAX_MOVE_TRAVEL_M,
@@ -481,32 +482,42 @@ def test_a_move_into_something_stops_at_its_force_limit_and_goes_back(start_cont
     robot.move_linear(flange_above_surface(0.02), speed_m_s=0.05)  # nothing to unlock: the next move runs
 
 
-def test_a_move_whose_way_back_meets_something_stops_there_at_the_force_limit(start_controller, connect):
+def test_a_move_whose_way_back_meets_something_stops_there_and_backs_off(start_controller, connect):
     """The move is blocked by the surface; on its way back up, something has come over the arm 3 mm above the
     flange: the way back stops where the force has grown by the move's limit again, far below the controller's
-    protective stop, and the error says the arm may press on what it met."""
+    protective stop, and backs off half the way it came, so it presses neither on what it met nor on the
+    surface."""
     controller = start_controller(base_T_flange=flange_above_surface(0.01))
     robot = connect()
     controller.when("blocked", "reach_over_the_arm", 0.003)
     with pytest.raises(RobotError, match=r"^the arm met something on its way back to where the move began "
-                                         r"\((5[0-9]|6[0-9]) N\) and stopped there: it may press on it: turn "
-                                         "freedrive on and move the arm clear by hand"):
+                                         r"\((5[0-9]|6[0-9]) N\), stopped and backed off a few millimetres the way "
+                                         "it came: look at what it met, turn freedrive on and move the arm clear"):
         robot.move_linear(flange_above_surface(-0.02), speed_m_s=0.05)
     assert controller.peak_contact_force_n() < MOVE_FORCE_LIMIT_N + 20.0
+    assert controller.contact_force_n() == 0.0
     assert robot.status().mode == "ready"
     assert_arm_stands(controller)
 
 
-def test_a_tap_whose_retract_meets_something_stops_there_and_keeps_the_contact(robot, controller):
-    """Something comes over the arm 4 mm above the flange while the tap stands in contact: the retract stops where
-    the force has grown by the move's limit, and the recorded contact is kept."""
-    controller.when("settled", "reach_over_the_arm", 0.004)
+@pytest.mark.parametrize("clearance_m", [0.004, 0.012])
+def test_a_tap_whose_retract_meets_something_backs_off_and_keeps_the_contact(start_controller, connect, clearance_m):
+    """Something comes over the arm 4 or 12 mm above the flange while the tap stands in contact: the retract stops
+    where the force has grown by the move's limit and backs off half the way it came, at most 5 mm, so nothing
+    stays pressed (neither what it met nor the surface); the recorded contact is kept."""
+    controller = start_controller(base_T_flange=flange_above_surface(0.02))
+    robot = connect()
+    controller.when("settled", "reach_over_the_arm", clearance_m)
     with pytest.raises(RobotError, match=r"^the arm met something on its way back to where the tap began "
-                                         r"\((5[0-9]|6[0-9]) N\) and stopped there; the contact was recorded: it "
-                                         "may press on it") as raised:
-        robot.tap(**FAST_TAP)
-    np.testing.assert_allclose(raised.value.tap_result.base_T_tcp_contact, controller.contact_poses()[-1], atol=2e-6)
+                                         r"\((5[0-9]|6[0-9]) N\), stopped and backed off a few millimetres the way "
+                                         "it came; the contact was recorded: look at") as raised:
+        robot.tap(max_travel_m=0.03, **FAST_TAP)
+    contact = controller.contact_poses()[-1]
+    np.testing.assert_allclose(raised.value.tap_result.base_T_tcp_contact, contact, atol=2e-6)
     assert controller.peak_contact_force_n() < MOVE_FORCE_LIMIT_N + 20.0
+    assert controller.contact_force_n() == 0.0
+    above_contact_m = controller.flange_pose()[2, 3] - contact[2, 3]
+    assert max(clearance_m / 2, clearance_m - BACK_OFF_M) <= above_contact_m < clearance_m
     assert robot.status().mode == "ready"
     assert_arm_stands(controller)
 

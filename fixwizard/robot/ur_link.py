@@ -576,12 +576,12 @@ class Link:
 
 
 def _return_blocked(motion: str, state: ControllerState, recorded: bool = False) -> RobotError:
-    """The error of a ``motion`` (tap, move) whose way back met something and stopped there (``state``: its end),
-    saying whether a tap's contact was ``recorded``."""
+    """The error of a ``motion`` (tap, move) whose way back met something, stopped and backed off (``state``: its
+    end), saying whether a tap's contact was ``recorded``."""
     kept = "; the contact was recorded" if recorded else ""
     return RobotError(f"the arm met something on its way back to where the {motion} began "
-                      f"({state.peak_force_n:.0f} N) and stopped there{kept}: it may press on it: turn freedrive on "
-                      "and move the arm clear by hand, then retry")
+                      f"({state.peak_force_n:.0f} N), stopped and backed off a few millimetres the way it came{kept}: "
+                      "look at what it met, turn freedrive on and move the arm clear by hand, then retry")
 
 
 def _exit_with(parent_pid: int) -> None:

@@ -11,7 +11,8 @@ the contact force reaches the limit. A PC that stalls or dies cannot take the ta
 feeding the watchdog, and the controller ends the program. A move refuses, on the controller, a target farther
 than ``MAX_MOVE_TRAVEL_M`` from where the flange stands, and stops and goes back where the force on the tool
 has grown by ``MOVE_FORCE_LIMIT_N`` on its way. The way back of both (a tap's retract, a blocked move's return)
-stops where the force grows by ``MOVE_FORCE_LIMIT_N`` again.
+stops where the force grows by ``MOVE_FORCE_LIMIT_N`` again, and backs off a little the way it came, so that
+nothing stays pressed.
 
 Registers (integers unless told; the RTDE I/O interface's range 18-22, ur_rtde's receive range 12-19 for doubles):
   input 18   kick counter the link rewrites every ``KICK_PERIOD_S``; the programs' watchdog variable
@@ -67,6 +68,7 @@ FINAL_PHASES = {PHASE_DONE, PHASE_NO_CONTACT, PHASE_STOPPED, PHASE_NOT_SETTLED, 
 ACCELERATION_M_S2 = 0.5
 STOP_DECELERATION_M_S2 = 10.0
 RETRACT_SPEED_M_S = 0.05
+BACK_OFF_M = 0.005  # a blocked way back backs off half the way it came, at most this (m): off what it pressed on
 SETTLE_SPEED_M_S = 0.0005  # settled: the flange slower than this ...
 SETTLE_WINDOW_S = 0.1  # ... for this long
 SETTLE_TIMEOUT_S = 2.0
@@ -80,7 +82,9 @@ MIN_WATCHDOG_HZ = 2.0  # a watchdog period of 0.5 s: every program stops within 
 # and ends the program with ``phase``. A STOP on the way stops it there; so does something it meets on the way:
 # the force on the tool (the program's ``return_force_n()``) grown by ``return_force_limit_n`` over the least it
 # has been since the way back began (the contact it leaves eases off first), ``PHASE_RETURN_BLOCKED`` with that
-# growth in the peak-force register.
+# growth in the peak-force register. Then, so that nothing stays pressed (a hand over the arm), it backs off
+# along the way it just came, half of it and at most ``back_off_m``: clear of what it met, short of where the way
+# back began (a tap's contact, a blocked move's obstacle). A STOP on that short way stops it there.
 _RETURN_TO_START = """\
   global start = get_actual_tcp_pose()
   global back = False
@@ -88,7 +92,33 @@ _RETURN_TO_START = """\
     movel(start, a=acceleration_m_s2, v=retract_speed_m_s)
     back = True
   end
+  global back_off_target = start
+  global backed_off = False
+  thread back_off_motion():
+    movel(back_off_target, a=acceleration_m_s2, v=retract_speed_m_s)
+    backed_off = True
+  end
+  def back_off_and_finish(return_began):
+    here = get_actual_tcp_pose()
+    gone_m = point_dist(here, return_began)
+    fraction = 0.5
+    if gone_m * fraction > back_off_m:
+      fraction = back_off_m / gone_m
+    end
+    back_off_target = interpolate_pose(here, return_began, fraction)
+    backing = run back_off_motion()
+    while not backed_off:
+      if requested(REQUEST_STOP):
+        kill backing
+        stopl(STOP_DECELERATION_M_S2)
+        finish(PHASE_RETURN_BLOCKED)
+      end
+      sync()
+    end
+    finish(PHASE_RETURN_BLOCKED)
+  end
   def retract_and_finish(phase):
+    return_began = get_actual_tcp_pose()
     retracting = run retract()
     least_n = return_force_n()
     while not back:
@@ -105,7 +135,7 @@ _RETURN_TO_START = """\
         kill retracting
         stopl(STOP_DECELERATION_M_S2)
         write_output_float_register(PEAK_FORCE_REGISTER, force - least_n)
-        finish(PHASE_RETURN_BLOCKED)
+        back_off_and_finish(return_began)
       end
       sync()
     end
@@ -129,7 +159,7 @@ def tap_program(run_id: int, watchdog_hz: float, max_travel_m: float, speed_m_s:
         "max_travel_m": max_travel_m, "speed_m_s": speed_m_s, "force_limit_n": force_limit_n,
         "settle_speed_m_s": SETTLE_SPEED_M_S, "settle_window_s": SETTLE_WINDOW_S,
         "settle_timeout_s": SETTLE_TIMEOUT_S, "retract_speed_m_s": RETRACT_SPEED_M_S,
-        "return_force_limit_n": MOVE_FORCE_LIMIT_N}, """\
+        "return_force_limit_n": MOVE_FORCE_LIMIT_N, "back_off_m": BACK_OFF_M}, """\
   def force_n():
     wrench = get_tcp_force()
     return sqrt(wrench[0] * wrench[0] + wrench[1] * wrench[1] + wrench[2] * wrench[2])
@@ -217,7 +247,7 @@ def move_program(run_id: int, watchdog_hz: float, target: Sequence[float], speed
     return _program("move", run_id, watchdog_hz, {"target": pose_literal(target), "speed_m_s": speed_m_s,
                                                   "max_travel_m": MAX_MOVE_TRAVEL_M,
                                                   "force_limit_n": MOVE_FORCE_LIMIT_N,
-                                                  "return_force_limit_n": MOVE_FORCE_LIMIT_N,
+                                                  "return_force_limit_n": MOVE_FORCE_LIMIT_N, "back_off_m": BACK_OFF_M,
                                                   "retract_speed_m_s": RETRACT_SPEED_M_S}, """\
   if point_dist(get_actual_tcp_pose(), target) > max_travel_m:
     finish(PHASE_TOO_FAR)

@@ -55,6 +55,15 @@ class LinearMove:
         return float(np.linalg.norm(self.base_T_target[:3, 3] - self.base_T_start[:3, 3])) / self.speed_m_s
 
 
+def interpolate_pose(base_T_from: np.ndarray, base_T_to: np.ndarray, fraction: float) -> np.ndarray:
+    """URScript's ``interpolate_pose``: the position along the straight line, the rotation along the shortest turn."""
+    rotations = Rotation.from_matrix([base_T_from[:3, :3], base_T_to[:3, :3]])
+    base_T_between = np.eye(4)
+    base_T_between[:3, :3] = Slerp([0.0, 1.0], rotations)(fraction).as_matrix()
+    base_T_between[:3, 3] = (1 - fraction) * base_T_from[:3, 3] + fraction * base_T_to[:3, 3]
+    return base_T_between
+
+
 @dataclass
 class SimulatedArm:
     """Flange pose, active tool offset, tool tip (the centre of a ball of ``ball_radius_m``; 0: a point), contact
@@ -139,10 +148,7 @@ class SimulatedArm:
         move = self.move
         move.elapsed_s += dt
         fraction = 1.0 if move.duration_s == 0.0 else min(move.elapsed_s / move.duration_s, 1.0)
-        rotations = Rotation.from_matrix([move.base_T_start[:3, :3], move.base_T_target[:3, :3]])
-        self.base_T_flange = np.eye(4)
-        self.base_T_flange[:3, :3] = Slerp([0.0, 1.0], rotations)(fraction).as_matrix()
-        self.base_T_flange[:3, 3] = (1 - fraction) * move.base_T_start[:3, 3] + fraction * move.base_T_target[:3, 3]
+        self.base_T_flange = interpolate_pose(move.base_T_start, move.base_T_target, fraction)
         if fraction >= 1.0:
             self.move = None
 

@@ -300,6 +300,11 @@ class LoopbackController:
         with self._lock:
             return [pose.copy() for pose in self._contact_poses]
 
+    def contact_force_n(self) -> float:
+        """The force (N) the surface or something over the arm pushes on the tool with now."""
+        with self._lock:
+            return float(np.linalg.norm(self._arm.contact_force_n()))
+
     def peak_contact_force_n(self) -> float:
         """The largest force (N) the surface has pushed on the tool with so far."""
         with self._lock:

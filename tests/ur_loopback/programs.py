@@ -11,7 +11,7 @@ from collections.abc import Callable, Iterator
 
 import numpy as np
 
-from ur_loopback.arm import SimulatedArm, transform
+from ur_loopback.arm import SimulatedArm, interpolate_pose, transform
 
 PROGRAM_NAME = re.compile(r"^def fixwizard_(\w+)\(\):\n", re.MULTILINE)
 PARAMETER = re.compile(r"^  global (\w+) = (p\[[^\]]*\]|[-+0-9.e]+)$", re.MULTILINE)
@@ -197,6 +197,7 @@ class FixwizardProgram:
         yield from self._retract(start, PHASE_DONE, self._force_n)
 
     def _retract(self, start: np.ndarray, phase: int, return_force_n: Callable[[], float]) -> Iterator[None]:
+        return_began = self.arm.base_T_flange.copy()
         self._linear(start, self.parameters["retract_speed_m_s"])
         least_n = return_force_n()
         while self.arm.moving():
@@ -208,9 +209,22 @@ class FixwizardProgram:
             if force - least_n >= self.parameters["return_force_limit_n"]:
                 self.arm.halt()
                 self.registers.write_double(PEAK_FORCE_REGISTER, force - least_n)
+                yield from self._back_off(return_began)
                 return self._finish(PHASE_RETURN_BLOCKED)
             yield
         self._finish(phase)
+
+    def _back_off(self, return_began: np.ndarray) -> Iterator[None]:
+        """Half the way back it came, at most ``back_off_m``, towards ``return_began`` (a STOP stops it there)."""
+        here = self.arm.base_T_flange.copy()
+        gone_m = float(np.linalg.norm(here[:3, 3] - return_began[:3, 3]))
+        fraction = 0.5 if gone_m * 0.5 <= self.parameters["back_off_m"] else self.parameters["back_off_m"] / gone_m
+        self._linear(interpolate_pose(here, return_began, fraction), self.parameters["retract_speed_m_s"])
+        while self.arm.moving():
+            if self._requested(REQUEST_STOP):
+                self.arm.halt()
+                return
+            yield
 
     def _move(self) -> Iterator[None]:
         arm, p = self.arm, self.parameters
