@@ -61,6 +61,8 @@ from ur_loopback.programs import unknown_functions
 HOST = private_loopback_host()
 # drop/reconnect cycles of the acceptance test: the issue's 100 in CI (about 3 min), 20 on a developer's run
 DROP_CYCLES = int(os.environ.get("UR_DROP_CYCLES", "100" if os.environ.get("CI") else "20"))
+# cycles of random faults mid-motion: 30 in CI (about 1 min), 12 on a developer's run
+FAULT_CYCLES = int(os.environ.get("UR_FAULT_CYCLES", "30" if os.environ.get("CI") else "12"))
 UNLOCK_DELAY_S = 1.0  # the loopback's "5 s after the stop" rule, shortened
 FAST_TAP = {"speed_m_s": 0.02}
 TRAVEL_SLACK_M = 0.001  # the issue's bound on travel past the limit when the PC stalls
@@ -972,6 +974,94 @@ def test_drop_and_reconnect_cycles_never_crash_move_after_the_error_or_lose_a_ta
         robot.close()
     print(f"\n{DROP_CYCLES} drop/reconnect cycles: {outcomes}; watchdog trips {controller.watchdog_trips()}")
     assert sum(outcomes.values()) == DROP_CYCLES
+
+
+class FaultMix:
+    """Random faults a cell has, each at a random moment of a random tap or move, and the way back to a ready arm."""
+
+    FAULTS = ("go_offline", "drop_connections", "freeze_link", "stall", "kill_link", "protective_stop",
+              "emergency_stop", "safeguard_stop", "pause_on_pendant", "local_control", "stop_button")
+
+    def __init__(self, controller, robot: URRobot, rng: random.Random) -> None:
+        self.controller, self.robot, self.rng = controller, robot, rng
+
+    def motion(self):
+        """A tap (some into nothing: the travel is short) or a move (some into the surface: blocked)."""
+        robot, rng = self.robot, self.rng
+        if rng.random() < 0.5:
+            travel_m, speed_m_s = rng.uniform(0.004, 0.03), rng.uniform(0.01, 0.05)
+            return "tap", lambda: robot.tap(max_travel_m=travel_m, speed_m_s=speed_m_s)
+        target = flange_above_surface(rng.uniform(-0.01, 0.05))
+        target[:2, 3] += [rng.uniform(-0.03, 0.03), rng.uniform(-0.03, 0.03)]
+        return "move", lambda: robot.move_linear(target, speed_m_s=rng.uniform(0.02, 0.1))
+
+    def inject(self, fault: str) -> None:
+        controller = self.controller
+        if fault == "stall":
+            stall_link(self.robot, self.rng.uniform(0.1, 1.5))
+        elif fault == "kill_link":
+            os.kill(self.robot.link_pid, signal.SIGKILL)
+        elif fault == "local_control":
+            controller.set_remote_control(False)
+        elif fault == "stop_button":
+            self.robot.stop()
+        else:
+            getattr(controller, fault)()
+
+    def recover(self, fault: str) -> None:
+        """Undo ``fault`` on the controller, as the operator does, and reconnect if the link is down."""
+        controller = self.controller
+        if fault == "go_offline":
+            controller.go_online()
+        controller.thaw_link()
+        controller.play_on_pendant()  # must move nothing: fixwizard stopped its paused program
+        controller.set_remote_control(True)
+        controller.release_emergency_stop()
+        controller.power_on()
+        if fault == "protective_stop":
+            time.sleep(UNLOCK_DELAY_S)
+            controller.unlock_on_pendant()
+        if not self.robot.status().connected:
+            self.robot.connect()
+
+
+@pytest.mark.slow
+def test_random_faults_mid_motion_never_leave_the_arm_moving_or_lose_a_contact(start_controller):
+    """Taps and moves of random length and speed, each hit at a random moment by a random fault (a dropped, frozen
+    or reset link, a stalled or killed link process, a protective, emergency or safeguard stop, pause on the
+    pendant, local control, STOP): every call comes back within its deadline, the arm stands from the moment it
+    does (nothing moves after an error, nor after the operator undoes the fault), and every contact it reports
+    is the one the controller made."""
+    controller = start_controller()
+    robot = URRobot(HOST)
+    seed = random.randrange(1 << 30)
+    mix = FaultMix(controller, robot, random.Random(seed))
+    seen: dict[str, int] = {}
+    try:
+        robot.connect()
+        for cycle in range(FAULT_CYCLES):
+            robot.move_linear(flange_above_surface(0.008))
+            name, call = mix.motion()
+            fault = mix.rng.choice(FaultMix.FAULTS)
+            where = f"seed {seed}, cycle {cycle}: {fault} during the {name}"
+            motion = MotionInThread(call, controller)
+            time.sleep(mix.rng.uniform(0.0, 0.6))
+            mix.inject(fault)
+            outcome = motion.join(15.0)
+            time.sleep(0.2)
+            np.testing.assert_allclose(controller.flange_pose(), motion.pose_at_outcome, atol=1e-9, err_msg=where)
+            contact = outcome if name == "tap" and not isinstance(outcome, RobotError) else getattr(
+                outcome, "tap_result", None)
+            if contact is not None:
+                np.testing.assert_allclose(contact.base_T_tcp_contact, controller.contact_poses()[-1], atol=2e-6,
+                                           err_msg=where)
+            kind = type(outcome).__name__
+            seen[kind] = seen.get(kind, 0) + 1
+            mix.recover(fault)
+            assert_arm_stands(controller, 0.1)
+    finally:
+        robot.close()
+    print(f"\n{FAULT_CYCLES} random faults (seed {seed}): {seen}; watchdog trips {controller.watchdog_trips()}")
 
 
 @pytest.mark.parametrize("safety_mode, bits, emergency, protective", [
