@@ -54,6 +54,7 @@ DEGREE_DECIMALS = 5  # 1e-5 deg, about 2e-7 rad
 # A rotation read from the rounded quaternion lies within this angle (rad) of the one of the unrounded quaternion:
 # each of four components moves by at most half a unit of the last decimal, and the angle is at most 2 |dq|.
 QUATERNION_ROUNDING_RAD = 2.0 * 2.0 * 0.5 * 10.0**-QUATERNION_DECIMALS
+MAX_POSITION_M = 1000.0  # farther from the robot base no fixture is: a report saying so was edited or damaged
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
 
 
@@ -337,7 +338,51 @@ def _pose_from(section: object, path: Path, where: str) -> np.ndarray:
         raise InputError(f"{path}: {where} needs position_m and rotvec_rad as three numbers each") from error
     if not (np.all(np.isfinite(position)) and np.all(np.isfinite(rotvec))):
         raise InputError(f"{path}: {where} holds numbers that are not finite")
-    return make_transform(Rotation.from_rotvec(rotvec), position)
+    if np.any(np.abs(position) > MAX_POSITION_M):
+        raise InputError(f"{path}: {where}.position_m lies more than {MAX_POSITION_M:g} m from the robot base: was the "
+                         "report edited?")
+    if np.any(np.abs(rotvec) > math.pi + 1.0) or np.linalg.norm(rotvec) > math.pi + 10.0**-ROTVEC_DECIMALS:
+        raise InputError(f"{path}: {where}.rotvec_rad turns by more than pi rad: fixwizard writes no such rotation "
+                         "vector; was the report edited?")
+    base_T_cad = make_transform(Rotation.from_rotvec(rotvec), position)
+    _check_other_forms(section, base_T_cad, path, where)
+    return base_T_cad
+
+
+def _check_other_forms(section: dict, base_T_cad: np.ndarray, path: Path, where: str) -> None:
+    """InputError unless the section's quaternion and UR literal, where it has them, are the pose of its position
+    and rotation vector (a robot program may read any of them): a report edited in one of them only."""
+    quaternion = section.get("quaternion_xyzw")
+    if quaternion is not None:
+        try:
+            quaternion = np.array(_not_bool(quaternion), float).reshape(4)
+        except (TypeError, ValueError) as error:
+            raise InputError(f"{path}: {where}.quaternion_xyzw must be four numbers") from error
+        if not (np.all(np.isfinite(quaternion)) and abs(np.linalg.norm(quaternion) - 1.0) < 1e-5):
+            raise InputError(f"{path}: {where}.quaternion_xyzw is not a unit quaternion")
+        apart_rad = rotation_angle_rad(Rotation.from_quat(quaternion).as_matrix().T @ base_T_cad[:3, :3])
+        if apart_rad > 2.0 * QUATERNION_ROUNDING_RAD:
+            raise InputError(f"{path}: {where}.quaternion_xyzw and rotvec_rad are rotations "
+                             f"{np.degrees(apart_rad):.3g} deg apart: the report was edited in one of them only")
+    literal = section.get("ur")
+    if literal is not None:
+        values = np.concatenate([base_T_cad[:3, 3], Rotation.from_matrix(base_T_cad[:3, :3]).as_rotvec()])
+        written = _ur_numbers(literal)
+        # every fixwizard version wrote it with at least 6 decimals (version 1: 6 for each number)
+        if written is None or not np.all(np.abs(written - values) <= 0.5e-6 + 1e-12):
+            raise InputError(f"{path}: {where}.ur is not p[{', '.join(f'{value:.6g}' for value in values)}], the "
+                             "pose of position_m and rotvec_rad: the report was edited in one of them only")
+
+
+def _ur_numbers(literal: object) -> np.ndarray | None:
+    """The six numbers of a UR pose literal ``p[x, y, z, rx, ry, rz]``, or None."""
+    if not isinstance(literal, str):
+        return None
+    match = re.fullmatch(r"\s*p\[([^\]]*)\]\s*", literal)
+    texts = [text.strip() for text in match.group(1).split(",")] if match else []
+    if len(texts) != 6 or not all(re.fullmatch(r"-?\d+(\.\d+)?", text) for text in texts):
+        return None
+    return np.array([float(text) for text in texts])
 
 
 def _figures_from(section: object, path: Path, where: str) -> list[float]:
@@ -444,4 +489,25 @@ def load(path: str | Path) -> Report:
     found = loaded(_pose_from(pose, path, "pose"), _pose_from(bounds.get("center"), path, "bounds.center"),
                    _figures_from(bounds, path, "bounds"), guarantee)
     _check_complete(data, path)
+    _check_guarantee_covers_the_pose(found)
     return found
+
+
+def _check_guarantee_covers_the_pose(found: Report) -> None:
+    """InputError unless ``pose.guaranteed`` is at least the bounds plus the pose's distance from their centre, as
+    ``write`` makes it (in position and rotation; the point figure needs the mesh): a pose edited by hand keeps a
+    guarantee that no longer holds about it."""
+    if found.pose_guarantee is None or found.base_T_cad is None or found.center_base_T_cad is None:
+        return
+    assert found.position_bound_m is not None and found.rotation_bound_deg is not None
+    guarantee, pose, centre = found.pose_guarantee, found.base_T_cad, found.center_base_T_cad
+    apart_m = float(np.linalg.norm(pose[:3, 3] - centre[:3, 3]))
+    apart_deg = math.degrees(rotation_angle_rad(centre[:3, :3].T @ pose[:3, :3]))
+    if (guarantee.position_m + 1e-9 < found.position_bound_m + apart_m
+            or guarantee.rotation_deg + 1e-6 < min(found.rotation_bound_deg + apart_deg, 180.0)):
+        bounds_mm = found.position_bound_m * 1e3
+        raise InputError(f"{found.path}: pose.guaranteed ({guarantee.position_m * 1e3:.4g} mm, "
+                         f"{guarantee.rotation_deg:.4g} deg) is less than the bounds ({bounds_mm:.4g} mm, "
+                         f"{found.rotation_bound_deg:.4g} deg) plus the pose's distance from bounds.center "
+                         f"({apart_m * 1e3:.4g} mm, {apart_deg:.4g} deg), so it does not hold about the pose: the "
+                         "report was edited; solve again")

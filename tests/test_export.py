@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation
 
 from fixwizard import report
 from fixwizard.cli import main
+from report_edits import with_pose
 from test_report import V1_REPORT
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "report.yaml"
@@ -74,8 +75,8 @@ def test_urscript_defines_the_pose_to_use_as_a_global(real_report, capsys):
 
 def test_urscript_writes_small_numbers_without_exponents_every_digit_kept(real_report, tmp_path, capsys):
     data = yaml.safe_load(real_report.read_text())
-    data["pose"].update(position_m=[0.45, -0.00002, 0.0000001], rotvec_rad=[0.00005, -0.000003, 0.560606])
-    small = report.write(tmp_path / "small.yaml", data)
+    small = report.write(tmp_path / "small.yaml", with_pose(data, [0.45, -0.00002, 0.0000001],
+                                                           [0.00005, -0.000003, 0.560606]))
     text = exported(capsys, small, "--format", "urscript")
     assert "fixture_cell2_bracket = p[0.45, -0.00002, 0.0000001, 0.00005, -0.000003, 0.560606]" in text  # was 2e-05
     assert parse_urscript(text)["fixture_cell2_bracket"] == [0.45, -0.00002, 0.0000001, 0.00005, -0.000003, 0.560606]

@@ -20,9 +20,11 @@ from fixwizard.solver.estimates import Bounds
 from fixwizard.solver.solve import solve
 from fixwizard.synthetic import bounded_noise, touching_ball_centres
 from fixwizard.yamlfile import parse_yaml
+from report_edits import with_pose
 from shapes import l_prism
 
 V1_REPORT = Path(__file__).resolve().parent / "data" / "report_v1.yaml"
+EXAMPLE_REPORT = Path(__file__).resolve().parents[1] / "examples" / "report.yaml"
 
 
 @pytest.fixture(scope="module")
@@ -233,6 +235,38 @@ def test_damaged_reports_are_refused_with_a_reason(tmp_path, text, match):
     path.write_text(text)
     with pytest.raises(InputError, match=match):
         report.load(path)
+
+
+@pytest.mark.parametrize("edit, match", [
+    (lambda pose: pose.update(ur="p[0.5, -0.1203435, 0.0199822, -0.005898, 0.005470, 0.560606]"),
+     r"pose.ur is not p\[0.450059, .*the report was edited in one of them only"),
+    (lambda pose: pose.update(quaternion_xyzw=[0.0, 0.0, 0.0, 1.0]),
+     r"pose.quaternion_xyzw and rotvec_rad are rotations 32.1 deg apart: the report was edited in one of them only"),
+    (lambda pose: pose.update(rotvec_rad=[0.0, 0.0, 7.0]), r"pose.rotvec_rad turns by more than pi rad"),
+    (lambda pose: pose.update(rotvec_rad=[1e308, 0.0, 0.0]), r"pose.rotvec_rad turns by more than pi rad"),
+])
+def test_a_pose_whose_forms_disagree_is_refused(tmp_path, edit, match):
+    """A robot program may read the pose's position and rotation vector, its quaternion or its UR literal: a report
+    edited in one of them would give programs different poses (and a rotation vector of 1e308 rad none at all)."""
+    data = yaml.safe_load(EXAMPLE_REPORT.read_text())
+    edit(data["pose"])
+    with pytest.raises(InputError, match=match):
+        report.load(report.write(tmp_path / "edited.yaml", data))
+
+
+def test_a_pose_moved_without_its_guarantee_is_refused(tmp_path):
+    """The pose moved 3 mm (in every form) while ``pose.guaranteed`` stayed: the guarantee no longer holds about it.
+    Moved together with the bounds' centre, the report is read."""
+    data = yaml.safe_load(EXAMPLE_REPORT.read_text())
+    moved = [0.4530593, -0.1203435, 0.0199822]
+    centre = dict(data["bounds"]["center"])
+    with_pose(data, moved)
+    data["bounds"]["center"] = centre
+    with pytest.raises(InputError, match=r"pose.guaranteed \(5.342 mm, 5.352 deg\) is less than the bounds \(4.815 "
+                                         r"mm, 4.29 deg\) plus the pose's distance from bounds.center \(3.446 mm, "
+                                         r"1.061 deg\), so it does not hold about the pose: the report was edited"):
+        report.load(report.write(tmp_path / "moved.yaml", data))
+    assert report.load(report.write(tmp_path / "moved.yaml", with_pose(data, moved))).base_T_cad[0, 3] == moved[0]
 
 
 def test_a_key_given_twice_is_refused_naming_both_lines_never_read_as_the_last(tmp_path):

@@ -35,6 +35,7 @@ from fixwizard.serve import (
     parse_duration_s,
 )
 from fixwizard.workflow.cell_reports import scan
+from report_edits import with_pose
 from test_report import V1_REPORT
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "report.yaml"
@@ -271,7 +272,7 @@ def test_a_new_report_is_served_from_the_next_call_on(running, cell):
     fw = running.client()
     before = fw.get_pose("bracket")
     data = yaml.safe_load((cell / "bracket-1.yaml").read_text())
-    data["pose"]["position_m"] = [0.5, -0.1, 0.02]
+    with_pose(data, [0.5, -0.1, 0.02])
     data["created"] = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
     report.write(cell / "bracket-2.yaml", data)
     after = fw.get_pose("bracket")
@@ -299,7 +300,7 @@ def test_a_new_report_is_the_only_one_read_again_and_a_report_replaced_is_read_a
     assert fw.get_status("bracket")["report"].endswith("bracket-2.yaml")
     assert sorted(read) == ["bracket-2.yaml", "notes.yaml"]  # the new one, and the one that cannot be read
     data = yaml.safe_load((cell / "bracket-2.yaml").read_text())
-    data["pose"]["position_m"] = [0.5, -0.1, 0.02]
+    with_pose(data, [0.5, -0.1, 0.02])
     report.write(cell / "bracket-2.yaml", data)  # replaced in place (a new file renamed over it)
     assert fw.get_pose("bracket")["x"] == 0.5 and read.count("bracket-2.yaml") == 2
 
