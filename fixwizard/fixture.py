@@ -26,9 +26,11 @@ from fixwizard.mesh_format import (
     STL_TRIANGLE_BYTES,
     binary_stl_size_mismatch,
     content_format,
+    unreadable_line_message,
 )
 from fixwizard.mesh_hygiene import ZIP_SHARE, clean_mesh, refuse_far_vertices, refuse_non_finite
-from fixwizard.obj_lines import face_triangles, reader_text, short_vertex_line
+from fixwizard.obj_lines import face_triangles, plain, reader_text, short_vertex_line, unreadable_line
+from fixwizard.ply_text import checked_ply
 from fixwizard.polygon_faces import checked_polygon_faces
 
 METRES_PER_UNIT = {"m": 1.0, "mm": 1e-3}
@@ -285,10 +287,15 @@ def _surface_of(loaded: object) -> object:
 def _trimesh_load(path: Path) -> object:
     """The triangles trimesh reads from the file (``_surface_of``); an OBJ as ``obj_lines.reader_text`` gives it
     (trimesh skipped indented lines, tabs after a keyword and the first line after a byte-order mark without a
-    word), checked to hold every triangle of its faces."""
+    word, and read no comment nor old Mac line ends), with no line of words that are no numbers, checked to hold
+    every triangle of its faces."""
     if path.suffix.lower() != ".obj":
         return _surface_of(trimesh.load(path, process=False))
-    text = reader_text(path.read_bytes())
+    lines = plain(path.read_bytes())
+    unreadable = unreadable_line(lines)
+    if unreadable is not None:
+        raise MeshError(unreadable_line_message(path, *unreadable))
+    text = reader_text(lines)
     short = short_vertex_line(text)
     if short is not None:
         raise MeshError(f"{path} has a vertex line with fewer than three coordinates ({quoted(short)}); export the "
@@ -320,6 +327,8 @@ def _load_trimesh(path: Path) -> tuple[trimesh.Trimesh, float]:
     if found is not None and found != suffix:
         raise MeshError(f"{path} holds a mesh in {FORMAT_NAMES[found]} format, not {FORMAT_NAMES[suffix]} as its name "
                         f"says (fixwizard reads a mesh by its suffix): rename it to {path.with_suffix(found).name}")
+    if suffix == ".ply":
+        checked_ply(path)
     warp = checked_polygon_faces(path)
     mismatch = binary_stl_size_mismatch(path) if suffix == ".stl" else None
     if mismatch is not None:

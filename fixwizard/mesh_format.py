@@ -1,14 +1,21 @@
 """What kind of mesh a file holds, by its first bytes: to tell the user of a file saved with the wrong suffix (an
 OBJ export named ``.stl``) what it is, instead of reading it as the suffix says and finding no triangles."""
 
+import re
 import struct
 from pathlib import Path
+
+from fixwizard.errors import quoted
 
 FORMAT_NAMES = {".stl": "STL", ".ply": "PLY", ".obj": "OBJ"}
 HEAD_BYTES = 4096
 STL_HEADER_BYTES, STL_TRIANGLE_BYTES = 84, 50  # binary STL: 80-byte header, uint32 count, 50 bytes per triangle
 UTF8_BOM = b"\xef\xbb\xbf"  # a byte-order mark some Windows tools put before a text file
 OBJ_KEYWORDS = {"v", "vn", "vt", "vp", "f", "l", "o", "g", "s", "mtllib", "usemtl"}
+# A number as an OBJ or ASCII PLY file writes it, and as numpy reads it: a decimal point, an exponent, or nan or inf
+# (those are refused once read, naming the vertex)
+NUMBER = rb"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|[-+]?(?i:nan|inf(?:inity)?)"
+_DECIMAL_COMMA = re.compile(r"\d,\d")
 
 
 def content_format(path: Path) -> str | None:
@@ -44,3 +51,16 @@ def binary_stl_size_mismatch(path: Path) -> tuple[int, int] | None:
         return None
     count = struct.unpack("<I", head[80:84])[0]
     return None if size == STL_HEADER_BYTES + STL_TRIANGLE_BYTES * count else (count, size)
+
+
+def unreadable_line_message(path: Path, number: int, line: str) -> str:
+    """What to say of line ``number`` (``line``, its text) of a mesh file that holds a word that is no number where
+    the format has numbers: a decimal comma is refused, not read, since ``1,500`` may be one and a half (a German
+    number format) or fifteen hundred (an English one)."""
+    if _DECIMAL_COMMA.search(line):
+        problem = ("writes its numbers with a decimal comma (an exporter set to a German or French number format), "
+                   "which fixwizard does not read: '1,500' may be one and a half or fifteen hundred. Export the mesh "
+                   "again with decimal points (an English number format), or as binary STL")
+    else:
+        problem = "holds a word that is no number where the format has numbers; export the mesh again from CAD"
+    return f"{path}: line {number} ({quoted(line)}) {problem}"

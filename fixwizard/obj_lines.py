@@ -3,31 +3,63 @@
 trimesh's OBJ reader takes a vertex or a face only from a line that starts with ``v `` or ``f `` at its first byte:
 an indented line, or one with a tab after its keyword, was skipped without a word. A vertex skipped moved every later
 vertex up by one, so faces named other corners (another surface, or "index out of bounds"); a face skipped left a
-hole; a byte-order mark before the first line lost that line too. ``reader_text`` hands trimesh the lines as the
-format reads them (the mark dropped, continued lines joined, tabs as spaces, indents removed), and the loader checks
-that trimesh read as many triangles as the faces hold (``face_triangles``) and refuses a vertex line of fewer than
-three numbers (``short_vertex_line``).
+hole; a byte-order mark before the first line lost that line too. Its lines end at LF alone, so a file with the old
+Mac line ends (CR alone) was one line, and a comment after a vertex's or a face's numbers (``f 1 2 3 # lid``) was
+read as numbers. ``plain`` gives the lines as the format reads them (the mark dropped, every line end an LF, comments
+blanked) and ``reader_text`` hands them to trimesh (continued lines joined, tabs as spaces, indents removed); the
+loader refuses a line whose numbers trimesh would not read as written (``unreadable_line``) and checks that trimesh
+read as many triangles as the faces hold (``face_triangles``).
 """
 
 import re
 
-from fixwizard.mesh_format import UTF8_BOM
+from fixwizard.mesh_format import NUMBER, UTF8_BOM
 
-_CONTINUATION = re.compile(rb"\\[ \t]*\r?\n")  # a backslash ending a line joins the next one to it (the OBJ spec)
+_CONTINUATION = re.compile(rb"\\[ \t]*\n")  # a backslash ending a line joins the next one to it (the OBJ spec)
+_COMMENT = re.compile(rb"#[^\n]*")  # from a '#' to the line's end
 _INDENT = re.compile(rb"^[ \t]+", re.MULTILINE)
 _FACE_CORNERS = re.compile(rb"^f[ \t]([^\n#]*)", re.MULTILINE)
 _VERTEX_NUMBERS = re.compile(rb"^v[ \t]([^\n#]*)", re.MULTILINE)
+_CORNER = rb"[-+]?\d+(?:/[-+]?\d*){0,2}"  # vertex[/texture[/normal]], either of the last two may be left out
+# A vertex (v), texture (vt), normal (vn) or parameter (vp) line, or a face line, with a word that is no number of its
+# kind: trimesh's reader read such a line as other numbers, or stopped with numpy's words.
+_UNREADABLE = re.compile(rb"^[ \t]*(?:(?:v|vt|vn|vp)[ \t](?![ \t]*(?:%s)(?:[ \t]+(?:%s))*[ \t]*$)"
+                         rb"|f[ \t](?![ \t]*%s(?:[ \t]+%s)*[ \t]*$))[^\n]*" % (NUMBER, NUMBER, _CORNER, _CORNER),
+                         re.MULTILINE)
+
+
+def plain(raw: bytes) -> bytes:
+    """An OBJ file's bytes with the byte-order mark dropped, every line end an LF (CR LF as a space and an LF, CR
+    alone as an LF) and every comment blanked (spaces): every other byte stays where it was, so a position's line
+    number (``line_number``) is that of the file's line it came from."""
+    text = raw.removeprefix(UTF8_BOM).replace(b"\r\n", b" \n").replace(b"\r", b"\n")
+    return _COMMENT.sub(lambda found: b" " * len(found.group()), text)
 
 
 def joined(text: bytes) -> bytes:
-    """The text with each line continued by a backslash joined to the next; every byte stays where it was (the
-    backslash and the line break become spaces), so a position's line number is that of the text it came from."""
+    """The ``plain`` text with each line continued by a backslash joined to the next; every byte stays where it was
+    (the backslash and the line break become spaces), so a position's line is still that of the ``plain`` text."""
     return _CONTINUATION.sub(lambda found: b" " * len(found.group()), text)
 
 
-def reader_text(raw: bytes) -> bytes:
-    """An OBJ file's bytes as trimesh's reader should see them (see the module doc)."""
-    return _INDENT.sub(b"", joined(raw.removeprefix(UTF8_BOM)).replace(b"\t", b" "))
+def line_number(text: bytes, position: int) -> int:
+    """The number (from 1) of the line of the ``plain`` text holding ``position``."""
+    return text.count(b"\n", 0, position) + 1
+
+
+def reader_text(text: bytes) -> bytes:
+    """An OBJ file's ``plain`` text as trimesh's reader should see it (see the module doc)."""
+    return _INDENT.sub(b"", joined(text).replace(b"\t", b" "))
+
+
+def unreadable_line(text: bytes) -> tuple[int, str] | None:
+    """The number and the words of the first line of the ``plain`` text that is a vertex, texture, normal or
+    parameter line with a word that is no number, or a face line with a corner that is no vertex number (with its
+    texture and normal numbers); None when there is none."""
+    found = _UNREADABLE.search(joined(text))
+    if found is None:
+        return None
+    return line_number(text, found.start()), found.group().decode("latin-1").strip()
 
 
 def face_triangles(text: bytes) -> int:

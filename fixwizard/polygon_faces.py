@@ -9,7 +9,8 @@ within the slab of the polygon's plane that holds its corners, and over the same
 slab's width of each other, twice the largest corner's distance from the plane. The fixture carries that width as
 the distance its surface may lie from the part's (``Fixture.surface_offset_m``). OBJ corner number 0: OBJ counts
 vertices from 1 (negative numbers count back), and trimesh read a 0 as some other vertex without a word. An OBJ's
-lines are read as trimesh reads them: ended by LF or CR LF, a backslash at the end joining the next line to it."""
+lines are read as the loader hands them to trimesh (``obj_lines.plain``): ended by LF, CR LF or CR alone, comments
+left out, a backslash at the end joining the next line to it."""
 
 import re
 from collections.abc import Iterable
@@ -19,13 +20,12 @@ import numpy as np
 from trimesh.exchange import ply
 
 from fixwizard.errors import MeshError
-from fixwizard.mesh_format import UTF8_BOM
-from fixwizard.obj_lines import joined
+from fixwizard.obj_lines import joined, line_number, plain
 
 _VERTEX_LINE = re.compile(rb"^[ \t]*v[ \t]+(\S+)[ \t]+(\S+)[ \t]+(\S+)", re.MULTILINE)
-_POLYGON_LINE = re.compile(rb"^[ \t]*f((?:[ \t]+\S+){4,})[ \t\r]*$", re.MULTILINE)  # CRLF line ends too
-_ZERO_TOKEN = re.compile(rb"[ \t][-+]?0+(?=[/ \t\r\n#]|$)")  # a number 0 in any line
-_ZERO_CORNER = re.compile(rb"^[ \t]*f[ \t][^\n#]*?(?<=[ \t])[-+]?0+(?=[/ \t\r\n#]|$)", re.MULTILINE)
+_POLYGON_LINE = re.compile(rb"^[ \t]*f((?:[ \t]+\S+){4,})[ \t]*$", re.MULTILINE)
+_ZERO_TOKEN = re.compile(rb"[ \t][-+]?0+(?=[/ \t\n]|$)")  # a number 0 in any line
+_ZERO_CORNER = re.compile(rb"^[ \t]*f[ \t][^\n]*?(?<=[ \t])[-+]?0+(?=[/ \t\n]|$)", re.MULTILINE)
 PLY_INDEX_NAMES = ("vertex_indices", "vertex_index")  # what PLY exporters call a face's corner list
 # A corner whose turn is below this share of its edges' and the normal's lengths is straight: the rounding of the
 # turn's two products (a few units of float64's eps each), no more (it was 1e-9). A concave corner any larger is
@@ -77,9 +77,10 @@ def _checked(path: Path, vertices: np.ndarray, polygons: Iterable[tuple[str, np.
     return warp
 
 
-def _obj_polygons(text: bytes, raw: bytes) -> tuple[np.ndarray, list[tuple[str, np.ndarray]]]:
+def _obj_polygons(text: bytes, lines: bytes) -> tuple[np.ndarray, list[tuple[str, np.ndarray]]]:
     """The vertices of an OBJ file's text (``obj_lines.joined``) and its faces of four or more corners, named by their
-    line in the file's own text ``raw`` (empty where it cannot be read: trimesh's reader then says what is wrong)."""
+    line in the file's ``obj_lines.plain`` text ``lines`` (empty where it cannot be read: the loader then says what is
+    wrong)."""
     polygons = list(_POLYGON_LINE.finditer(text))
     vertex_lines = list(_VERTEX_LINE.finditer(text)) if polygons else []
     try:
@@ -90,8 +91,7 @@ def _obj_polygons(text: bytes, raw: bytes) -> tuple[np.ndarray, list[tuple[str, 
             defined = int(np.searchsorted(starts, polygon.start()))  # negative indices count back from here
             indices = [int(token.split(b"/")[0]) for token in polygon.group(1).split()]
             rows = np.array([index - 1 if index > 0 else defined + index for index in indices])
-            line = raw.count(b"\n", 0, polygon.start()) + 1
-            found.append((f"on line {line}", rows))
+            found.append((f"on line {line_number(lines, polygon.start())}", rows))
     except ValueError:
         return np.zeros((0, 3)), []
     return vertices, found
@@ -118,13 +118,13 @@ def _ply_polygons(path: Path) -> tuple[np.ndarray, list[tuple[str, np.ndarray]]]
                       if len(rows) >= 4]
 
 
-def _face_naming_vertex_zero(text: bytes, raw: bytes) -> int | None:
-    """The number of the line of the file's own text ``raw`` where the first face of an OBJ file's text
-    (``obj_lines.joined``) with a corner numbered 0 (before any comment) starts, None when there is none."""
+def _face_naming_vertex_zero(text: bytes, lines: bytes) -> int | None:
+    """The number of the line of the file's ``obj_lines.plain`` text ``lines`` where the first face of an OBJ file's
+    text (``obj_lines.joined``) with a corner numbered 0 starts, None when there is none."""
     if _ZERO_TOKEN.search(text) is None:  # most files: no number 0 anywhere, found at the speed of a plain search
         return None
     zero = _ZERO_CORNER.search(text)
-    return None if zero is None else raw.count(b"\n", 0, zero.start()) + 1
+    return None if zero is None else line_number(lines, zero.start())
 
 
 def checked_polygon_faces(path: Path) -> float:
@@ -134,13 +134,13 @@ def checked_polygon_faces(path: Path) -> float:
     the largest polygon's ``_warp`` (0.0 for a file of triangles, or of another format)."""
     suffix = path.suffix.lower()
     if suffix == ".obj":
-        raw = path.read_bytes().removeprefix(UTF8_BOM)  # as fixture reads it: before it, the first vertex was lost
-        text = joined(raw)
-        line = _face_naming_vertex_zero(text, raw)
+        lines = plain(path.read_bytes())  # as the loader hands it to trimesh
+        text = joined(lines)
+        line = _face_naming_vertex_zero(text, lines)
         if line is not None:
             raise MeshError(f"{path}: the face on line {line} names vertex 0, which an OBJ file does not have (it "
                             "counts vertices from 1); export the mesh again from CAD")
-        return _checked(path, *_obj_polygons(text, raw))
+        return _checked(path, *_obj_polygons(text, lines))
     if suffix == ".ply":
         return _checked(path, *_ply_polygons(path))
     return 0.0

@@ -419,3 +419,101 @@ def test_an_obj_face_naming_vertex_zero_is_refused(tmp_path, face):
     path.write_text(f"v 0 0 0\nv 0.1 0 0\nv 0 0.1 0\nv 0 0 0.1\n{face}\nf 1 2 3 # 0 in a comment is no corner\n")
     with pytest.raises(MeshError, match="the face on line 5 names vertex 0, which an OBJ file does not have"):
         load_fixture(path)
+
+
+def _comment_after_each(text: str, keyword: str, comment: str) -> str:
+    return "".join(line + comment + "\n" if line.startswith(keyword + " ") else line + "\n"
+                   for line in text.splitlines())
+
+
+OBJ_OLD_SPELLINGS = {"a comment after each face": lambda text: _comment_after_each(text, "f", " # facet 5 6"),
+                     "a comment after each vertex": lambda text: _comment_after_each(text, "v", "  # corner 7"),
+                     "a comment right after the numbers": lambda text: _comment_after_each(text, "f", "#0 1"),
+                     "CR line ends (old Mac)": lambda text: text.replace("\n", "\r"),
+                     "CR line ends and comments": lambda text: _comment_after_each(text, "f", " # 2").replace("\n",
+                                                                                                             "\r")}
+
+
+@pytest.mark.parametrize("spelling", sorted(OBJ_OLD_SPELLINGS))
+def test_an_obj_with_comments_after_its_numbers_or_old_mac_line_ends_loads_as_the_same_file_without(tmp_path,
+                                                                                                  spelling):
+    """trimesh's OBJ reader took a comment after a face's corners or a vertex's numbers for more numbers, and a file
+    whose lines end with CR alone for one line: refused in numpy's words ("could not be read to its end"), with
+    numpy before 2.3 numbers cut short. Now exactly the vertices and faces of the file without them."""
+    box = trimesh.creation.box((0.1, 0.06, 0.03))
+    text = _obj_text(np.vstack([box.vertices, [[0.2, 0.2, 0.2]]]), box.faces)
+    (tmp_path / "clean.obj").write_text(text)
+    (tmp_path / "box.obj").write_bytes(OBJ_OLD_SPELLINGS[spelling](text).encode())
+    clean, read = load_fixture(tmp_path / "clean.obj"), load_fixture(tmp_path / "box.obj")
+    assert np.array_equal(read.mesh.vertices, clean.mesh.vertices) and np.array_equal(read.mesh.faces, clean.mesh.faces)
+    assert read.signed and read.warnings == ()
+
+
+@pytest.mark.parametrize("spelling", ["a comment after each face", "CR line ends (old Mac)"])
+def test_a_concave_polygon_face_with_a_comment_or_old_mac_line_ends_is_refused_naming_its_line(tmp_path, spelling):
+    """The check of polygon faces reads the lines as the reader does: a comment after the corners made them no
+    polygon of numbers to it, and CR alone made the file one line."""
+    path = tmp_path / "plate.obj"
+    path.write_bytes(OBJ_OLD_SPELLINGS[spelling](_prism_obj(L_OUTLINE, [list(range(8))])).encode())
+    with pytest.raises(MeshError, match="line 17 is a polygon of 8 corners that is not convex"):
+        load_fixture(path)
+
+
+def _ascii_ply(vertices: np.ndarray, faces: np.ndarray, element: str = "face") -> str:
+    """An ASCII PLY of the mesh, its faces (or triangle strips: ``element``) as lists of corners."""
+    header = (f"ply\nformat ascii 1.0\nelement vertex {len(vertices)}\nproperty double x\nproperty double y\n"
+              f"property double z\nelement {element} {len(faces)}\nproperty list uchar int vertex_indices\n"
+              "end_header\n")
+    return header + "".join(f"{x!r} {y!r} {z!r}\n" for x, y, z in vertices.tolist()) + "".join(
+        f"{len(face)} {' '.join(map(str, face))}\n" for face in faces.tolist())
+
+
+DECIMAL_COMMA = "writes its numbers with a decimal comma .* Export the mesh again with decimal points"
+
+
+@pytest.mark.parametrize("suffix, line", [(".obj", 4), (".ply", 13)])
+def test_numbers_with_a_decimal_comma_are_refused_naming_the_line(tmp_path, suffix, line):
+    """A German-locale exporter writes 'v 1,5 2,0 3,0': refused in numpy's words, naming no line (with numpy before
+    2.3 read as other numbers). Not read as decimals either: '1,500' may be fifteen hundred."""
+    box = trimesh.creation.box((0.1, 0.06, 0.03))
+    text = (_obj_text if suffix == ".obj" else _ascii_ply)(box.vertices, box.faces)
+    lines = text.splitlines()
+    lines[line - 1] = lines[line - 1].replace(".", ",")
+    path = tmp_path / f"box{suffix}"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(MeshError, match=f"box{suffix}: line {line} \\('(v )?[-0-9, ]+'\\) {DECIMAL_COMMA}"):
+        load_fixture(path)
+
+
+@pytest.mark.parametrize("line", ["v 0.1 0.2 x", "vn 0,1 0 1", "f 1 2 3/x"])
+def test_an_obj_line_with_a_word_that_is_no_number_is_refused_naming_it(tmp_path, line):
+    box = trimesh.creation.box((0.1, 0.06, 0.03))
+    path = tmp_path / "box.obj"
+    path.write_text(_obj_text(box.vertices, box.faces) + line + "\n")
+    with pytest.raises(MeshError, match=f"box.obj: line 21 \\('{line}'\\) (holds a word that is no number|writes)"):
+        load_fixture(path)
+
+
+@pytest.mark.parametrize("faces_too", [False, True])
+def test_a_ply_of_triangle_strips_is_refused_with_the_fix(tmp_path, faces_too):
+    """trimesh reads faces, not strips: a PLY of strips loaded as a point cloud ("holds no triangles"), and strips
+    beside faces were left out without a word (a surface with holes)."""
+    box = trimesh.creation.box((0.1, 0.06, 0.03))
+    strips = np.array([[0, 1, 2, 3]]) if not faces_too else box.faces[:1]
+    text = _ascii_ply(box.vertices, strips, "tristrips")
+    if faces_too:
+        text = text.replace("end_header", "element face 11\nproperty list uchar int vertex_indices\nend_header") + \
+            "".join(f"3 {a} {b} {c}\n" for a, b, c in box.faces[1:].tolist())
+    path = tmp_path / "strips.ply"
+    path.write_text(text)
+    with pytest.raises(MeshError, match="strips.ply: it holds triangle strips .* export the mesh with faces"):
+        load_fixture(path)
+
+
+def test_a_ply_whose_header_ends_its_lines_with_cr_alone_is_refused_with_the_fix(tmp_path):
+    """trimesh read such a header as one line: "list index out of range"."""
+    box = trimesh.creation.box((0.1, 0.06, 0.03))
+    path = tmp_path / "box.ply"
+    path.write_text(_ascii_ply(box.vertices, box.faces).replace("\n", "\r"))
+    with pytest.raises(MeshError, match="box.ply: its header's lines end with a carriage return alone"):
+        load_fixture(path)
