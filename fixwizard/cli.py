@@ -72,6 +72,27 @@ def _seconds(text: str) -> float:
     return value
 
 
+def _ros_frame_id(text: str) -> str:
+    """A frame id as tf2 and ROS names take it: names of letters, digits and '_', each starting with a letter or '_',
+    joined by single '/' (a prefix, as in ``ur/base``). tf2 refuses an empty one and one starting with '/' (ROS 1's
+    tf wrote ``/base``): its static transform would be published and never found."""
+    if not text:
+        problem = "it is empty"
+    elif re.search(r"[^A-Za-z0-9_/]", text):
+        problem = "it may hold only letters, digits, '_' and '/'"
+    elif text.startswith("/"):
+        problem = "tf2 refuses a frame id that starts with '/' (as ROS 1 wrote them); leave the '/' out"
+    elif "" in text.split("/"):
+        problem = "a '/' must stand between two names, as in 'ur/base'"
+    elif text[0].isdigit():
+        problem = "it must start with a letter or '_', not a digit"
+    elif re.search(r"/\d", text):
+        problem = "each name after a '/' must start with a letter or '_', not a digit"
+    else:
+        return text
+    raise argparse.ArgumentTypeError(f"{text!r} is no ROS frame name: {problem}")
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with bad usage exiting 1 (bad input), since exit code 2 means inconsistent taps, and with
     negative lengths such as ``-1mm`` taken as values (so that their check can say what is wrong)."""
@@ -167,11 +188,11 @@ def _add_export(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("report", metavar="REPORT", help="a fixwizard report")
     parser.add_argument("--format", required=True, choices=EXPORT_FORMATS, help="urscript, ros2 or json")
     parser.add_argument("-o", "--output", help="file to write (default, or '-': standard output)")
-    parser.add_argument("--frame-id", default=ROS_BASE_FRAME_ID,
+    parser.add_argument("--frame-id", default=ROS_BASE_FRAME_ID, type=_ros_frame_id,
                         help=f"ros2: the parent frame (default {ROS_BASE_FRAME_ID})")
-    parser.add_argument("--child-frame-id", help="ros2: the fixture's frame (default: its name with every character "
-                        "but letters, digits and '_' made '_', and fixture_ before a leading digit: 1-a.b gives "
-                        "fixture_1_a_b)")
+    parser.add_argument("--child-frame-id", type=_ros_frame_id, help="ros2: the fixture's frame (default: its name "
+                        "with every character but letters, digits and '_' made '_', and fixture_ before a leading "
+                        "digit: 1-a.b gives fixture_1_a_b)")
     parser.add_argument("--allow-simulated", action="store_true",
                         help="export a report of the simulated cell to urscript or ros2 (for tests; marked SIMULATED)")
     parser.set_defaults(handler="fixwizard.export:export_command")

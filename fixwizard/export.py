@@ -43,19 +43,6 @@ def default_child_frame_id(name: str) -> str:
     return identifier if re.match(r"[A-Za-z_]", identifier) else f"fixture_{identifier}"
 
 
-def _check_frame(option: str, frame: str) -> None:
-    """InputError naming the rule of ROS frame names that ``frame`` (given as ``option``) breaks."""
-    if not frame:
-        problem = "it is empty"
-    elif re.search(r"[^A-Za-z0-9_/]", frame):
-        problem = "it may hold only letters, digits, '_' and '/'"
-    elif frame[0].isdigit():
-        problem = "it must start with a letter, '_' or '/', not a digit"
-    else:
-        return
-    raise InputError(f"{option} {frame!r} is no ROS frame name: {problem}")
-
-
 def _usable(loaded: report.Report, allow_simulated: bool, format_name: str) -> report.Guarantee:
     """The guarantee of the pose to use; InputError when a robot must not use this report."""
     pose = loaded.pose_to_use()
@@ -102,11 +89,9 @@ def urscript_text(loaded: report.Report, allow_simulated: bool = False) -> str:
 def ros2_document(loaded: report.Report, frame_id: str = BASE_FRAME_ID, child_frame_id: str | None = None,
                   allow_simulated: bool = False) -> dict:
     """The ``TransformStamped`` from ``frame_id`` to the fixture (``child_frame_id``, by default
-    ``default_child_frame_id`` of its name) and the ``static_transform_publisher`` arguments."""
+    ``default_child_frame_id`` of its name) and the ``static_transform_publisher`` arguments; frame ids given are
+    checked by the command line (``cli._ros_frame_id``)."""
     _usable(loaded, allow_simulated, "ROS 2")
-    _check_frame("--frame-id", frame_id)
-    if child_frame_id is not None:
-        _check_frame("--child-frame-id", child_frame_id)
     child = default_child_frame_id(loaded.name) if child_frame_id is None else child_frame_id
     values = _ur_values(loaded)
     quaternion = Rotation.from_rotvec(values[3:]).as_quat()

@@ -239,16 +239,28 @@ def test_a_fixture_name_starting_with_a_digit_gives_a_ros_frame_name_with_fixtur
     assert list(parse_urscript(exported(capsys, real_report, "--format", "urscript"))) == ["fixture_1_a_b"]
 
 
+FRAME_RULES = {  # what is said of a frame id given, and frame ids that break that rule
+    "tf2 refuses a frame id that starts with '/' (as ROS 1 wrote them); leave the '/' out": ["/", "/base"],
+    "it is empty": [""],
+    "it may hold only letters, digits, '_' and '/'": ["my base", " base", "jig\n"],
+    "a '/' must stand between two names, as in 'ur/base'": ["ur//base", "base/"],
+    "it must start with a letter or '_', not a digit": ["1jig"],
+    "each name after a '/' must start with a letter or '_', not a digit": ["cell/2jig"],
+}
+
+
 @pytest.mark.parametrize(("option", "frame", "rule"), [
-    ("--child-frame-id", "1jig", "it must start with a letter, '_' or '/', not a digit"),
-    ("--frame-id", "2base", "it must start with a letter, '_' or '/', not a digit"),
-    ("--child-frame-id", "jig\n", "it may hold only letters, digits, '_' and '/'"),
-    ("--child-frame-id", "", "it is empty"),
-])
+    (option, frame, rule) for rule, frames in FRAME_RULES.items() for frame in frames
+    for option in ("--frame-id", "--child-frame-id")])
 def test_a_frame_name_that_is_given_is_refused_with_the_rule_it_breaks(real_report, capsys, option, frame, rule):
+    """As every other argument error: the usage, then the argument and the rule (tf2's own: not empty, no leading
+    '/'; ROS names': letters, digits and '_', no name starting with a digit), before the report is read (exit 1)."""
     assert main(["export", str(real_report), "--format", "ros2", option, frame]) == 1
     err = capsys.readouterr().err
-    assert f"{option} {frame!r} is no ROS frame name: {rule}" in err and "Traceback" not in err
+    assert err.startswith("usage: fixwizard export") and "Traceback" not in err
+    assert f"fixwizard: argument {option}: {frame!r} is no ROS frame name: {rule}" in err
+    assert main(["export", "no-such-report.yaml", "--format", "ros2", option, frame]) == 1
+    assert "no ROS frame name" in capsys.readouterr().err
 
 
 def test_a_report_dated_in_the_future_is_exported_with_a_note_on_the_clocks(real_report, tmp_path, capsys):
