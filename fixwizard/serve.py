@@ -47,7 +47,7 @@ from typing import Any
 from xmlrpc.server import SimpleXMLRPCRequestHandler, SimpleXMLRPCServer
 
 from fixwizard import report
-from fixwizard.atomic import same_file
+from fixwizard.atomic import home_expanded, same_file
 from fixwizard.errors import InputError, file_problem, one_line, quoted
 from fixwizard.workflow.cell_reports import SUFFIXES, CellReports, folder_state, report_files, scan
 from fixwizard.workflow.verify import age_text
@@ -383,6 +383,14 @@ class LogFile(logging.FileHandler):
         super().__init__(path, encoding="utf-8")
         self.failed = False
 
+    def _open(self) -> Any:
+        """The file opened to append, without waiting for a reader: a named pipe (FIFO) no program reads raises
+        ENXIO (opened as a file would be, it held serve's start up for ever); blocking again once open, so a line
+        waits for a slow reader rather than being lost."""
+        descriptor = os.open(self.baseFilename, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NONBLOCK, 0o666)
+        os.set_blocking(descriptor, True)
+        return open(descriptor, "a", encoding=self.encoding, errors=self.errors)
+
     def emit(self, record: logging.LogRecord) -> None:
         if not self.failed:
             super().emit(record)
@@ -412,13 +420,31 @@ class LogFormatter(logging.Formatter):
         return one_line(super().formatMessage(record))
 
 
+def open_log(log: str) -> LogFile:
+    """The ``--log`` file opened to append; InputError saying what to do when it cannot be: a folder, a folder that
+    does not exist, a named pipe no program reads, no permission."""
+    try:
+        return LogFile(log)
+    except OSError as error:
+        if error.errno == errno.ENXIO:
+            problem = ("is a named pipe (FIFO) that no program reads, so serve would wait for one for ever: start the "
+                       "program that reads it first, or give a file")
+        elif error.errno == errno.EISDIR:
+            problem = "is a folder: give a file, e.g. serve.log in it"
+        elif error.errno == errno.ENOENT:
+            problem = f"is in a folder that does not exist ({Path(log).parent}): make the folder, or give another path"
+        else:
+            problem = f"cannot be opened: {file_problem(error, log)}"
+        raise InputError(f"the log {log} {problem}") from None
+
+
 def _log_handlers(log: str | None) -> list[logging.Handler]:
-    """The handlers of the log: stderr, and the ``--log`` file when given; added to ``LOG``, which then writes to
-    them alone (a handler above it, with a formatter of its own, would get a caller's raw text); ``_close_log``
-    ends them."""
+    """The handlers of the log: stderr, and the ``--log`` file when given (``open_log``); added to ``LOG``, which then
+    writes to them alone (a handler above it, with a formatter of its own, would get a caller's raw text);
+    ``_close_log`` ends them."""
     handlers: list[logging.Handler] = [logging.StreamHandler(sys.stderr)]
     if log:
-        handlers.append(LogFile(log))
+        handlers.append(open_log(log))
     for each in handlers:
         each.setFormatter(LogFormatter("%(asctime)s %(message)s"))
         LOG.addHandler(each)
@@ -440,10 +466,11 @@ def serve_command(args: argparse.Namespace) -> int:
     if not folder.is_dir():
         raise InputError(f"there is no reports folder {folder}: give the folder the wizard writes reports to with "
                          "--reports DIR")
-    if args.log:
-        check_log(Path(args.log), folder)
+    log = home_expanded(args.log) if args.log else None
+    if log:
+        check_log(Path(log), folder)
     service = FixtureService(folder, parse_duration_s(args.max_age))
-    handlers = _log_handlers(args.log)
+    handlers = _log_handlers(log)
     try:
         _serve(service, args.host, args.port)
     finally:

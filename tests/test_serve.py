@@ -527,6 +527,45 @@ def test_the_serve_command_refuses_a_log_that_is_one_of_its_inputs(cell, tmp_pat
     assert (tmp_path / "taps.csv").read_text() == "0.1,0.2,0.3\n"
 
 
+def test_the_serve_command_refuses_a_log_it_cannot_open_in_one_line_with_the_fix(cell, tmp_path, capsys,
+                                                                                  stops_at_once):
+    """A folder and a folder that does not exist were said in the file system's words ('Is a directory'; the log
+    'does not exist', as if it had to); a log under ~ made a folder named '~'."""
+    serve = ["serve", "--reports", str(cell), "--host", "127.0.0.1", "--port", "0", "--log"]
+    problems = {str(tmp_path): "is a folder: give a file, e.g. serve.log in it",
+                str(cell): "is a folder: give a file, e.g. serve.log in it",
+                str(tmp_path / "none" / "serve.log"): f"is in a folder that does not exist ({tmp_path / 'none'}): make "
+                                                       "the folder, or give another path"}
+    for log, problem in problems.items():
+        assert main([*serve, log]) == 1
+        assert capsys.readouterr().err == f"fixwizard: the log {log} {problem}\n"
+    assert main([*serve, "~nobody-of-this-name/serve.log"]) == 1
+    assert "this PC has no user 'nobody-of-this-name'" in capsys.readouterr().err
+
+
+def test_a_log_that_is_a_named_pipe_no_program_reads_is_refused_instead_of_waiting_for_ever(cell, tmp_path):
+    """Opening a FIFO to write waits for a reader: serve never started, and said nothing."""
+    fifo = tmp_path / "serve.fifo"
+    os.mkfifo(fifo)
+    finished = subprocess.run([sys.executable, "-m", "fixwizard.cli", "serve", "--reports", str(cell), "--host",
+                               "127.0.0.1", "--port", "0", "--log", str(fifo)], capture_output=True, text=True,
+                              cwd=REPO, timeout=30)
+    assert finished.returncode == 1 and finished.stdout == ""
+    assert finished.stderr == (f"fixwizard: the log {fifo} is a named pipe (FIFO) that no program reads, so serve "
+                               "would wait for one for ever: start the program that reads it first, or give a file\n")
+
+
+def test_a_log_that_is_a_named_pipe_a_program_reads_gets_the_log(cell, tmp_path, stops_at_once):
+    fifo = tmp_path / "serve.fifo"
+    os.mkfifo(fifo)
+    reader = os.open(fifo, os.O_RDONLY | os.O_NONBLOCK)  # the program reading it (the lines fit the pipe's buffer)
+    try:
+        assert main(["serve", "--reports", str(cell), "--host", "127.0.0.1", "--port", "0", "--log", str(fifo)]) == 0
+        assert b"read reports in" in os.read(reader, 1 << 16)
+    finally:
+        os.close(reader)
+
+
 @needs_full_disk
 def test_a_log_file_that_cannot_be_written_is_said_once_and_serving_goes_on(running, caplog, capsys):
     log = LogFile(FULL_DISK)
