@@ -15,7 +15,7 @@ import igl
 import numpy as np
 import trimesh
 
-from fixwizard.errors import MeshError, MeshUnitsError, quoted
+from fixwizard.errors import MeshError, MeshUnitsError, file_problem, quoted
 from fixwizard.geometry.hull_cover import HullCover, hull_cover
 from fixwizard.geometry.meb import minimum_enclosing_ball
 from fixwizard.geometry.mesh_distance import MeshDistance
@@ -450,8 +450,11 @@ def load_fixture(path: str | Path, units: str = "m") -> Fixture:
     path = Path(path)
     if units not in METRES_PER_UNIT:
         raise MeshError(f"mesh units must be 'm' or 'mm', not {units!r}")
-    mesh, warp = _load_trimesh(path)
+    try:
+        mesh, warp = _load_trimesh(path)
+        sha256 = hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError as error:  # no permission, a name too long, a disk error: a mesh that cannot be read
+        raise MeshError(file_problem(error, path)) from error
     mesh = mesh.copy()
     mesh.apply_scale(METRES_PER_UNIT[units])
-    return fixture_from_mesh(mesh, path, units, hashlib.sha256(path.read_bytes()).hexdigest(),
-                             warp * METRES_PER_UNIT[units])
+    return fixture_from_mesh(mesh, path, units, sha256, warp * METRES_PER_UNIT[units])

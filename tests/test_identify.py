@@ -61,7 +61,28 @@ def test_an_unreadable_mesh_is_reported_and_no_verdict_is_claimed_without_it(tmp
         assert main(["identify", str(DEMO_TAPS), *map(str, meshes), *FLAGS]) == 1
         out, err = capsys.readouterr()
         assert f"unreadable  {meshes[0]}" in out and f"{other:11} {meshes[1]}: " in out
-        assert f"{meshes[0].name} could not be read, so whether it fits is not known" in err
+        assert err == (f"fixwizard: {meshes[0]} could not be read, so whether it fits is not known; fix it or leave "
+                       "it out\n")
+        assert ("no mesh that could be read fits" in out) == (other == "ruled out") and "no mesh fits" not in out
+
+
+def test_several_unreadable_meshes_are_each_named_with_why_in_one_closing_sentence(tmp_path, capsys):
+    """Exit 1, each mesh named with the loader's reason, then one sentence naming them all as given ("whether it
+    fits" was said of four meshes, by their names alone). A name too long for the file system (an OSError) was the
+    whole command's error: the other meshes' verdicts were lost. Nothing was ruled out: no "no mesh fits"."""
+    text_file, comma = tmp_path / "notes.stl", tmp_path / "comma.obj"
+    text_file.write_text("not a mesh")
+    comma.write_text("v 0,1 0 0\nv 0 0,1 0\nv 0 0 0,1\nf 1 2 3\n")
+    too_long, missing = tmp_path / ("x" * 300 + ".stl"), tmp_path / "gone.stl"
+    reasons = {text_file: "holds no triangles", comma: "line 1 ('v 0,1 0 0') writes its numbers with a decimal comma",
+               too_long: "File name too long", missing: "does not exist"}
+    assert main(["identify", str(DEMO_TAPS), *map(str, reasons), *FLAGS]) == 1
+    out, err = capsys.readouterr()
+    lines = out.splitlines()
+    assert len(lines) == 4 and all(line.startswith(f"unreadable  {mesh}: ") and reason in line
+                                   for line, (mesh, reason) in zip(lines, reasons.items(), strict=True))
+    assert err == (f"fixwizard: {text_file}, {comma}, {too_long} and {missing} could not be read, so whether they fit "
+                   "is not known; fix them or leave them out\n")
 
 
 @pytest.mark.slow

@@ -172,10 +172,20 @@ def summary_lines(verdicts: list[MeshVerdict]) -> list[str]:
     if open_ones:
         lines.append(f"not decided: {', '.join(open_ones)}; tap more points spread over the fixture, or give more "
                      "time (--time-limit) or cells (--max-cells)")
-    if not fitting and not open_ones:
-        lines.append("no mesh fits: check the units (--mesh-units), the tip calibration and the sample bound, or "
-                     "tap again")
+    ruled_out = any(verdict.verdict == "ruled out" for verdict in verdicts)
+    if not fitting and not open_ones and ruled_out:
+        unread = any(verdict.verdict == "unreadable" for verdict in verdicts)
+        lines.append(f"no mesh {'that could be read ' if unread else ''}fits: check the units (--mesh-units), the tip "
+                     "calibration and the sample bound, or tap again")
     return lines
+
+
+def unreadable_sentence(meshes: list[Path]) -> str:
+    """What to say of the meshes (as given) that could not be read: each might be the one that fits."""
+    if len(meshes) == 1:
+        return f"{meshes[0]} could not be read, so whether it fits is not known; fix it or leave it out"
+    listed = f"{', '.join(map(str, meshes[:-1]))} and {meshes[-1]}"
+    return f"{listed} could not be read, so whether they fit is not known; fix them or leave them out"
 
 
 def _print_step(step: IdentifyStep) -> None:
@@ -206,10 +216,9 @@ def identify_command(args: argparse.Namespace) -> int:
         base_p_taps, meshes, parse_length_m(args.ball_diameter), parse_length_m(args.sample_bound), args.max_cells,
         args.time_limit, cancel, None if args.quiet else _print_step))
     print("\n".join(summary_lines(verdicts)))
-    unreadable = [verdict.mesh.name for verdict in verdicts if verdict.verdict == "unreadable"]
+    unreadable = [verdict.mesh for verdict in verdicts if verdict.verdict == "unreadable"]
     if unreadable:
-        print(f"fixwizard: {', '.join(unreadable)} could not be read, so whether it fits is not known; fix it or "
-              "leave it out", file=sys.stderr)
+        print(f"fixwizard: {unreadable_sentence(unreadable)}", file=sys.stderr)
         return 1
     fitting = sum(verdict.verdict == "fits" for verdict in verdicts)
     if fitting:
