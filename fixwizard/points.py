@@ -44,9 +44,10 @@ def _rows_to_array(rows: Sequence[tuple[str, object]]) -> np.ndarray:
 
 
 def _read_csv(text: str, path: Path) -> np.ndarray:
-    """One ``x,y,z`` row per tap; a first row is a header only when none of its cells is or starts like a
-    number (a typo in a first row of numbers is an error like in any other row)."""
-    reader = csv.reader(io.StringIO(text))
+    """One ``x,y,z`` row per tap, lines ended by LF, CR LF or CR alone (Excel for Mac before 2016); a first row is a
+    header only when none of its cells is or starts like a number (a typo in a first row of numbers is an error like
+    in any other row)."""
+    reader = csv.reader(io.StringIO(text, newline=""))
     try:
         lines = [(reader.line_num, row) for row in reader if any(cell.strip() for cell in row)]
     except csv.Error as error:  # a cell over the reader's field limit (128 kB)

@@ -60,6 +60,20 @@ def test_blank_lines_do_not_shift_the_line_named(tmp_path):
         load_points(path)
 
 
+@pytest.mark.parametrize("line_end", ["\r", "\n", "\r\n"])
+def test_every_line_end_keeps_every_tap_and_names_the_right_line(tmp_path, line_end):
+    """Excel for Mac before 2016 saves CSV with CR alone at each line end: refused in the csv module's words ("new-line
+    character seen in unquoted field - do you need to open the file in universal-newline mode?")."""
+    path = tmp_path / "taps.csv"
+    path.write_text(line_end.join(["x,y,z", *tap_rows()]) + line_end, newline="")
+    np.testing.assert_allclose(load_points(path), TAPS, atol=1e-6)
+    rows = tap_rows()
+    rows[4] = "0.1,0.2"
+    path.write_text(line_end.join(["x,y,z", *rows]) + line_end, newline="")
+    with pytest.raises(InputError, match="tap 5 \\(line 6 of .*\\) has 2 numbers"):
+        load_points(path)
+
+
 BOMB = "\n".join(["a: &a [1, 2, 3, 4, 5, 6, 7, 8, 9]"] + [
     f"{chr(98 + level)}: &{chr(98 + level)} [{', '.join(['*' + chr(97 + level)] * 9)}]" for level in range(8)])
 
