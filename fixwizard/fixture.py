@@ -15,6 +15,7 @@ import igl
 import numpy as np
 import trimesh
 
+from fixwizard import stl_text
 from fixwizard.errors import MeshError, MeshUnitsError, file_problem, quoted
 from fixwizard.geometry.hull_cover import HullCover, hull_cover
 from fixwizard.geometry.meb import minimum_enclosing_ball
@@ -26,6 +27,7 @@ from fixwizard.mesh_format import (
     STL_TRIANGLE_BYTES,
     binary_stl_size_mismatch,
     content_format,
+    is_binary_stl,
     unreadable_line_message,
 )
 from fixwizard.mesh_hygiene import ZIP_SHARE, clean_mesh, refuse_far_vertices, refuse_non_finite
@@ -289,6 +291,8 @@ def _trimesh_load(path: Path) -> object:
     (trimesh skipped indented lines, tabs after a keyword and the first line after a byte-order mark without a
     word, and read no comment nor old Mac line ends), with no line of words that are no numbers, checked to hold
     every triangle of its faces."""
+    if path.suffix.lower() == ".stl":
+        return _surface_of(_stl_load(path))
     if path.suffix.lower() != ".obj":
         return _surface_of(trimesh.load(path, process=False))
     lines = plain(path.read_bytes())
@@ -306,6 +310,19 @@ def _trimesh_load(path: Path) -> object:
         raise MeshError(f"{path}: its faces hold {held} triangles, of which the OBJ reader read {read}; export the "
                         "mesh again from CAD, or as STL")
     return loaded
+
+
+def _stl_load(path: Path) -> object:
+    """What trimesh reads from an STL file; an ASCII one as ``stl_text.reader_text`` gives it (trimesh read CR alone
+    as no line end), with every vertex line of three numbers."""
+    raw = path.read_bytes()
+    if is_binary_stl(raw[:STL_HEADER_BYTES], len(raw)):
+        return trimesh.load(path, process=False)
+    text = stl_text.reader_text(raw)
+    unreadable = stl_text.unreadable_line(text)
+    if unreadable is not None:
+        raise MeshError(unreadable_line_message(path, *unreadable))
+    return trimesh.load(io.BytesIO(text), file_type="stl", process=False)
 
 
 def _load_trimesh(path: Path) -> tuple[trimesh.Trimesh, float]:

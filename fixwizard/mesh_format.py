@@ -18,14 +18,19 @@ NUMBER = rb"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|[-+]?(?i:nan|inf(?:inity)?
 _DECIMAL_COMMA = re.compile(r"\d,\d")
 
 
+def is_binary_stl(head: bytes, size: int) -> bool:
+    """Whether a file of ``size`` bytes starting with ``head`` is a binary STL: its size is that of the triangle count
+    in its header (whatever the header says: it may start with "solid" too)."""
+    return size >= STL_HEADER_BYTES and size == STL_HEADER_BYTES + STL_TRIANGLE_BYTES * struct.unpack(
+        "<I", head[80:84])[0]
+
+
 def content_format(path: Path) -> str | None:
     """The suffix (``.stl``, ``.ply`` or ``.obj``) of the format the file's content is in, None when its first
     bytes match none of them (then the reader of its suffix says what is wrong)."""
     with path.open("rb") as file:
         head = file.read(HEAD_BYTES)
-    size = path.stat().st_size
-    if size >= STL_HEADER_BYTES and size == STL_HEADER_BYTES + STL_TRIANGLE_BYTES * struct.unpack(
-            "<I", head[80:84])[0]:
+    if is_binary_stl(head, path.stat().st_size):
         return ".stl"  # binary, whatever its header says (it may start with "solid" too)
     text = head.removeprefix(UTF8_BOM).lstrip()
     if text.startswith(b"ply") and text[3:4] in (b"\n", b"\r"):

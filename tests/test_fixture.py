@@ -471,17 +471,24 @@ def _ascii_ply(vertices: np.ndarray, faces: np.ndarray, element: str = "face") -
 DECIMAL_COMMA = "writes its numbers with a decimal comma .* Export the mesh again with decimal points"
 
 
-@pytest.mark.parametrize("suffix, line", [(".obj", 4), (".ply", 13)])
+def _ascii_stl(vertices: np.ndarray, faces: np.ndarray) -> str:
+    return trimesh.Trimesh(vertices, faces, process=False).export(file_type="stl_ascii")
+
+
+MESH_TEXTS = {".obj": _obj_text, ".ply": _ascii_ply, ".stl": _ascii_stl}
+
+
+@pytest.mark.parametrize("suffix, line", [(".obj", 4), (".ply", 13), (".stl", 11)])
 def test_numbers_with_a_decimal_comma_are_refused_naming_the_line(tmp_path, suffix, line):
     """A German-locale exporter writes 'v 1,5 2,0 3,0': refused in numpy's words, naming no line (with numpy before
     2.3 read as other numbers). Not read as decimals either: '1,500' may be fifteen hundred."""
     box = trimesh.creation.box((0.1, 0.06, 0.03))
-    text = (_obj_text if suffix == ".obj" else _ascii_ply)(box.vertices, box.faces)
+    text = MESH_TEXTS[suffix](box.vertices, box.faces)
     lines = text.splitlines()
     lines[line - 1] = lines[line - 1].replace(".", ",")
     path = tmp_path / f"box{suffix}"
     path.write_text("\n".join(lines) + "\n")
-    with pytest.raises(MeshError, match=f"box{suffix}: line {line} \\('(v )?[-0-9, ]+'\\) {DECIMAL_COMMA}"):
+    with pytest.raises(MeshError, match=f"box{suffix}: line {line} \\('(v |vertex )?[-0-9, ]+'\\) {DECIMAL_COMMA}"):
         load_fixture(path)
 
 
@@ -508,6 +515,18 @@ def test_a_ply_of_triangle_strips_is_refused_with_the_fix(tmp_path, faces_too):
     path.write_text(text)
     with pytest.raises(MeshError, match="strips.ply: it holds triangle strips .* export the mesh with faces"):
         load_fixture(path)
+
+
+@pytest.mark.parametrize("line_end", ["\r", "\r\n"])
+def test_an_ascii_stl_with_old_mac_or_windows_line_ends_loads_as_the_same_file_with_lf(tmp_path, line_end):
+    """trimesh's reader took each vertex's numbers up to the next LF: with CR alone a facet's 'endloop' and 'facet
+    normal' were read as numbers (numpy's words; with numpy before 2.3, the numbers cut short)."""
+    box = trimesh.creation.box((0.1, 0.06, 0.03))
+    text = _ascii_stl(box.vertices, box.faces)
+    (tmp_path / "clean.stl").write_text(text)
+    (tmp_path / "box.stl").write_text(text.replace("\n", line_end), newline="")
+    clean, read = load_fixture(tmp_path / "clean.stl"), load_fixture(tmp_path / "box.stl")
+    assert np.array_equal(read.mesh.vertices, clean.mesh.vertices) and np.array_equal(read.mesh.faces, clean.mesh.faces)
 
 
 def test_a_ply_whose_header_ends_its_lines_with_cr_alone_is_refused_with_the_fix(tmp_path):
