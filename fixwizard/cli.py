@@ -62,6 +62,13 @@ def _diameter(text: str) -> str:
     return _length(text, allow_zero=True)
 
 
+def _port(text: str) -> int:
+    """A TCP port, 1-65535, or 0 for any free one."""
+    if not re.fullmatch(r"\d{1,5}", text.strip()) or int(text) > 65535:
+        raise argparse.ArgumentTypeError(f"a port is a number from 1 to 65535 (0: any free one), not {text!r}")
+    return int(text)
+
+
 def _seconds(text: str) -> float:
     try:
         value = float(text)
@@ -205,7 +212,7 @@ def _add_serve(commands: argparse._SubParsersAction) -> None:
                                  "of each fixture in the reports folder.")
     parser.add_argument("--reports", default="reports", metavar="DIR", help="the reports folder (default reports)")
     parser.add_argument("--host", default=SERVE_HOST, help=f"address to listen on (default {SERVE_HOST}: all)")
-    parser.add_argument("--port", type=int, default=SERVE_PORT, help=f"port (default {SERVE_PORT})")
+    parser.add_argument("--port", type=_port, default=SERVE_PORT, help=f"port (default {SERVE_PORT})")
     parser.add_argument("--max-age", default=SERVE_MAX_AGE, help=f"refuse older reports, e.g. 8h or 7d (default "
                         f"{SERVE_MAX_AGE})")
     parser.add_argument("--log", metavar="FILE", help="also append the log of calls to FILE")

@@ -401,7 +401,11 @@ def test_the_serve_command_refuses_what_cannot_work(cell, tmp_path, capsys):
         assert "another fixwizard serve? give another --port" in capsys.readouterr().err
     finally:
         taken.close()
-    assert main(["serve", "--reports", str(cell), "--port", "70000"]) == 1
+    for port in ("70000", "-1", "http"):  # said as the port's fault, not the address's
+        assert main(["serve", "--reports", str(cell), f"--port={port}"]) == 1
+        err = capsys.readouterr().err
+        assert f"argument --port: a port is a number from 1 to 65535 (0: any free one), not '{port}'" in err
+        assert "--host" not in err.splitlines()[-1]
     assert main(["serve", "--reports", str(cell), "--max-age", "forever"]) == 1
     err = capsys.readouterr().err
     assert "cannot read the age" in err and "Traceback" not in err
