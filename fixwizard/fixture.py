@@ -31,7 +31,14 @@ from fixwizard.mesh_format import (
     unreadable_line_message,
 )
 from fixwizard.mesh_hygiene import ZIP_SHARE, clean_mesh, refuse_far_vertices, refuse_non_finite
-from fixwizard.obj_lines import face_triangles, plain, reader_text, short_vertex_line, unreadable_line
+from fixwizard.obj_lines import (
+    corner_before_first_vertex,
+    face_triangles,
+    plain,
+    reader_text,
+    short_vertex_line,
+    unreadable_line,
+)
 from fixwizard.ply_text import checked_ply
 from fixwizard.polygon_faces import checked_polygon_faces
 
@@ -299,6 +306,11 @@ def _trimesh_load(path: Path) -> object:
     unreadable = unreadable_line(lines)
     if unreadable is not None:
         raise MeshError(unreadable_line_message(path, *unreadable))
+    before_first = corner_before_first_vertex(lines)
+    if before_first is not None:
+        raise MeshError(f"{path}: the face on line {before_first[0]} ({quoted(before_first[1])}) counts back past the "
+                        "first vertex (a negative corner counts back from the vertices before its line); export the "
+                        "mesh again from CAD")
     text = reader_text(lines)
     short = short_vertex_line(text)
     if short is not None:

@@ -536,3 +536,35 @@ def test_a_ply_whose_header_ends_its_lines_with_cr_alone_is_refused_with_the_fix
     path.write_text(_ascii_ply(box.vertices, box.faces).replace("\n", "\r"))
     with pytest.raises(MeshError, match="box.ply: its header's lines end with a carriage return alone"):
         load_fixture(path)
+
+
+def _objects_obj(meshes: list[trimesh.Trimesh], counted_back: bool) -> str:
+    """An OBJ of the meshes object by object, each its vertices then its faces; corners counted back from the
+    vertices before the face (``f -8 -6 -7``), or numbered from the file's first vertex."""
+    text, offset = "", 0
+    for number, mesh in enumerate(meshes):
+        text += f"o part_{number}\n" + "".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in mesh.vertices.tolist())
+        text += "".join("f " + " ".join(str(corner - len(mesh.vertices) if counted_back else offset + corner + 1)
+                                         for corner in face) + "\n" for face in mesh.faces.tolist())
+        offset += len(mesh.vertices)
+    return text
+
+
+def test_an_obj_whose_corners_count_back_loads_as_its_own_surface(tmp_path):
+    """OBJ counts a negative corner back from the vertices before its line; trimesh counted back from the file's last
+    vertex, so a box and a cube written object by object loaded as the cube twice (0.0024 m2 of 0.024), with only a
+    warning that repeated faces were dropped. A corner counted back past the first vertex is refused naming its line
+    (it was "index -9 is out of bounds")."""
+    cube = trimesh.creation.box((0.02, 0.02, 0.02))
+    cube.apply_translation([0.2, 0.0, 0.0])
+    meshes = [trimesh.creation.box((0.1, 0.06, 0.03)), cube]
+    (tmp_path / "numbered.obj").write_text(_objects_obj(meshes, counted_back=False))
+    (tmp_path / "counted.obj").write_text(_objects_obj(meshes, counted_back=True))
+    numbered, counted = load_fixture(tmp_path / "numbered.obj"), load_fixture(tmp_path / "counted.obj")
+    assert numbered.mesh.area == pytest.approx(0.024, rel=1e-12)
+    assert np.array_equal(counted.mesh.vertices, numbered.mesh.vertices)
+    assert np.array_equal(counted.mesh.faces, numbered.mesh.faces)
+    path = tmp_path / "past.obj"
+    path.write_text(_objects_obj(meshes[:1], counted_back=True).replace("f -1 ", "f -9 ", 1))
+    with pytest.raises(MeshError, match=r"past.obj: the face on line \d+ \('f -9 .*'\) counts back past the first"):
+        load_fixture(path)
