@@ -68,7 +68,7 @@ def solve_command(args: argparse.Namespace) -> int:
     ball_diameter_m, sample_bound_m = _lengths_from(args)
     request = SolveRequest(Path(args.mesh), Path(args.points), ball_diameter_m, sample_bound_m, args.mesh_units,
                            parse_length_m(args.sigma) if args.sigma else None, args.max_cells,
-                           report.fixture_name(args.fixture_name) if args.fixture_name else None)
+                           report.fixture_name(args.fixture_name) if args.fixture_name is not None else None)
     output = _report_path(args)
     check_output(output, [("mesh", args.mesh), ("POINTS file", args.points), ("tip calibration", args.calibration)],
                  "give another report path with -o, e.g. -o report.yaml")

@@ -93,6 +93,16 @@ def test_wrong_units_name_the_fix(bracket, capsys):
     assert "--mesh-units mm" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("name", ["", "left plate", "../plate"])
+def test_a_fixture_name_serve_could_not_offer_is_refused_before_the_solve(bracket, tmp_path, capsys, name):
+    """An empty name (a shell variable left unset) named the report after the mesh without a word: with two fixtures
+    made from one mesh, serve would offer the one calibrated last under both names."""
+    folder, _, _ = bracket
+    assert main(solve_args(folder, "taps.yaml", "--fixture-name", name, "-o", str(tmp_path / "named.yaml"))) == 1
+    assert f"the fixture name {name!r} must be 1-64 letters" in capsys.readouterr().err
+    assert not (tmp_path / "named.yaml").exists()
+
+
 def test_a_non_mesh_file_is_refused(bracket, tmp_path, capsys):
     folder, _, _ = bracket
     (tmp_path / "plate.stl").write_text("this is a shopping list, not a mesh\n" * 20)
