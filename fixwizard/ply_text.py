@@ -4,11 +4,17 @@ trimesh's PLY reader reads the header up to each LF: a header whose lines end wi
 line to it ("list index out of range"). It reads the surface from ``element face`` alone: triangle strips
 (``element tristrips``, as Stanford's range scanning tools wrote them) were skipped without a word, leaving a point
 cloud or, beside faces, a surface with holes. An ASCII PLY's numbers go to numpy's parser, which reads ``0,05`` (a
-decimal comma) as 0 and stops, or refuses in words naming no line, by its version.
+decimal comma) as 0 and stops, or refuses in words naming no line, by its version; and its reader takes the rows the
+file holds, not those the header announces: a file cut short lost its last faces, lines added after them were left
+out, without a word.
 """
 
 import re
+import warnings
+from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from fixwizard.errors import MeshError
 from fixwizard.mesh_format import NUMBER, UTF8_BOM, unreadable_line_message
@@ -16,9 +22,100 @@ from fixwizard.mesh_format import NUMBER, UTF8_BOM, unreadable_line_message
 _HEADER_END = re.compile(rb"^end_header[ \t]*(?:\r\n|\r|\n)", re.MULTILINE)
 _LINE_END = re.compile(rb"\r\n|\r|\n")
 _NOT_A_NUMBER = re.compile(rb"(?<!\S)(?!(?:%s)(?!\S))\S+" % NUMBER)
-_STRIPS = re.compile(rb"^element[ \t]+(tristrips?)\b", re.MULTILINE | re.IGNORECASE)
 _ASCII = re.compile(rb"^format[ \t]+ascii\b", re.MULTILINE)
 HEAD_BYTES = 1024
+_WHITESPACE = np.zeros(256, bool)  # by byte value: what separates an ASCII PLY's words
+_WHITESPACE[list(b" \t\n\r\x0b\x0c")] = True
+
+
+@dataclass(frozen=True)
+class _Element:
+    """An element of a PLY header: its name, how many rows it announces, and per property whether it is a list."""
+
+    name: str
+    count: int
+    lists: tuple[bool, ...]
+
+
+def _elements(header: bytes) -> list[_Element]:
+    """The header's elements with their properties, in order (an unreadable count is trimesh's to refuse: -1)."""
+    elements: list[_Element] = []
+    for words in (line.split() for line in header.splitlines()):
+        if len(words) >= 3 and words[0] == b"element":
+            count = int(words[2]) if words[2].isdigit() else -1
+            elements.append(_Element(words[1].decode("latin-1"), count, ()))
+        elif len(words) >= 2 and words[0] == b"property" and elements:
+            last = elements[-1]
+            elements[-1] = _Element(last.name, last.count, (*last.lists, words[1] == b"list"))
+    return elements
+
+
+def _numbers(body: bytes) -> np.ndarray | None:
+    """Every word of an ASCII PLY's body as a number, each word one value, as numpy reads them (trimesh's reader
+    does); None when some word is none (numpy refuses it, or, before 2.3, warns and stops there)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        try:
+            values = np.fromstring(body, sep=" ")
+        except (ValueError, DeprecationWarning):
+            return None
+    return values if len(values) == len(body.split()) else None
+
+
+def _lines_and_words(body: bytes, first: int) -> tuple[np.ndarray, np.ndarray]:
+    """The numbers (in the file, ``first`` being the body's first line) of the body's lines that hold words, and how
+    many words each holds; a line ends at LF, CR LF or CR alone."""
+    data = np.frombuffer(body, np.uint8)
+    space = _WHITESPACE[data]
+    follows = np.append(data[1:], 0)
+    line_of = np.cumsum((data == ord("\n")) | ((data == ord("\r")) & (follows != ord("\n"))))
+    line_of = np.concatenate(([0], line_of[:-1]))  # a line end belongs to the line it ends
+    starts = ~space & np.concatenate(([True], space[:-1]))
+    words = np.bincount(line_of[starts], minlength=int(line_of[-1]) + 1 if len(line_of) else 1)
+    held = np.flatnonzero(words)
+    return held + first, words[held]
+
+
+def _wrong_rows(values: np.ndarray, offsets: np.ndarray, words: np.ndarray, lists: tuple[bool, ...]) -> np.ndarray:
+    """Which rows (their first value at ``offsets`` of ``values``, ``words`` values each) do not hold what their
+    properties say: one value per property, a list's length first."""
+    position, ends = offsets.copy(), offsets + words
+    wrong = np.zeros(len(offsets), bool)
+    for is_list in lists:
+        if is_list:
+            inside = position < ends
+            length = np.where(inside, values[np.minimum(position, len(values) - 1)], -1.0)
+            wrong |= ~inside | (length < 0) | (length != np.round(length))
+            position = position + np.where(wrong, 0, length).astype(np.int64)
+        position = position + 1
+    return wrong | (position != ends)
+
+
+def _rows_problem(raw: bytes, start: int, elements: list[_Element], values: np.ndarray) -> str | None:
+    """What is wrong when an ASCII PLY's body (from ``start`` of its ``raw`` bytes; ``values``, its numbers) does not
+    hold the rows its header announces, one per line, each as long as its properties say: a file cut short lost its
+    last faces without a word, and the lines after the announced ones (two files joined) were left out. None when it
+    holds them."""
+    lines, words = _lines_and_words(raw[start:], len(_LINE_END.findall(raw, 0, start)) + 1)
+    offsets = np.cumsum(words) - words
+    cut_short = "(cut short by an interrupted copy or download, or damaged); copy or export it again"
+    done = 0
+    for element in elements:
+        if element.count < 0:
+            return None
+        rows = slice(done, done + element.count)
+        if len(lines[rows]) < element.count:
+            return f"its header announces {element.count} {element.name} lines, and it holds {len(lines[rows])} " \
+                + cut_short
+        wrong = np.flatnonzero(_wrong_rows(values, offsets[rows], words[rows], element.lists))
+        if len(wrong):
+            return f"line {lines[rows][wrong[0]]} does not hold the {element.name} values its header announces " \
+                + cut_short
+        done += element.count
+    if len(lines) > done:
+        return (f"line {lines[done]} and those after it are more than its header announces (two files joined into "
+                "one?); export the mesh again")
+    return None
 
 
 def _ends_lines_with_cr_alone(head: bytes) -> bool:
@@ -40,8 +137,8 @@ def _unreadable_line(raw: bytes, start: int) -> tuple[int, str] | None:
 
 def checked_ply(path: Path) -> None:
     """Raise ``MeshError`` saying what to do for a PLY file at ``path`` whose header ends its lines with CR alone,
-    that holds triangle strips, or, ASCII, a word that is no number (a decimal comma), naming its line; other files
-    pass (trimesh's reader says what else is wrong)."""
+    that holds triangle strips, or, ASCII, a word that is no number (a decimal comma) or other rows than its header
+    announces, naming the line; other files pass (trimesh's reader says what else is wrong)."""
     raw = path.read_bytes()
     if _ends_lines_with_cr_alone(raw[:HEAD_BYTES]):
         raise MeshError(f"{path}: its header's lines end with a carriage return alone (CR, as classic Mac OS wrote "
@@ -50,11 +147,19 @@ def checked_ply(path: Path) -> None:
     end = _HEADER_END.search(raw)
     if end is None:
         return
-    strips = _STRIPS.search(raw, 0, end.start())
+    elements = _elements(raw[:end.start()])
+    strips = next((element.name for element in elements if element.name.lower() in ("tristrips", "tristrip")), None)
     if strips is not None:
-        raise MeshError(f"{path}: it holds triangle strips (element {strips.group(1).decode()}), which fixwizard's PLY "
-                        "reader does not read (it reads element face); export the mesh with faces (triangles), or "
-                        "as binary STL")
-    unreadable = _unreadable_line(raw, end.end()) if _ASCII.search(raw, 0, end.start()) else None
-    if unreadable is not None:
+        raise MeshError(f"{path}: it holds triangle strips (element {strips}), which fixwizard's PLY reader does not "
+                        "read (it reads element face); export the mesh with faces (triangles), or as binary STL")
+    if not _ASCII.search(raw, 0, end.start()):
+        return
+    values = _numbers(raw[end.end():])
+    if values is None:
+        unreadable = _unreadable_line(raw, end.end())
+        if unreadable is None:
+            raise MeshError(f"{path}: its data holds a word that is no number; export the mesh again from CAD")
         raise MeshError(unreadable_line_message(path, *unreadable))
+    problem = _rows_problem(raw, end.end(), elements, values)
+    if problem is not None:
+        raise MeshError(f"{path}: {problem}")

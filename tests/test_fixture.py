@@ -568,3 +568,19 @@ def test_an_obj_whose_corners_count_back_loads_as_its_own_surface(tmp_path):
     path.write_text(_objects_obj(meshes[:1], counted_back=True).replace("f -1 ", "f -9 ", 1))
     with pytest.raises(MeshError, match=r"past.obj: the face on line \d+ \('f -9 .*'\) counts back past the first"):
         load_fixture(path)
+
+
+@pytest.mark.parametrize("damage, problem", [
+    (lambda text: text[:-30], r"its header announces 12 face lines, and it holds 9 \(cut short"),
+    (lambda text: text.rstrip("\n").rsplit(" ", 1)[0] + "\n", "line 29 does not hold the face values its header"),
+    (lambda text: text + "3 0 1 2\n", r"line 30 and those after it are more than its header announces \(two files"),
+])
+def test_an_ascii_ply_cut_short_or_with_lines_added_is_refused_naming_the_line(tmp_path, damage, problem):
+    """trimesh read the rows an ASCII PLY holds, not those its header announces: a file cut short by an interrupted
+    copy loaded without its last faces (an open mesh, solved with the unsigned distance), and lines after the
+    announced ones (two files joined) were left out, without a word."""
+    box = trimesh.creation.box((0.1, 0.06, 0.03))
+    path = tmp_path / "box.ply"
+    path.write_text(damage(_ascii_ply(box.vertices, box.faces)))
+    with pytest.raises(MeshError, match=f"box.ply: {problem}"):
+        load_fixture(path)
