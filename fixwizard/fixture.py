@@ -326,7 +326,7 @@ def _trimesh_load(path: Path) -> object:
 
 def _stl_load(path: Path) -> object:
     """What trimesh reads from an STL file; an ASCII one as ``stl_text.reader_text`` gives it (trimesh read CR alone
-    as no line end), with every vertex line of three numbers."""
+    as no line end), with every vertex line of three numbers and every solid ended."""
     raw = path.read_bytes()
     if is_binary_stl(raw[:STL_HEADER_BYTES], len(raw)):
         return trimesh.load(path, process=False)
@@ -334,6 +334,10 @@ def _stl_load(path: Path) -> object:
     unreadable = stl_text.unreadable_line(text)
     if unreadable is not None:
         raise MeshError(unreadable_line_message(path, *unreadable))
+    unended = stl_text.unended_solid(text)
+    if unended is not None:
+        raise MeshError(f"{path}: the solid that starts on line {unended} has no 'endsolid' after it: the file is cut "
+                        "short (an interrupted copy or download?); copy or export it again")
     return trimesh.load(io.BytesIO(text), file_type="stl", process=False)
 
 

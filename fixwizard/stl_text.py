@@ -3,7 +3,8 @@
 trimesh's ASCII STL reader takes each vertex's numbers up to the next LF: with CR alone at each line end (classic
 Mac OS) the words after a facet's last vertex (``endloop``, ``endfacet``, ``facet normal``) were read as numbers,
 refused in numpy's words or, with numpy before 2.3, cut short without a word. Numbers written with a decimal comma
-(``vertex 1,5 2,0 3,0``) are refused naming their line, as in OBJ and PLY files (``mesh_format``).
+(``vertex 1,5 2,0 3,0``) are refused naming their line, as in OBJ and PLY files (``mesh_format``), and so is a
+``solid`` that no ``endsolid`` ends (cut short).
 """
 
 import re
@@ -15,10 +16,26 @@ _UNREADABLE_VERTEX = re.compile(rb"^[ \t]*vertex\b(?![ \t]+(?:%s)[ \t]+(?:%s)[ \
                                 % (NUMBER, NUMBER, NUMBER), re.MULTILINE | re.IGNORECASE)
 
 
+_SOLID_LINE = re.compile(rb"^[ \t]*(end)?solid", re.MULTILINE | re.IGNORECASE)
+
+
 def reader_text(raw: bytes) -> bytes:
     """An ASCII STL's bytes with every line end an LF (CR LF and CR alone too): its lines, and their count, as
     written."""
     return raw.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
+
+
+def unended_solid(text: bytes) -> int | None:
+    """The number of the line of ``reader_text`` where a ``solid`` starts that no ``endsolid`` ends (a file cut short:
+    trimesh's reader left that solid out, said as "no triangles" when it was the only one), None when each is
+    ended."""
+    started = None
+    for line in _SOLID_LINE.finditer(text):
+        if line.group(1):
+            started = None
+        elif started is None:
+            started = text.count(b"\n", 0, line.start()) + 1
+    return started
 
 
 def unreadable_line(text: bytes) -> tuple[int, str] | None:

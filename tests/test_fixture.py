@@ -584,3 +584,18 @@ def test_an_ascii_ply_cut_short_or_with_lines_added_is_refused_naming_the_line(t
     path.write_text(damage(_ascii_ply(box.vertices, box.faces)))
     with pytest.raises(MeshError, match=f"box.ply: {problem}"):
         load_fixture(path)
+
+
+@pytest.mark.parametrize("solids", [1, 2])
+@pytest.mark.parametrize("cut", ["before endsolid", "inside a facet"])
+def test_an_ascii_stl_cut_short_is_refused_naming_the_solid_it_cuts(tmp_path, solids, cut):
+    """trimesh's reader leaves out a solid with no 'endsolid': one cut short was said to hold no triangles ("a point
+    cloud or an empty model?"), and the second of two solids was left out without a word."""
+    box = trimesh.creation.box((0.1, 0.06, 0.03))
+    text = _ascii_stl(box.vertices, box.faces) * solids
+    text = text[:text.rfind("endsolid")] if cut == "before endsolid" else text[:text.rfind("endfacet")]
+    path = tmp_path / "box.stl"
+    path.write_text(text)
+    line = 1 + (solids - 1) * len(_ascii_stl(box.vertices, box.faces).splitlines())
+    with pytest.raises(MeshError, match=f"box.stl: the solid that starts on line {line} has no 'endsolid' after it"):
+        load_fixture(path)
