@@ -6,10 +6,12 @@ line to it ("list index out of range"). It reads the surface from ``element face
 cloud or, beside faces, a surface with holes. An ASCII PLY's numbers go to numpy's parser, which reads ``0,05`` (a
 decimal comma) as 0 and stops, or refuses in words naming no line, by its version; and its reader takes the rows the
 file holds, not those the header announces: a file cut short lost its last faces, lines added after them were left
-out, without a word.
+out, without a word. A binary PLY's faces are all taken as long as the first: triangles and quads together (Blender
+untriangulated), a file cut short and bytes added were all "PLY is unexpected length!"; each is said for what it is.
 """
 
 import re
+import struct
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,18 +25,31 @@ _HEADER_END = re.compile(rb"^end_header[ \t]*(?:\r\n|\r|\n)", re.MULTILINE)
 _LINE_END = re.compile(rb"\r\n|\r|\n")
 _NOT_A_NUMBER = re.compile(rb"(?<!\S)(?!(?:%s)(?!\S))\S+" % NUMBER)
 _ASCII = re.compile(rb"^format[ \t]+ascii\b", re.MULTILINE)
+_BIG_ENDIAN = re.compile(rb"^format[ \t]+binary_big_endian\b", re.MULTILINE)
 HEAD_BYTES = 1024
 _WHITESPACE = np.zeros(256, bool)  # by byte value: what separates an ASCII PLY's words
 _WHITESPACE[list(b" \t\n\r\x0b\x0c")] = True
 
 
+# Bytes and struct codes of PLY's types (a list's length is one of the integer types)
+_TYPES = {b"char": (1, "b"), b"int8": (1, "b"), b"uchar": (1, "B"), b"uint8": (1, "B"), b"short": (2, "h"),
+          b"int16": (2, "h"), b"ushort": (2, "H"), b"uint16": (2, "H"), b"int": (4, "i"), b"int32": (4, "i"),
+          b"uint": (4, "I"), b"uint32": (4, "I"), b"float": (4, "f"), b"float32": (4, "f"), b"double": (8, "d"),
+          b"float64": (8, "d")}
+
+
 @dataclass(frozen=True)
 class _Element:
-    """An element of a PLY header: its name, how many rows it announces, and per property whether it is a list."""
+    """An element of a PLY header: its name, how many rows it announces, and each property's type words (``float``,
+    or ``list uchar int``)."""
 
     name: str
     count: int
-    lists: tuple[bool, ...]
+    types: tuple[tuple[bytes, ...], ...]
+
+    @property
+    def lists(self) -> tuple[bool, ...]:
+        return tuple(words[0] == b"list" for words in self.types)
 
 
 def _elements(header: bytes) -> list[_Element]:
@@ -44,10 +59,70 @@ def _elements(header: bytes) -> list[_Element]:
         if len(words) >= 3 and words[0] == b"element":
             count = int(words[2]) if words[2].isdigit() else -1
             elements.append(_Element(words[1].decode("latin-1"), count, ()))
-        elif len(words) >= 2 and words[0] == b"property" and elements:
+        elif len(words) >= 3 and words[0] == b"property" and elements:
             last = elements[-1]
-            elements[-1] = _Element(last.name, last.count, (*last.lists, words[1] == b"list"))
+            elements[-1] = _Element(last.name, last.count, (*last.types, tuple(words[1:-1])))
     return elements
+
+
+def _row_end(raw: bytes, position: int, element: _Element, order: str) -> tuple[int, tuple[int, ...]]:
+    """Where a binary row starting at ``position`` ends, and its lists' lengths (``order``: struct's byte order);
+    past the end of ``raw`` when it is cut short there."""
+    lengths: list[int] = []
+    for words in element.types:
+        if words[0] != b"list":
+            position += _TYPES[words[0]][0]
+            continue
+        size, code = _TYPES[words[1]]
+        if position + size > len(raw):
+            return len(raw) + 1, tuple(lengths)
+        lengths.append(struct.unpack_from(order + code, raw, position)[0])
+        position += size + lengths[-1] * _TYPES[words[2]][0]
+    return position, tuple(lengths)
+
+
+def _known(words: tuple[bytes, ...]) -> bool:
+    """Whether a property's type words name types PLY has (``float``; ``list uchar int``)."""
+    if words[:1] == (b"list",):
+        return len(words) == 3 and words[1] in _TYPES and words[2] in _TYPES
+    return len(words) == 1 and words[0] in _TYPES
+
+
+def _size_if_uniform(raw: bytes, start: int, elements: list[_Element], order: str) -> int:
+    """The bytes of a binary PLY's data if every list were as long as the first of its element (as trimesh's reader
+    takes them)."""
+    position = start
+    for element in elements:
+        row_end = _row_end(raw, position, element, order)[0] if element.count else position
+        position += element.count * (row_end - position)
+    return position - start
+
+
+def _binary_problem(raw: bytes, start: int, elements: list[_Element], order: str) -> str | None:
+    """What is wrong when a binary PLY's data (from ``start``) is not the rows its header announces with every list as
+    long as the first of its element (the only data trimesh's reader takes: "PLY is unexpected length!", which said
+    nothing of why): cut short, bytes after them, or faces of different corner counts. None when it is such, or its
+    types are trimesh's to refuse."""
+    if not all(_known(words) for element in elements for words in element.types) or \
+            any(element.count < 0 for element in elements) or \
+            start + _size_if_uniform(raw, start, elements, order) == len(raw):
+        return None
+    position, uniform = start, True
+    for element in elements:
+        first: tuple[int, ...] | None = None
+        for row in range(element.count):
+            position, lengths = _row_end(raw, position, element, order)
+            if position > len(raw):
+                return (f"it ends inside {element.name} {row + 1} of the {element.count} its header announces (cut "
+                        "short by an interrupted copy or download, or damaged); copy or export it again")
+            uniform &= first is None or lengths == first
+            first = lengths if first is None else first
+    if position < len(raw):
+        return (f"it holds {len(raw) - position} bytes after the data its header announces (two files joined, or "
+                "damaged); export the mesh again")
+    return ("its faces have different numbers of corners (triangles and quads), which fixwizard's reader does not "
+            "read from a binary PLY; export the mesh with triangulated faces (in Blender: Triangulate Mesh), as ASCII "
+            "PLY, or as binary STL") if not uniform else None
 
 
 def _numbers(body: bytes) -> np.ndarray | None:
@@ -138,7 +213,8 @@ def _unreadable_line(raw: bytes, start: int) -> tuple[int, str] | None:
 def checked_ply(path: Path) -> None:
     """Raise ``MeshError`` saying what to do for a PLY file at ``path`` whose header ends its lines with CR alone,
     that holds triangle strips, or, ASCII, a word that is no number (a decimal comma) or other rows than its header
-    announces, naming the line; other files pass (trimesh's reader says what else is wrong)."""
+    announces, naming the line, or, binary, other data than its header announces or faces of different corner
+    counts; other files pass (trimesh's reader says what else is wrong)."""
     raw = path.read_bytes()
     if _ends_lines_with_cr_alone(raw[:HEAD_BYTES]):
         raise MeshError(f"{path}: its header's lines end with a carriage return alone (CR, as classic Mac OS wrote "
@@ -153,6 +229,9 @@ def checked_ply(path: Path) -> None:
         raise MeshError(f"{path}: it holds triangle strips (element {strips}), which fixwizard's PLY reader does not "
                         "read (it reads element face); export the mesh with faces (triangles), or as binary STL")
     if not _ASCII.search(raw, 0, end.start()):
+        binary = _binary_problem(raw, end.end(), elements, ">" if _BIG_ENDIAN.search(raw, 0, end.start()) else "<")
+        if binary is not None:
+            raise MeshError(f"{path}: {binary}")
         return
     values = _numbers(raw[end.end():])
     if values is None:

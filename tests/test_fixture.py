@@ -1,5 +1,7 @@
 """Loading fixture meshes: units, bad files, open meshes; distance intervals and signs."""
 
+import re
+
 import numpy as np
 import pytest
 import trimesh
@@ -599,3 +601,34 @@ def test_an_ascii_stl_cut_short_is_refused_naming_the_solid_it_cuts(tmp_path, so
     line = 1 + (solids - 1) * len(_ascii_stl(box.vertices, box.faces).splitlines())
     with pytest.raises(MeshError, match=f"box.stl: the solid that starts on line {line} has no 'endsolid' after it"):
         load_fixture(path)
+
+
+def _binary_ply(vertices: np.ndarray, faces: list[list[int]], order: str = "<") -> bytes:
+    """A binary PLY (``order``: '<' little, '>' big endian) of float vertices and faces of any corner counts."""
+    endian = "little" if order == "<" else "big"
+    header = (f"ply\nformat binary_{endian}_endian 1.0\nelement vertex {len(vertices)}\nproperty float x\n"
+              f"property float y\nproperty float z\nelement face {len(faces)}\nproperty list uchar int vertex_indices\n"
+              "end_header\n").encode()
+    return header + np.asarray(vertices, f"{order}f4").tobytes() + b"".join(
+        bytes([len(face)]) + np.asarray(face, f"{order}i4").tobytes() for face in faces)
+
+
+@pytest.mark.parametrize("order", ["<", ">"])
+def test_a_binary_ply_of_triangles_and_quads_or_damaged_is_refused_saying_why(tmp_path, order):
+    """trimesh's binary PLY reader takes every face as long as the first, and refused all three as "PLY is unexpected
+    length!" (and "check that it is an STL, PLY or OBJ export"): a box as Blender writes it untriangulated, cut short
+    by a copy, and with bytes after its data. The same box of quads alone loads."""
+    vertices = np.array([[0, 0, 0], [0.1, 0, 0], [0.1, 0.06, 0], [0, 0.06, 0], [0, 0, 0.03], [0.1, 0, 0.03],
+                         [0.1, 0.06, 0.03], [0, 0.06, 0.03]])
+    quads = WARPED_BOX_QUADS.tolist()
+    path = tmp_path / "box.ply"
+    path.write_bytes(_binary_ply(vertices, quads, order))
+    assert load_fixture(path).mesh.area == pytest.approx(0.0216, rel=1e-6)
+    mixed = [[0, 3, 2], [0, 2, 1], *quads[1:]]
+    damaged = {_binary_ply(vertices, mixed, order): "its faces have different numbers of corners (triangles and quads)",
+               _binary_ply(vertices, quads, order)[:-10]: "it ends inside face 6 of the 6 its header announces",
+               _binary_ply(vertices, quads, order) + bytes(17): "it holds 17 bytes after the data its header announces"}
+    for data, problem in damaged.items():
+        path.write_bytes(data)
+        with pytest.raises(MeshError, match=re.escape(f"box.ply: {problem}")):
+            load_fixture(path)
