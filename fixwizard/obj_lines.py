@@ -5,10 +5,12 @@ an indented line, or one with a tab after its keyword, was skipped without a wor
 vertex up by one, so faces named other corners (another surface, or "index out of bounds"); a face skipped left a
 hole; a byte-order mark before the first line lost that line too. Its lines end at LF alone, so a file with the old
 Mac line ends (CR alone) was one line, and a comment after a vertex's or a face's numbers (``f 1 2 3 # lid``) was
-read as numbers. ``plain`` gives the lines as the format reads them (the mark dropped, every line end an LF, comments
-blanked) and ``reader_text`` hands them to trimesh (continued lines joined, tabs as spaces, indents removed); the
-loader refuses a line whose numbers trimesh would not read as written (``unreadable_line``) and checks that trimesh
-read as many triangles as the faces hold (``face_triangles``).
+read as numbers; a corner counted back (``f -3 -2 -1``) was counted from the file's last vertex, not from those before
+its line. ``plain`` gives the lines as the format reads them (the mark dropped, every line end an LF, comments
+blanked) and ``reader_text`` hands them to trimesh (continued lines joined, corners counted back made absolute, tabs
+as spaces, indents removed); the loader refuses a line whose numbers trimesh would not read as written
+(``unreadable_line``) or a corner counted back past the first vertex, and checks that trimesh read as many triangles
+as the faces hold (``face_triangles``).
 """
 
 import bisect
@@ -20,8 +22,8 @@ from fixwizard.mesh_format import NUMBER, UTF8_BOM
 _CONTINUATION = re.compile(rb"\\[ \t]*\n")  # a backslash ending a line joins the next one to it (the OBJ spec)
 _COMMENT = re.compile(rb"#[^\n]*")  # from a '#' to the line's end
 _INDENT = re.compile(rb"^[ \t]+", re.MULTILINE)
-_FACE_CORNERS = re.compile(rb"^f[ \t]([^\n#]*)", re.MULTILINE)
-_VERTEX_NUMBERS = re.compile(rb"^v[ \t]([^\n#]*)", re.MULTILINE)
+_FACE_CORNERS = re.compile(rb"^f[ \t]([^\n]*)", re.MULTILINE)
+_VERTEX_NUMBERS = re.compile(rb"^v[ \t]([^\n]*)", re.MULTILINE)
 _VERTEX_START = re.compile(rb"^[ \t]*v[ \t]", re.MULTILINE)
 _FACE = re.compile(rb"^([ \t]*f[ \t])([^\n]*)", re.MULTILINE)
 _COUNTED_BACK = re.compile(rb"^[ \t]*f[ \t][^\n]*(?<=[ \t])-\d", re.MULTILINE)  # a face with a corner such as -3
