@@ -17,7 +17,7 @@ import re
 import sys
 from typing import NoReturn
 
-from fixwizard.errors import FixwizardError, MeshUnitsError, file_problem
+from fixwizard.errors import FixwizardError, command_line_text, file_problem, likely_units
 from fixwizard.exit_codes import EXIT_BAD_INPUT, EXIT_CANCELLED, EXIT_CODES, EXIT_OK
 from fixwizard.units import parse_length_m
 
@@ -245,9 +245,7 @@ def main(argv: list[str] | None = None) -> int:
         module, function = args.handler.split(":")
         return getattr(importlib.import_module(module), function)(args)
     except FixwizardError as error:
-        units_fix = f" (--mesh-units {error.likely_units})" if isinstance(error, MeshUnitsError) and \
-            error.likely_units else ""
-        print(f"fixwizard: {error}{units_fix}", file=sys.stderr)
+        print(f"fixwizard: {command_line_text(str(error), likely_units(error))}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except OSError as error:
         print(f"fixwizard: {file_problem(error)}", file=sys.stderr)

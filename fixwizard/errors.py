@@ -32,6 +32,17 @@ class MeshUnitsError(MeshError):
         self.likely_units = likely_units
 
 
+def likely_units(error: Exception) -> str | None:
+    """The units that would make a mesh plausible (``MeshUnitsError.likely_units``), None for any other error."""
+    return error.likely_units if isinstance(error, MeshUnitsError) else None
+
+
+def command_line_text(message: str, units: str | None) -> str:
+    """An error's message as the command line says it: with the option that fixes a mesh's ``units`` (``likely_units``)
+    when there are some."""
+    return f"{message} (--mesh-units {units})" if units else message
+
+
 def quoted(value: object) -> str:
     """A short ``repr`` of a value read from a person's file: nested and long values are cut (``...``), so a
     message never grows with the input (an alias-expanding YAML stays a few hundred characters)."""

@@ -66,6 +66,13 @@ def test_an_unreadable_mesh_is_reported_and_no_verdict_is_claimed_without_it(tmp
         assert ("no mesh that could be read fits" in out) == (other == "ruled out") and "no mesh fits" not in out
 
 
+def test_a_mesh_in_other_units_is_unreadable_with_the_option_that_fixes_it(tmp_path, capsys):
+    """The command line's own words, as solve says them: the verdict said 'its units are mm' without the option."""
+    assert FLAGS[:2] == ["--mesh-units", "mm"]
+    assert main(["identify", str(DEMO_TAPS), str(DEMO_MESH), "--mesh-units", "m", *FLAGS[2:]]) == 1
+    assert "if the file is in millimetres, its units are mm (--mesh-units mm)" in capsys.readouterr().out
+
+
 def test_several_unreadable_meshes_are_each_named_with_why_in_one_closing_sentence(tmp_path, capsys):
     """Exit 1, each mesh named with the loader's reason, then one sentence naming them all as given ("whether it
     fits" was said of four meshes, by their names alone). A name too long for the file system (an OSError) was the

@@ -22,7 +22,7 @@ from typing import Literal
 
 import numpy as np
 
-from fixwizard.errors import FixwizardError, InputError
+from fixwizard.errors import FixwizardError, InputError, command_line_text, likely_units
 from fixwizard.fixture import Fixture, load_fixture
 from fixwizard.interrupt import run_interruptibly
 from fixwizard.points import load_points
@@ -42,7 +42,8 @@ Verdict = Literal["fits", "ruled out", "not decided", "unreadable"]
 @dataclass(frozen=True)
 class MeshVerdict:
     """One mesh's verdict; ``rms_mm`` and ``worst_mm``: the taps' distances from the surface at the most
-    probable pose (fits and not decided; None otherwise); ``max_cells``: the budget the verdict was reached at."""
+    probable pose (fits and not decided; None otherwise); ``max_cells``: the budget the verdict was reached at;
+    ``likely_units``: the units that would make an unreadable mesh plausible, if that is why it is unreadable."""
 
     mesh: Path
     verdict: Verdict
@@ -50,6 +51,7 @@ class MeshVerdict:
     rms_mm: float | None = None
     worst_mm: float | None = None
     max_cells: float = 0.0
+    likely_units: str | None = None
 
 
 @dataclass(frozen=True)
@@ -94,7 +96,7 @@ def _verdict(base_p_taps: np.ndarray, mesh: Path, mesh_units: str, ball_diameter
     try:
         fixture = load_fixture(mesh, mesh_units)
     except FixwizardError as error:
-        return MeshVerdict(mesh, "unreadable", str(error))
+        return MeshVerdict(mesh, "unreadable", str(error), likely_units=likely_units(error))
     budgets = [budget for budget in BUDGETS if budget < max_cells] + [max_cells]
     solution: Solution | None = None
     for budget in budgets:
@@ -163,7 +165,8 @@ def _residuals_mm(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: fl
 def summary_lines(verdicts: list[MeshVerdict]) -> list[str]:
     """One line per mesh, best fit first, then what the verdicts mean together."""
     verdicts = ranked(verdicts)
-    lines = [f"{verdict.verdict:11} {verdict.mesh}: {verdict.message}" for verdict in verdicts]
+    lines = [f"{verdict.verdict:11} {verdict.mesh}: {command_line_text(verdict.message, verdict.likely_units)}"
+             for verdict in verdicts]
     fitting = [verdict for verdict in verdicts if verdict.verdict == "fits"]
     open_ones = [verdict.mesh.name for verdict in verdicts if verdict.verdict == "not decided"]
     if len(fitting) > 1:
