@@ -25,6 +25,7 @@ from fixwizard.mesh_format import (
     FORMAT_NAMES,
     STL_HEADER_BYTES,
     STL_TRIANGLE_BYTES,
+    archive_format,
     binary_stl_size_mismatch,
     content_format,
     is_binary_stl,
@@ -356,6 +357,10 @@ def _load_trimesh(path: Path) -> tuple[trimesh.Trimesh, float]:
                         "PLY or OBJ")
     if path.stat().st_size == 0:
         raise MeshError(f"the mesh file {path} is empty; export the fixture's CAD model again")
+    archive = archive_format(path)
+    if archive is not None:
+        raise MeshError(f"{path} is a {archive} archive, not a mesh (a compressed download; a 3MF file is a ZIP too): "
+                        "unpack the mesh from it, or export the fixture's CAD model as STL, PLY or OBJ")
     found, suffix = content_format(path), path.suffix.lower()
     if found is not None and found != suffix:
         raise MeshError(f"{path} holds a mesh in {FORMAT_NAMES[found]} format, not {FORMAT_NAMES[suffix]} as its name "

@@ -16,6 +16,7 @@ OBJ_KEYWORDS = {"v", "vn", "vt", "vp", "f", "l", "o", "g", "s", "mtllib", "usemt
 # (those are refused once read, naming the vertex)
 NUMBER = rb"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|[-+]?(?i:nan|inf(?:inity)?)"
 _DECIMAL_COMMA = re.compile(r"\d,\d")
+ARCHIVE_MAGIC = {b"PK\x03\x04": "ZIP", b"\x1f\x8b": "gzip", b"7z\xbc\xaf\x27\x1c": "7z"}  # a 3MF is a ZIP too
 
 
 def is_binary_stl(head: bytes, size: int) -> bool:
@@ -23,6 +24,16 @@ def is_binary_stl(head: bytes, size: int) -> bool:
     in its header (whatever the header says: it may start with "solid" too)."""
     return size >= STL_HEADER_BYTES and size == STL_HEADER_BYTES + STL_TRIANGLE_BYTES * struct.unpack(
         "<I", head[80:84])[0]
+
+
+def archive_format(path: Path) -> str | None:
+    """The kind of archive (``ZIP``, ``gzip``, ``7z``) the file is by its first bytes, None for any other file (a
+    binary STL of that size whatever its header says)."""
+    with path.open("rb") as file:
+        head = file.read(HEAD_BYTES)
+    if is_binary_stl(head, path.stat().st_size):
+        return None
+    return next((kind for magic, kind in ARCHIVE_MAGIC.items() if head.startswith(magic)), None)
 
 
 def content_format(path: Path) -> str | None:

@@ -1,6 +1,8 @@
 """Loading fixture meshes: units, bad files, open meshes; distance intervals and signs."""
 
+import gzip
 import re
+import zipfile
 
 import numpy as np
 import pytest
@@ -86,6 +88,23 @@ def test_a_mesh_saved_with_another_formats_suffix_is_named_for_what_it_holds(tmp
         else:
             with pytest.raises(MeshError, match=rf"in {fmt[1:].upper()} format, .* rename it to fixture\{fmt}$"):
                 load_fixture(path)
+
+
+@pytest.mark.parametrize("kind", ["ZIP", "gzip"])
+def test_a_compressed_mesh_is_called_an_archive_not_a_binary_stl_cut_short(tmp_path, kind):
+    """A zipped or gzipped export (or a 3MF, a ZIP) named .stl was "a binary STL whose header announces 1886351212
+    triangles ... cut short"; a binary STL whose header starts like a ZIP still loads."""
+    data = _exported("ASCII STL")
+    path = tmp_path / "fixture.stl"
+    if kind == "ZIP":
+        with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive:
+            archive.writestr("fixture.stl", data)
+    else:
+        path.write_bytes(gzip.compress(data))
+    with pytest.raises(MeshError, match=f"fixture.stl is a {kind} archive, not a mesh .* unpack the mesh from it"):
+        load_fixture(path)
+    path.write_bytes(_exported("binary STL", header=b"PK\x03\x04 and more"))
+    assert len(load_fixture(path).mesh.faces) == len(SHAPES["l_prism"]().faces)
 
 
 @pytest.mark.parametrize("content", [b"\xef\xbb\xbf" + _exported("OBJ"),
