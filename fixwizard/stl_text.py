@@ -14,9 +14,7 @@ from fixwizard.mesh_format import NUMBER
 # A vertex line whose words after ``vertex`` are not three numbers (the reader lowercases the text, so any case).
 _UNREADABLE_VERTEX = re.compile(rb"^[ \t]*vertex\b(?![ \t]+(?:%s)[ \t]+(?:%s)[ \t]+(?:%s)[ \t]*$)[^\n]*"
                                 % (NUMBER, NUMBER, NUMBER), re.MULTILINE | re.IGNORECASE)
-
-
-_SOLID_LINE = re.compile(rb"^[ \t]*(end)?solid", re.MULTILINE | re.IGNORECASE)
+_SOLID_LINE = re.compile(rb"^[ \t]*(end)?solid", re.MULTILINE | re.IGNORECASE)  # a solid's start or end
 
 
 def reader_text(raw: bytes) -> bytes:
