@@ -54,6 +54,7 @@ PARITY_TILT = np.array([0.0117, 0.0131, 0.0093])
 # left in to keep the mesh closed): points nearest to it are checked by ray parity.
 RELIABLE_NORMAL_SINE = 1e-6
 MESH_SUFFIXES = (".stl", ".ply", ".obj")
+POINTS_SUFFIXES = (".yaml", ".yml", ".csv")  # a POINTS file given as the mesh: the arguments swapped
 PLAUSIBLE_SIZE_M = (0.005, 2.5)
 
 
@@ -352,6 +353,10 @@ def _load_trimesh(path: Path) -> tuple[trimesh.Trimesh, float]:
     if not path.is_file():
         raise MeshError(f"{path} is not a regular file (a pipe or a device such as /dev/null), so it holds no "
                         "mesh to read; give the path of an STL, PLY or OBJ file")
+    if path.suffix.lower() in POINTS_SUFFIXES:
+        raise MeshError(f"{path} is a points file (YAML or CSV of the taps), not a mesh: give the fixture's STL, PLY "
+                        "or OBJ file (on the command line, are the arguments in the wrong order? solve MESH POINTS, "
+                        "identify POINTS MESH...)")
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise MeshError(f"{path} is not a mesh file fixwizard reads; export the fixture's CAD model as STL, "
                         "PLY or OBJ")

@@ -103,6 +103,16 @@ def test_a_fixture_name_serve_could_not_offer_is_refused_before_the_solve(bracke
     assert not (tmp_path / "named.yaml").exists()
 
 
+def test_points_and_mesh_swapped_say_so(bracket, capsys):
+    """The mesh is read first: the POINTS file given as the mesh was 'not a mesh file fixwizard reads; export the
+    fixture's CAD model as STL, PLY or OBJ'."""
+    folder, _, _ = bracket
+    args = solve_args(folder)
+    args[1:3] = args[2:0:-1]
+    assert main(args) == 1
+    assert "taps.yaml is a points file (YAML or CSV of the taps), not a mesh" in capsys.readouterr().err
+
+
 def test_a_non_mesh_file_is_refused(bracket, tmp_path, capsys):
     folder, _, _ = bracket
     (tmp_path / "plate.stl").write_text("this is a shopping list, not a mesh\n" * 20)
