@@ -107,8 +107,11 @@ def help_of(app) -> str:
 
 
 async def open_help(pilot: Pilot) -> str:
+    """Open the help, check it is all in view (at 80x24, the tests' size), close it; its text."""
     await pilot.press("question_mark")
-    await until(pilot, lambda: isinstance(pilot.app.screen, HelpScreen))
+    await until(pilot, lambda: isinstance(pilot.app.screen, HelpScreen) and bool(pilot.app.screen.query(Static)))
+    await pilot.pause()
+    assert pilot.app.screen.query_one(VerticalScroll).max_scroll_y == 0
     text = help_of(pilot.app)
     await pilot.press("escape")
     await until(pilot, lambda: not isinstance(pilot.app.screen, HelpScreen))
@@ -127,7 +130,7 @@ def test_question_mark_opens_the_help_of_each_step_with_its_keys_and_the_global_
             await until(pilot, lambda: isinstance(app.screen, PivotScreen) and not app.screen.busy)
             text = await open_help(pilot)
             assert text.startswith("Find the ball tip roughly") and "Keys on this screen:" in text
-            assert "  m       SIM hands: SIMULATED cell only" in text and "  Space   Capture" in text
+            assert "  m       SIM hands: the simulated hands move" in text and "  Space   Capture" in text
             assert "  Esc     Back" in text and "  Ctrl+R  Re-arm" in text
             for _ in range(app.cell.hands.pivot_count):
                 await pilot.press("m")
@@ -453,7 +456,7 @@ def test_stop_stays_in_the_footer_and_the_help_fits_the_terminal(tmp_path, size)
             box = app.screen.query_one(Vertical)
             assert "Esc closes this help" in str(box.border_subtitle)
             # within the terminal, the status line above it and the footer (F12 STOP) below it in view
-            assert box.region.x >= 0 and box.region.right <= width and box.region.y == 1
+            assert box.region.x >= 0 and box.region.right <= width and box.region.y >= 1
             assert box.region.bottom <= height - 1
             text = app.screen.query_one(VerticalScroll)
             if size == SIZE:

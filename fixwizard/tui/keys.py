@@ -35,47 +35,39 @@ class Key:
         return self.display or self.keys.split(",")[0]
 
 
-# --- every screen ---
-STOP = Key("f12,ctrl+x", "stop_robot", "STOP", "halt the robot now and stop any automatic step (also Ctrl+X); the "
-           "wizard then stays STOPPED until you re-arm it", display="F12")
-REARM = Key("ctrl+r", "rearm", "Re-arm", "after a STOP: once the cell is checked and clear, allow robot motion "
-            "again (asks first)", display="Ctrl+R")
-QUIT = Key("ctrl+q", "quit", "Quit", "leave the wizard (asks first while the robot moves); an open session stays "
-           "resumable", display="Ctrl+Q")
+# --- every screen --- (each key's help line fits the help's 72 columns: tests/test_tui_help.py)
+STOP = Key("f12,ctrl+x", "stop_robot", "STOP", "halt the robot now (also Ctrl+X); STOPPED until re-armed",
+           display="F12")
+REARM = Key("ctrl+r", "rearm", "Re-arm", "after a STOP, allow motion again (asks first)", display="Ctrl+R")
+QUIT = Key("ctrl+q", "quit", "Quit", "leave (asks if the robot moves); a session can resume", display="Ctrl+Q")
 HELP = Key("question_mark", "help", "Help", "this help", display="?")
-BACK = Key("escape", "back", "Back", "one step back, or cancel what is running (asks before anything recorded is "
-           "dropped)", display="Esc")
+BACK = Key("escape", "back", "Back", "one step back or cancel (asks before dropping records)", display="Esc")
 
 # --- the steps ---
-TAP = Key("t", "tap", "Tap", "the robot taps straight down along the tool axis and records the contact",
-          motion=True)
-CAPTURE = Key("space", "capture", "Capture", "record the current pose of the arm (the ball stays on its point)",
-              display="Space")
+TAP = Key("t", "tap", "Tap", "the robot taps along the tool axis, records the contact", motion=True)
+CAPTURE = Key("space", "capture", "Capture", "record the arm's pose (the ball stays on its point)", display="Space")
 UNDO = Key("u", "undo", "Undo", "undo the last tap (the journal keeps it, marked undone)")
 SOLVE = Key("s", "solve", "Solve", "find every fixture pose that explains the taps")
-CHECK = Key("c", "check", "Check", "check the taps against the fixture's report: has it moved?")
-GO = Key("g", "go", "Go", "the robot moves by itself: above the suggested next tap (after asking), or through "
-         "the automatic calibration taps (at once)", motion=True)
+CHECK = Key("c", "check", "Check", "the taps against the fixture's report: has it moved?")
+GO = Key("g", "go", "Go", "the robot moves: above the next tap, or the automatic taps", motion=True)
 NEXT = Key("n", "next", "Next", "go on to the next step")
 FREEDRIVE = Key("f", "freedrive", "Freedrive", "turn freedrive on, to guide the arm by hand")
-IDENTIFY = Key("i", "identify", "Which?", "check the taps against every fixture offered: which one is this?")
-HANDS = Key("m", "simulated_hands", "SIM hands", "SIMULATED cell only: the simulated operator's hands move the arm "
-            "to the next point (and the step goes on)", motion=True)
-UNLOCK = Key("k", "simulated_unlock", "SIM unlock", "SIMULATED cell only: unlock a protective stop, as on the teach "
-             "pendant")
-DETAILS = Key("o", "details", "Details", "show or hide the solver's own figures behind what is shown (levels, "
-              "cells, budget, candidate poses)")
+IDENTIFY = Key("i", "identify", "Which?", "the taps against every fixture offered: which is this?")
+HANDS = Key("m", "simulated_hands", "SIM hands", "the simulated hands move the arm to the next point",
+            motion=True)
+UNLOCK = Key("k", "simulated_unlock", "SIM unlock", "unlock a protective stop, as on the teach pendant")
+DETAILS = Key("o", "details", "Details", "show or hide the solver's own figures (cells, levels)")
 WRITE = Key("w", "write", "Write", "write the report to the path shown")
-EDIT_PATH = Key("e", "edit_path", "Edit path", "edit where the report is written (Enter writes it there)")
-VIEW = Key("v", "next_view", "View", "show the next view: summary, rotation set, taps on the fixture")
-DROP = Key("d", "drop_suspect", "Drop tap", "drop the tap that does not fit (the journal keeps it), then sample "
-           "and solve again")
+EDIT_PATH = Key("e", "edit_path", "Edit path", "edit where the report goes (Enter writes it there)")
+VIEW = Key("v", "next_view", "View", "next view: summary, rotation set, taps on the fixture")
+DROP = Key("d", "drop_suspect", "Drop tap", "drop the tap that does not fit, then solve again")
 RESAMPLE = Key("r", "resample", "Resample", "back to sampling to add taps, then solve again")
-DONE = Key("q", "done", "Done", "finish this fixture (asks once if the report is not written)")
-SCROLL_DOWN = Key("down", "scroll_summary(1)", "Scroll down", "scroll the summary down", display="Down")
-SCROLL_UP = Key("up", "scroll_summary(-1)", "Scroll up", "scroll the summary up", display="Up")
-PAGE_DOWN = Key("pagedown", "scroll_summary(10)", "Page down", "scroll the summary a page down", display="PgDn")
-PAGE_UP = Key("pageup", "scroll_summary(-10)", "Page up", "scroll the summary a page up", display="PgUp")
+DONE = Key("q", "done", "Done", "finish this fixture (asks if the report is not written)")
+SCROLL = "the text by a line or a page"  # one line in the help for the four
+SCROLL_DOWN = Key("down", "scroll_summary(1)", "Scroll", SCROLL, display="Down")
+SCROLL_UP = Key("up", "scroll_summary(-1)", "Scroll", SCROLL, display="Up")
+PAGE_DOWN = Key("pagedown", "scroll_summary(10)", "Scroll", SCROLL, display="PgDn")
+PAGE_UP = Key("pageup", "scroll_summary(-10)", "Scroll", SCROLL, display="PgUp")
 
 # --- dialogs ---
 YES = Key("y", "yes", "Yes", "answer yes (the button says what it does)")

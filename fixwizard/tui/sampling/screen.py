@@ -89,11 +89,9 @@ class SamplingScreen(Screen[bool]):
         keys.binding(keys.FREEDRIVE, show=False),
     ]
     HELP_TITLE = "sampling"
-    HELP_ABOUT = ("Freedrive is on: guide the ball 5-10 mm above the fixture, the tool pointing at the surface, and "
-                  "tap; every tap is saved at once. Spread 10-20 taps over several faces. After 3 taps a live check "
-                  "says how well the pose is pinned down and suggests where to tap next (the robot can go above it "
-                  "for you). Solve when the check says unique. Esc goes back to the start screen; the session "
-                  "stays there to resume.")
+    HELP_ABOUT = ("Freedrive is on: bring the ball 5-10 mm above the fixture and tap; each tap is saved at once. "
+                  "Spread 10-20 taps over its faces. From 3 taps on, a live check says where to tap next; solve "
+                  "once it says unique.")  # three lines: the help of its ten keys fits 80x24
 
     def __init__(self, cell: Cell, sampling: Sampling, solver: SolverProcess, opened: str = "") -> None:
         super().__init__()

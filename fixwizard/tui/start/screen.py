@@ -51,7 +51,8 @@ class StartScreen(Screen[StartChoice]):
     HELP_ABOUT = ("Choose the robot (the simulated demo cell, or type a UR arm's IP address), the fixture's mesh "
                   "and its units (check the size shown), and the tip calibration: a stored one of this robot, or a "
                   "new one (about 5 minutes). An unfinished session can be resumed with its own fixture and "
-                  "calibration. Then Continue; \"Check a calibrated fixture\" tests whether a fixture has moved.")
+                  "calibration. Then Continue; \"Check a calibrated fixture\" tests whether a fixture has moved. Tab "
+                  "moves between the fields, Enter opens a list or presses a button.")
 
 
     def __init__(self, cell: Cell, refusal: ResumeRefused | None = None, left: Path | None = None) -> None:

@@ -51,7 +51,8 @@ class CalibrationResultScreen(CalibrationStepScreen):
     TITLE_TEXT = "result"
     HELP_ABOUT = ("Read the residuals and the proposed sample bound, check the ball diameter (as measured or from "
                   "the data sheet) and the file name, then accept to save the calibration, or redo it from the "
-                  "pivot. Esc goes back to the automatic taps, which are kept.")
+                  "pivot. Esc goes back to the automatic taps, which are kept. Tab moves between the fields and "
+                  "buttons.")
 
     calibration: TipCalibration | None = None
 

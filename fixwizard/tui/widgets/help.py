@@ -1,5 +1,6 @@
 """The help screen (``?`` on every screen): what to do on this step in one paragraph, the keys of this screen
-and the ones that work everywhere, each with what it does. Esc, n or ``?`` closes it."""
+and the ones that work everywhere, each with what it does, on one page at 80x24. Below that size it scrolls by
+the keys, and its bottom line says when more is below. Esc, n or ``?`` closes it."""
 
 from rich.text import Text
 from textual.app import ComposeResult
@@ -9,27 +10,33 @@ from textual.widgets import Static
 
 from fixwizard.tui import keys
 
-NOT_NOW = " (not now)"
+TEXT_WIDTH = 72  # the help's text at 80 columns: the box (76) less its border and padding
 
 
-def key_lines(entries: list[tuple[keys.Key, bool]]) -> list[str]:
-    """One line per key: its name, label and explanation; ``False`` marks a key that does nothing right now."""
-    return [f"  {key.shown:7} {key.label}{'' if enabled else NOT_NOW}: {key.explanation}"
-            for key, enabled in entries]
+def key_lines(screen_keys: list[keys.Key]) -> list[str]:
+    """One line per key: its name, label and explanation; keys that share a label and explanation (Up, Down, PgUp,
+    PgDn) share a line."""
+    groups: dict[tuple[str, str], list[keys.Key]] = {}
+    for key in screen_keys:
+        groups.setdefault((key.label, key.explanation), []).append(key)
+    return [f"  {'/'.join(key.shown for key in group):7} {label}: {explanation}"
+            for (label, explanation), group in groups.items()]
 
 
-def help_text(about: str, screen_keys: list[tuple[keys.Key, bool]], stopped: bool) -> str:
-    """The help screen's text: the step's paragraph, its keys, then the keys of every screen (but ``?``, which the
-    reader has just pressed: a line less to fit at 80x24)."""
-    lines = [about, ""]
+def help_text(about: str, screen_keys: list[tuple[keys.Key, bool]], stopped: bool) -> Text:
+    """The help screen's text: the step's paragraph, its keys (those that do nothing right now named in their
+    heading), then the keys of every screen but ``?``, which the reader has just pressed."""
+    text = Text(about + "\n")
     if stopped:
-        lines += [f"STOPPED: the robot keys are refused until you re-arm ({keys.name(keys.REARM)}) once the cell "
-                  "is checked and clear.", ""]
+        text.append(f"STOPPED: the robot keys are refused until you re-arm ({keys.name(keys.REARM)}).\n", "bold")
     if screen_keys:
-        lines += ["Keys on this screen:", *key_lines(screen_keys), ""]
-    lines += ["Keys everywhere:", *key_lines([(key, True) for key in keys.GLOBAL_KEYS if key != keys.HELP]),
-              "  Tab     moves between fields; Enter opens a list or presses a button"]
-    return "\n".join(lines)
+        not_now = [key.shown for key, enabled in screen_keys if not enabled]
+        text.append("\nKeys on this screen" + (f" (not now: {', '.join(not_now)})" if not_now else "") + ":\n",
+                    "bold")
+        text.append("\n".join(key_lines([key for key, _ in screen_keys])) + "\n")
+    text.append("Keys everywhere:\n", "bold")
+    text.append("\n".join(key_lines([key for key in keys.GLOBAL_KEYS if key != keys.HELP])))
+    return text
 
 
 class HelpScreen(ModalScreen[None]):
@@ -37,15 +44,30 @@ class HelpScreen(ModalScreen[None]):
 
     BINDINGS = [keys.binding(keys.NO, "Close"), keys.binding(keys.HELP, "Close", show=False)]
 
-    def __init__(self, title: str, text: str) -> None:
+    def __init__(self, title: str, text: Text) -> None:
         super().__init__()
         self.title_text, self.text = title, text
 
     def compose(self) -> ComposeResult:
         with Vertical() as box:  # the title and how to close it are in its border: every row left is the text's
             box.border_title = Text(f" Help: {self.title_text} ")
-            box.border_subtitle = Text(f" {keys.name(keys.NO)} or Esc closes this help; Up/Down scroll it ")
-            yield VerticalScroll(Static(self.text, id="help-text", markup=False))
+            yield VerticalScroll(Static(self.text, id="help-text"))
+
+    def on_mount(self) -> None:
+        scroll = self.query_one(VerticalScroll)
+        self.watch(scroll, "scroll_y", lambda _: self._show_position(), init=False)
+        self.watch(scroll, "virtual_size", lambda _: self._show_position())
+
+    def on_resize(self) -> None:
+        self.call_after_refresh(self._show_position)
+
+    def _show_position(self) -> None:
+        """The bottom line: how to close the help, and how to read on while more of it is below."""
+        scroll = self.query_one(VerticalScroll)
+        more = scroll.scroll_y < scroll.max_scroll_y
+        read_on = " MORE BELOW: Down or PgDn; " if more else " "
+        self.query_one(Vertical).border_subtitle = Text(f"{read_on}{keys.name(keys.NO)} or Esc closes this help ",
+                                                        "bold reverse" if more else "")
 
     def action_no(self) -> None:
         self.dismiss(None)
