@@ -367,6 +367,24 @@ def test_a_protective_stop_during_the_automatic_taps_says_to_re_arm_before_going
     asyncio.run(run())
 
 
+def test_stop_during_the_automatic_taps_says_to_re_arm_before_going_on(tmp_path):
+    """STOP cancels the taps between two of them, and the step said 'Press g to continue' while g was refused."""
+    async def run():
+        app = FixwizardApp(wizard(tmp_path, pace_s=0.05))
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            await calibrate_by_hand(pilot)
+            screen = app.screen
+            await pilot.press("g")
+            await until(pilot, lambda: app.motion_running())
+            await pilot.press("f12")
+            await until(pilot, lambda: not app.motion_running())
+            state = str(screen.query_one("#auto-state", Static).render())
+            assert state.startswith("Stopped: ") and state.endswith(
+                "Once the cell is checked and clear, re-arm (Ctrl+R), then press g to continue.")
+    asyncio.run(run())
+
+
 class StopCounter:
     """The simulated cell, counting ``stop`` calls."""
 

@@ -135,11 +135,11 @@ class AutoTapsScreen(CalibrationStepScreen):
         self.refresh_bindings()
         if outcome is None:
             dismiss_when_on_top(self, "next")
-        elif isinstance(outcome, Cancelled):
-            self._show(f"{outcome}. Press g to continue.")
         elif services(self).stopped or isinstance(outcome, ProtectiveStop):  # g is refused until re-armed
             self._show(f"Stopped: {outcome}\nOnce the cell is checked and clear, re-arm ({keys.name(keys.REARM)}), "
                        f"then press {keys.name(keys.GO)} to continue.")
+        elif isinstance(outcome, Cancelled):
+            self._show(f"{outcome}. Press {keys.name(keys.GO)} to continue.")
         else:
             self._show(f"Stopped: {outcome}\nPress {keys.name(keys.GO)} to continue once the cell is ready.")
 
