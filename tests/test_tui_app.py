@@ -105,10 +105,10 @@ async def calibrate_by_hand(pilot: Pilot) -> None:
 
 
 @contextlib.asynccontextmanager
-async def at_the_automatic_taps(tmp_path: Path) -> AsyncIterator[tuple[Cell, FixwizardApp, Pilot]]:
+async def at_the_automatic_taps(tmp_path: Path, pace_s: float = 0.0) -> AsyncIterator[tuple[Cell, FixwizardApp, Pilot]]:
     """The wizard on the simulated cell at its automatic calibration taps (pivot and table points by the SIMULATED
-    hands)."""
-    context = wizard(tmp_path)
+    hands); ``pace_s``: the simulated cell's time per motion."""
+    context = wizard(tmp_path, pace_s)
     app = FixwizardApp(context)
     async with app.run_test(size=SIZE) as pilot:
         await at_start(pilot)
@@ -370,10 +370,7 @@ def test_a_protective_stop_during_the_automatic_taps_says_to_re_arm_before_going
 def test_stop_during_the_automatic_taps_says_to_re_arm_before_going_on(tmp_path):
     """STOP cancels the taps between two of them, and the step said 'Press g to continue' while g was refused."""
     async def run():
-        app = FixwizardApp(wizard(tmp_path, pace_s=0.05))
-        async with app.run_test(size=SIZE) as pilot:
-            await at_start(pilot)
-            await calibrate_by_hand(pilot)
+        async with at_the_automatic_taps(tmp_path, pace_s=0.05) as (_, app, pilot):
             screen = app.screen
             await pilot.press("g")
             await until(pilot, lambda: app.motion_running())

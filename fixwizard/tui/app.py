@@ -12,7 +12,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TypeVar
 
-from textual import work
+from textual import events, work
 from textual.actions import ActionParseResult
 from textual.app import App
 from textual.dom import DOMNode
@@ -37,6 +37,7 @@ from fixwizard.tui.widgets.errors import ErrorModal, Recovery, ResumeRefused
 from fixwizard.tui.widgets.help import HelpScreen, help_text
 from fixwizard.tui.widgets.key_footer import KeyFooter
 from fixwizard.tui.widgets.status import StatusBar
+from fixwizard.tui.widgets.too_small import TooSmall, too_small
 from fixwizard.tui.workers import ShownError, in_thread
 from fixwizard.workflow.solver_process import SolverProcess
 
@@ -83,13 +84,32 @@ class FixwizardApp(App[None]):
     # --- every screen: status bar, footer, STOP, errors ---
 
     def _frame_screen(self, screen: Screen) -> None:
-        """Give every full screen the status bar and the footer (with the STOP key) unless it has them."""
+        """Give every full screen the status bar and the footer (with the STOP key) unless it has them; cover it
+        while the terminal is too small."""
+        self.call_later(self._fit_terminal)
         if isinstance(screen, ModalScreen):
             return
         if not screen.query(StatusBar):
             screen.mount(StatusBar())
         if not screen.query(Footer):
             screen.mount(KeyFooter(compact=True))
+
+    def on_resize(self, event: events.Resize) -> None:
+        self.call_later(self._fit_terminal)
+
+    def _fit_terminal(self) -> None:
+        """A step's screen on top in a terminal too small for it: cover it with ``TooSmall``; ``TooSmall`` on top in
+        a terminal large enough: close it. A dialog on top stays as it is (dialogs scroll what does not fit)."""
+        screen = self.screen
+        if isinstance(screen, TooSmall):
+            if not too_small(self.size):
+                screen.dismiss()
+        elif not isinstance(screen, ModalScreen) and too_small(self.size):
+            self.push_screen(TooSmall(getattr(screen, "HELP_TITLE", "starting")))
+
+    def step_screen(self) -> Screen:
+        """The step's screen: the topmost full screen, under any dialog or ``TooSmall``."""
+        return next(screen for screen in reversed(self.screen_stack) if not isinstance(screen, ModalScreen | TooSmall))
 
     def refresh_robot_status(self) -> None:
         """Ask the robot for its status in a worker thread (one request at a time); the bars follow."""
@@ -197,7 +217,7 @@ class FixwizardApp(App[None]):
                             f"{keys.name(keys.REARM)}.", severity="warning")
             elif yes:
                 self.stopped = False
-                freedrive = getattr(self.screen, "action_freedrive", None)  # a STOP ended the screen's freedrive
+                freedrive = getattr(self.step_screen(), "action_freedrive", None)  # a STOP ended its freedrive
                 if freedrive is not None:
                     freedrive()
                 self.notify("Re-armed: the robot keys work again" + (" and freedrive is on." if freedrive else "."))
@@ -291,7 +311,7 @@ class FixwizardApp(App[None]):
     def _reconnected(self) -> None:
         """Say so; where the operator guides the arm by hand, that freedrive is off until turned on (the lost link
         ended it, and after a fault nothing starts by itself)."""
-        by_hand = getattr(self.screen, "action_freedrive", None) is not None
+        by_hand = getattr(self.step_screen(), "action_freedrive", None) is not None
         self.notify("Connected to the robot again" + (f": freedrive is off, press {keys.name(keys.FREEDRIVE)} to "
                                                        "guide the arm by hand." if by_hand else "."))
 

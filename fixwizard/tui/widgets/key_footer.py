@@ -21,6 +21,11 @@ class KeyFooter(Footer):
                 widget.add_class("-stop")
             yield widget
 
+    def on_mount(self) -> None:
+        """Show the keys at once: Textual's footer waits for the screen's next change of bindings, which a screen
+        without focusable widgets (``TooSmall``) never has."""
+        self.call_after_refresh(self.bindings_changed, self.screen)
+
     def bindings_changed(self, screen: Screen) -> None:
         if self.is_attached and screen is self.screen and self.app.app_focus and self._enable_in_place():
             return

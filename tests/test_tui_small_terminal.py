@@ -1,0 +1,76 @@
+"""The wizard in a terminal smaller than it is made for (80x24): every field, button and footer key of a screen is in
+view from 80x23 (tmux's status line takes a row of 80x24) on; smaller, the step's screen is covered by a notice
+that says so, with STOP in view, and comes back as it was, its work gone on meanwhile."""
+
+import asyncio
+
+from textual.widgets import Button, Input, Select, Static
+
+from fixwizard.tui.app import FixwizardApp
+from fixwizard.tui.tip_calibration.result import CalibrationResultScreen
+from fixwizard.tui.widgets.errors import ErrorModal
+from fixwizard.tui.widgets.too_small import TooSmall
+from pilot_wait import until
+from test_tui_app import SIZE, at_start, at_the_automatic_taps, rearm, wizard
+from test_tui_keys import assert_in_view
+
+TMUX_SIZE = (80, 23)
+
+
+def notice(app) -> str:
+    return str(app.screen.query_one("#too-small", Static).render())
+
+
+def test_at_60x20_the_start_screen_says_the_terminal_is_too_small_instead_of_cutting_the_units_off(tmp_path):
+    async def run():
+        app = FixwizardApp(wizard(tmp_path))
+        async with app.run_test(size=(60, 20)) as pilot:
+            await until(pilot, lambda: isinstance(app.screen, TooSmall) and bool(app.screen.query("#too-small")))
+            assert notice(app).startswith("This terminal is 60x20: too small for this step (start), which needs "
+                                          "80x23 or more.")
+            await assert_in_view(pilot, "f12", "ctrl+q", "question_mark")
+            await pilot.resize_terminal(70, 30)  # wide enough is needed too
+            await until(pilot, lambda: "This terminal is 70x30" in notice(app))
+            for size in (TMUX_SIZE, SIZE):
+                await pilot.resize_terminal(*size)
+                await at_start(pilot)
+                await pilot.pause()
+                fields = [*app.screen.query(Select), *app.screen.query(Input), *app.screen.query(Button)]
+                assert {"units", "fixture", "calibration", "continue", "check"} <= {field.id for field in fields}
+                cut = [field.id for field in fields if field.display and field.region.right > size[0]]
+                assert not cut
+                await assert_in_view(pilot, "f12", "ctrl+q", "question_mark")
+    asyncio.run(run())
+
+
+def test_resized_below_80x23_mid_step_the_automatic_taps_go_on_under_the_notice_and_come_back(tmp_path):
+    """The taps run on while the notice covers their screen, STOP works from it, and the result screen the taps end
+    in waits for a terminal that fits it."""
+    async def run():
+        async with at_the_automatic_taps(tmp_path, pace_s=0.05) as (_, app, pilot):
+            taps = app.screen
+            await pilot.press("g")
+            await until(pilot, lambda: app.motion_running())
+            await pilot.resize_terminal(80, 22)
+            await until(pilot, lambda: isinstance(app.screen, TooSmall))
+            assert "(tip calibration, step 3 of 4: automatic taps)" in notice(app)
+            await pilot.press("t", "escape", "n")  # the covered screen's keys do nothing
+            await pilot.press("f12")
+            await until(pilot, lambda: app.stopped and not app.motion_running())
+            await pilot.resize_terminal(*SIZE)
+            await until(pilot, lambda: app.screen is taps or isinstance(app.screen, ErrorModal))
+            if isinstance(app.screen, ErrorModal):  # STOP came during a tap: its error, over the notice
+                await pilot.press("escape")
+            await until(pilot, lambda: app.screen is taps)
+            assert "re-arm (Ctrl+R), then press g to continue" in str(taps.query_one("#auto-state", Static).render())
+            await rearm(pilot)
+            await pilot.press("g")
+            await until(pilot, lambda: app.motion_running())
+            await pilot.resize_terminal(60, 20)
+            await until(pilot, lambda: isinstance(app.screen, TooSmall))
+            await until(pilot, lambda: not app.motion_running(), timeout_s=120)
+            await pilot.pause(0.3)
+            assert isinstance(app.screen, TooSmall)  # the result waits under the notice, not over it
+            await pilot.resize_terminal(*TMUX_SIZE)
+            await until(pilot, lambda: isinstance(app.screen, CalibrationResultScreen))
+    asyncio.run(run())
