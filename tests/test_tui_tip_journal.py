@@ -4,13 +4,18 @@ pose kept, and once accepted it is finished and no longer offered. A redo drops 
 from the pivot gives the calibration up."""
 
 import asyncio
+import contextlib
 import json
+from collections.abc import AsyncIterator
 
 import pytest
+from textual.containers import VerticalScroll
 from textual.pilot import Pilot
 from textual.widgets import Button, ProgressBar, Select, Static
+from textual.widgets._footer import FooterKey
 
 from fixwizard.tui.app import FixwizardApp
+from fixwizard.tui.cell import Cell
 from fixwizard.tui.launch import simulated_cell
 from fixwizard.tui.sampling.screen import SamplingScreen
 from fixwizard.tui.start.screen import UNFINISHED, StartScreen
@@ -21,6 +26,7 @@ from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.errors import ErrorModal
 from fixwizard.workflow.calibration_journal import find_unfinished_calibrations
 from pilot_wait import until
+from test_tui_keys import assert_in_view, open_help
 from tui_cell import start_fixture
 from tui_tip_steps import press_when_ready, to_automatic_taps, to_result
 
@@ -28,6 +34,7 @@ pytestmark = pytest.mark.slow  # two wizard runs through a tip calibration, abou
 
 SEED = 5
 SIZE = (100, 30)
+TERMINAL = (80, 24)  # the smallest the wizard is made for
 
 
 async def at_start(pilot: Pilot) -> StartScreen:
@@ -40,6 +47,16 @@ async def at_start(pilot: Pilot) -> StartScreen:
 async def press_continue(pilot: Pilot) -> None:
     pilot.app.screen.query_one("#continue", Button).focus()
     await pilot.press("enter")
+
+
+@contextlib.asynccontextmanager
+async def continued(cell: Cell, size: tuple[int, int] = SIZE) -> AsyncIterator[tuple[FixwizardApp, Pilot]]:
+    """The wizard on ``cell`` after Continue on its start screen, with the tip calibration it chose."""
+    app = FixwizardApp(cell)
+    async with app.run_test(size=size) as pilot:
+        await at_start(pilot)
+        await press_continue(pilot)
+        yield app, pilot
 
 
 def test_a_calibration_left_during_the_automatic_taps_continues_where_it_stopped(tmp_path):
@@ -104,10 +121,7 @@ def test_a_redo_drops_the_poses_for_good_and_back_from_the_pivot_gives_the_calib
         return find_unfinished_calibrations(cell.calibrations_dir, cell.robot_name)
 
     async def run() -> None:
-        app = FixwizardApp(cell)
-        async with app.run_test(size=SIZE) as pilot:
-            await at_start(pilot)
-            await press_continue(pilot)
+        async with continued(cell) as (app, pilot):
             await to_result(pilot, cell.hands.pivot_count)
             (journal,) = offered()
             assert journal.counts["tilted"] == 40
@@ -131,3 +145,33 @@ def test_a_redo_drops_the_poses_for_good_and_back_from_the_pivot_gives_the_calib
     path = asyncio.run(run())
     last = json.loads(path.read_text().splitlines()[-1])
     assert last["kind"] == "closed" and last["outcome"] == "discarded"
+
+
+def test_the_continued_automatic_taps_show_their_text_keys_and_help_whole_at_80x24(tmp_path):
+    """Continued, the automatic taps need the operator's hands first (f, or m on the simulated cell): f was not in
+    the footer, the help said nothing of it, and the step said 'Press g to start' with the taps half done."""
+    cell = simulated_cell(SEED, pace_s=0.0, folder=tmp_path)
+
+    async def leave_at_the_automatic_taps() -> None:
+        async with continued(cell, TERMINAL) as (app, pilot):
+            await to_automatic_taps(pilot, cell.hands.pivot_count)
+            await pilot.press("ctrl+q")  # nothing moves: the wizard quits at once, the calibration left unfinished
+            await until(pilot, lambda: not app.is_running)
+
+    async def continue_it() -> None:
+        async with continued(simulated_cell(SEED, pace_s=0.0, folder=tmp_path), TERMINAL) as (app, pilot):
+            await until(pilot, lambda: isinstance(app.screen, AutoTapsScreen) and bool(app.screen.query(FooterKey)))
+            await pilot.pause()
+            assert app.screen.query_one(VerticalScroll).max_scroll_y == 0  # every line in view
+            text = "\n".join(str(widget.render()) for widget in app.screen.query(Static))
+            assert "Press g to go on." in text and "turn freedrive on (f)" in text
+            assert "press m and the simulated hands bring the ball above B" in text
+            await assert_in_view(pilot, "f12", "escape", "g", "m", "f", "n", "ctrl+q", "question_mark")
+            assert "f (freedrive) lets you guide it there" in await open_help(pilot)
+            await pilot.press("f12")
+            await until(pilot, lambda: app.stopped)
+            await assert_in_view(pilot, "f12", "escape", "g", "m", "f", "n", "ctrl+q", "ctrl+r", "question_mark")
+            await open_help(pilot)
+
+    asyncio.run(leave_at_the_automatic_taps())
+    asyncio.run(continue_it())

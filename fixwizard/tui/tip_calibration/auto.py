@@ -17,7 +17,7 @@ from fixwizard.workflow.robot_calibration import Cancelled, Step
 AUTO_TEXT = (
     "The robot now moves by itself: it lifts the ball {height_mm:.0f} mm above the table, taps a {rows} x {cols} "
     "grid in the corner between A, B and C, then taps {tilted} times near B with the tool tilted. Keep clear of "
-    "the cell; the STOP key (F12) halts it at once. Press g to start.")
+    "the cell; the STOP key (F12) halts it at once. Press {go} to {start}.")
 CONTINUED_TEXT = (
     "This calibration goes on where it stopped, with every tap recorded before. If the arm was moved since, turn "
     "freedrive on ({freedrive}) and bring the ball a few centimetres above the corner B first; then press {go}.")
@@ -31,19 +31,22 @@ class AutoTapsScreen(CalibrationStepScreen):
 
     STEP = 3
     TITLE_TEXT = "automatic taps"
-    BINDINGS = [keys.binding(keys.GO), keys.binding(keys.HANDS), keys.binding(keys.FREEDRIVE, show=False),
-                keys.binding(keys.NEXT)]
+    BINDINGS = [keys.binding(keys.GO), keys.binding(keys.HANDS), keys.binding(keys.FREEDRIVE), keys.binding(keys.NEXT)]
     HELP_ABOUT = ("The robot taps the table by itself: a grid in the corner of A, B and C, then tilted taps near "
                   "B. Keep clear of the cell; STOP (F12) halts it at once, Esc cancels after the current tap and "
-                  "going on continues where it stopped. Once all taps are done, go on to the result.")
+                  "going on continues where it stopped. Once all taps are done, go on to the result. A calibration "
+                  "continued after the wizard left it starts with the ball above the corner B: f (freedrive) lets "
+                  "you guide it there.")
 
     _cancel: threading.Event | None = None
 
     def body(self) -> ComposeResult:
         workflow = self.workflow
         rows, cols = workflow.table_grid
+        started = self._continued() or any(len(self.workflow.poses(step)) for step in AUTO_STEPS)
         yield Static(AUTO_TEXT.format(height_mm=workflow.approach_height_m * 1e3, rows=rows, cols=cols,
-                                      tilted=self._totals()["tilted"]))
+                                      tilted=self._totals()["tilted"], go=keys.name(keys.GO),
+                                      start="go on" if started else "start"))
         for step in AUTO_STEPS:
             with Horizontal(classes="progress-row"):
                 yield Static(STEP_LABELS[step], classes="progress-label")
