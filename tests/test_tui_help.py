@@ -11,11 +11,12 @@ from textual.widgets import Static
 from fixwizard.tui import keys
 from fixwizard.tui.app import FixwizardApp
 from fixwizard.tui.sampling.screen import SamplingScreen
-from fixwizard.tui.widgets.help import TEXT_WIDTH, HelpScreen, help_text, key_lines
+from fixwizard.tui.solve.screen import SolveScreen
+from fixwizard.tui.widgets.help import TEXT_WIDTH, HelpScreen, help_text, key_lines, keys_of
 from pilot_wait import until
 from test_tui_app import SIZE, at_start, wizard
 from test_tui_keys import at_pivot, open_help, wizard_screens
-from tui_cell import ScreenHost, wizard_context
+from tui_cell import PausedSolver, ScreenHost, wizard_context
 
 SCREENS_WITH_HELP = [cls for cls in wizard_screens() if getattr(cls, "HELP_ABOUT", "")]
 
@@ -105,3 +106,16 @@ def test_the_wizard_s_help_is_on_one_page_at_80x24_on_the_start_the_pivot_and_sa
             assert "  i       Which?" in await open_help(pilot)
         context.session.release()
     asyncio.run(run())
+
+
+@pytest.mark.asyncio
+async def test_the_help_names_each_key_as_the_footer_does(tmp_path):
+    """The solve screen's footer says 'esc Cancel', its help said 'Esc Back: one step back'."""
+    context = wizard_context(tmp_path)
+    app = ScreenHost(lambda: context.solve_screen(PausedSolver()))
+    async with app.run_test(size=SIZE) as pilot:
+        await until(pilot, lambda: isinstance(app.screen, SolveScreen))
+        assert [(key.shown, key.label) for key, _ in keys_of(app.screen)] == [("Esc", "Cancel"), ("o", "Details")]
+        text = help_text(SolveScreen.HELP_ABOUT, keys_of(app.screen), stopped=False).plain
+        assert "  Esc     Cancel: " in text
+    context.session.release()

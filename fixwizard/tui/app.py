@@ -34,7 +34,7 @@ from fixwizard.tui.start.sessions import resume_refusal, resume_session, start_s
 from fixwizard.tui.tip_calibration.steps import calibrate_tip_on_screens, open_tip_calibration
 from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.errors import ErrorModal, Recovery, ResumeRefused
-from fixwizard.tui.widgets.help import HelpScreen, help_text
+from fixwizard.tui.widgets.help import HelpScreen, help_text, keys_of
 from fixwizard.tui.widgets.key_footer import KeyFooter
 from fixwizard.tui.widgets.status import StatusBar
 from fixwizard.tui.widgets.too_small import TooSmall, too_small
@@ -236,15 +236,9 @@ class FixwizardApp(App[None]):
         screen = self.screen
         if isinstance(screen, HelpScreen):
             return
-        entries, seen = [], set()
-        for active in self.active_bindings.values():
-            key = keys.key_of(active.binding.action)
-            if active.node is not self and key is not None and key not in keys.GLOBAL_KEYS and key not in seen:
-                seen.add(key)
-                entries.append((key, active.enabled))
         about = getattr(screen, "HELP_ABOUT", "Answer the question, or press Esc to close it.")
         title = getattr(screen, "HELP_TITLE", "this dialog")
-        self.push_screen(HelpScreen(title, help_text(about, entries, self.stopped)))
+        self.push_screen(HelpScreen(title, help_text(about, keys_of(screen), self.stopped)))
 
     async def action_quit(self) -> None:
         """Quit; while the robot moves (or an automatic step runs) ask first, then stop it. An automatic step

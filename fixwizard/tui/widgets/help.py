@@ -2,15 +2,29 @@
 and the ones that work everywhere, each with what it does, on one page at 80x24. Below that size it scrolls by
 the keys, and its bottom line says when more is below. Esc, n or ``?`` closes it."""
 
+from dataclasses import replace
+
 from rich.text import Text
 from textual.app import ComposeResult
 from textual.containers import Vertical, VerticalScroll
-from textual.screen import ModalScreen
+from textual.screen import ModalScreen, Screen
 from textual.widgets import Static
 
 from fixwizard.tui import keys
 
 TEXT_WIDTH = 72  # the help's text at 80 columns: the box (76) less its border and padding
+
+
+def keys_of(screen: Screen) -> list[tuple[keys.Key, bool]]:
+    """The keys of ``screen`` as they stand now (but the app's own), each named as its footer names it, and whether
+    it works now."""
+    entries: list[tuple[keys.Key, bool]] = []
+    for active in screen.active_bindings.values():
+        key = keys.key_of(active.binding.action)
+        if active.node is not screen.app and key is not None and key not in keys.GLOBAL_KEYS and \
+                all(key.action != seen.action for seen, _ in entries):
+            entries.append((replace(key, label=active.binding.description), active.enabled))
+    return entries
 
 
 def key_lines(screen_keys: list[keys.Key]) -> list[str]:
