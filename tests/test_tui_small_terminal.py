@@ -26,11 +26,11 @@ def test_at_60x20_the_start_screen_says_the_terminal_is_too_small_instead_of_cut
         app = FixwizardApp(wizard(tmp_path))
         async with app.run_test(size=(60, 20)) as pilot:
             await until(pilot, lambda: isinstance(app.screen, TooSmall) and bool(app.screen.query("#too-small")))
-            assert notice(app).startswith("This terminal is 60x20: too small for this step (start), which needs "
-                                          "80x23 or more.")
+            assert notice(app).startswith("Terminal too small: 60x20, the wizard needs 80x23.")
+            assert "this step (start) comes back as it was" in notice(app)
             await assert_in_view(pilot, "f12", "ctrl+q", "question_mark")
             await pilot.resize_terminal(70, 30)  # wide enough is needed too
-            await until(pilot, lambda: "This terminal is 70x30" in notice(app))
+            await until(pilot, lambda: notice(app).startswith("Terminal too small: 70x30"))
             for size in (TMUX_SIZE, SIZE):
                 await pilot.resize_terminal(*size)
                 await at_start(pilot)

@@ -18,10 +18,10 @@ def too_small(size: Size) -> bool:
 
 
 def too_small_text(size: Size, step: str) -> str:
-    return (f"This terminal is {size.width}x{size.height}: too small for this step ({step}), which needs "
-            f"{MIN_SIZE.width}x{MIN_SIZE.height} or more. Make the window larger (or the font smaller): the step "
-            f"comes back as it was. Meanwhile {keys.name(keys.STOP)} stops the robot and {keys.name(keys.QUIT)} "
-            "quits.")
+    """The notice, its point first (a very small terminal shows only its first line)."""
+    return (f"Terminal too small: {size.width}x{size.height}, the wizard needs {MIN_SIZE.width}x{MIN_SIZE.height}.\n\n"
+            f"Make the window larger (or the font smaller): this step ({step}) comes back as it was; what it was "
+            f"doing goes on meanwhile. {keys.name(keys.STOP)} stops the robot, {keys.name(keys.QUIT)} quits.")
 
 
 class TooSmall(Screen[None]):
