@@ -287,6 +287,19 @@ def test_a_protective_stop_makes_the_wizard_stopped_and_rearm_waits_for_the_unlo
     asyncio.run(run())
 
 
+def test_ctrl_c_says_which_keys_stop_the_robot_and_quit(tmp_path):
+    """A tired operator's Ctrl+C (to stop the robot, or to quit) said "Press ctrl+q to quit the app"."""
+    async def run():
+        app = FixwizardApp(wizard(tmp_path))
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await at_pivot(pilot)
+            await pilot.press("ctrl+c")
+            await until(pilot, lambda: any("Ctrl+C stops nothing here: F12 stops the robot, Ctrl+Q quits the wizard."
+                                           == str(note.message) for note in app._notifications))
+            assert isinstance(app.screen, PivotScreen) and app.is_running
+    asyncio.run(run())
+
+
 @pytest.mark.parametrize("cancel", ["n", "enter"])  # Enter presses the focused Cancel button
 def test_quitting_while_the_robot_moves_asks_first(tmp_path, cancel):
     async def run():

@@ -240,6 +240,12 @@ class FixwizardApp(App[None]):
         title = getattr(screen, "HELP_TITLE", "this dialog")
         self.push_screen(HelpScreen(title, help_text(about, keys_of(screen), self.stopped)))
 
+    def action_help_quit(self) -> None:
+        """Ctrl+C (Textual's: it copies in a field and quits nothing): which keys stop the robot and quit, in the
+        wizard's words (Textual's said "Press ctrl+q to quit the app")."""
+        self.notify(f"Ctrl+C stops nothing here: {keys.name(keys.STOP)} stops the robot, {keys.name(keys.QUIT)} "
+                    "quits the wizard.", title="Stop or quit?", severity="warning")
+
     async def action_quit(self) -> None:
         """Quit; while the robot moves (or an automatic step runs) ask first, then stop it. An automatic step
         stops after its current motion, a solve at once (its process ends), and the session stays resumable."""
