@@ -35,6 +35,7 @@ def test_at_60x20_the_start_screen_says_the_terminal_is_too_small_instead_of_cut
                 await pilot.resize_terminal(*size)
                 await at_start(pilot)
                 await pilot.pause()
+                assert not any(isinstance(screen, TooSmall) for screen in app.screen_stack)
                 fields = [*app.screen.query(Select), *app.screen.query(Input), *app.screen.query(Button)]
                 assert {"units", "fixture", "calibration", "continue", "check"} <= {field.id for field in fields}
                 cut = [field.id for field in fields if field.display and field.region.right > size[0]]
