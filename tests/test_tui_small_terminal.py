@@ -4,15 +4,17 @@ that says so, with STOP in view, and comes back as it was, its work gone on mean
 
 import asyncio
 
-from textual.widgets import Button, Input, Select, Static
+from textual.widgets import Button, Footer, Input, Select, Static
 
 from fixwizard.tui.app import FixwizardApp
+from fixwizard.tui.sampling.screen import SamplingScreen
 from fixwizard.tui.tip_calibration.result import CalibrationResultScreen
 from fixwizard.tui.widgets.errors import ErrorModal
 from fixwizard.tui.widgets.too_small import TooSmall
 from pilot_wait import until
 from test_tui_app import SIZE, at_start, at_the_automatic_taps, rearm, wizard
 from test_tui_keys import assert_in_view
+from tui_cell import record_spread_taps, wizard_context
 
 TMUX_SIZE = (80, 23)
 
@@ -75,3 +77,27 @@ def test_resized_below_80x23_mid_step_the_automatic_taps_go_on_under_the_notice_
             await pilot.resize_terminal(*TMUX_SIZE)
             await until(pilot, lambda: isinstance(app.screen, CalibrationResultScreen))
     asyncio.run(run())
+
+
+def test_at_80x23_a_robot_problem_on_sampling_stays_above_the_footer_next_to_the_advice(tmp_path):
+    """With the live check and the next-tap advice shown, a robot problem of five lines ran under the footer (the
+    screen grew a scroll bar no key reaches). The advice makes room while the problem is shown."""
+    context = wizard_context(tmp_path)
+    record_spread_taps(context, 14)
+
+    async def run():
+        app = FixwizardApp(context.cell, sampling=context.sampling)
+        async with app.run_test(size=TMUX_SIZE) as pilot:
+            await until(pilot, lambda: isinstance(app.screen, SamplingScreen) and not app.screen.busy)
+            screen = app.screen
+            guide = screen.query_one("#guide", Static)
+            await until(pilot, lambda: not screen.live_running and not guide.has_class("-empty"), timeout_s=120)
+            screen._problem(" ".join(["The link to the robot is down: the network dropped."] * 6))
+            await pilot.pause()
+            problem, footer = screen.query_one("#problem", Static), screen.query_one(Footer)
+            assert problem.region.height >= 7 and problem.region.bottom <= footer.region.y
+            assert not guide.display and screen.query_one("#title").region.width == TMUX_SIZE[0]  # no scroll bar
+            screen._say("Tap 15 recorded and saved.")
+            await until(pilot, lambda: guide.display)
+    asyncio.run(run())
+    context.session.release()

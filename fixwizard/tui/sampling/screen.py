@@ -469,6 +469,7 @@ class SamplingScreen(Screen[bool]):
         problem = self.query_one("#problem", Static)
         problem.update("")
         problem.add_class("-empty")
+        self.remove_class("-problem")
 
     def _say(self, text: str) -> None:
         """What just happened, in the note line; clears any problem shown."""
@@ -481,6 +482,7 @@ class SamplingScreen(Screen[bool]):
         problem = self.query_one("#problem", Static)
         problem.update(text)
         problem.remove_class("-empty")
+        self.add_class("-problem")  # the next-tap advice makes room for it, until it is cleared
         note = self.query_one("#note", Static)
         note.update("")
         note.add_class("-empty")  # the table shrinks under the problem and keeps its newest tap in view itself
