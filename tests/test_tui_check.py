@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from textual.widgets import DataTable, Select, Static
+from textual.widgets import DataTable, Footer, Select, Static
 
 from fixwizard import report
 from fixwizard.demo import demo_cell, demo_fixture
@@ -192,6 +192,27 @@ def test_four_suggested_taps_tell_whether_the_fixture_moved_and_what_to_do_next(
 
 
 @pytest.mark.slow
+def test_at_80x23_the_verdict_and_every_tap_are_in_view(tmp_path, calibrated):
+    """A MOVED verdict under the suggestions left the taps table its header alone at 80x23; once checked, the
+    suggestions make room (back with the next tap)."""
+    cell, tip = context_for(tmp_path, calibrated, push_m=0.01)
+
+    async def run():
+        app = check_host(cell, tip)
+        async with app.run_test(size=(80, 23)) as pilot:
+            screen = app.screen
+            await tap_suggested(pilot, screen, 5)
+            assert (await check(pilot, screen)).startswith("MOVED")
+            await pilot.pause()
+            table, verdict = screen.query_one(DataTable), screen.query_one("#check-verdict", Static)
+            assert not screen.query_one("#check-suggest").display
+            assert table.size.height >= 7  # the header, 5 taps and a row for the wizard's status line
+            assert verdict.region.bottom <= screen.query_one(Footer).region.y
+            await tap_suggested(pilot, screen, 1)
+            assert screen.query_one("#check-suggest").display
+    asyncio.run(run())
+
+
 def test_two_taps_that_fit_are_too_few_and_the_verdict_says_to_tap_more(tmp_path, calibrated):
     cell, tip = context_for(tmp_path, calibrated)
 

@@ -359,6 +359,7 @@ class CheckScreen(Screen[None]):
         verdict.update("" if result is None else "\n".join(verdict_lines(result)))
         verdict.set_class(result is None, "-empty")
         verdict.set_class(result is not None and result.moved, "-moved")
+        self.set_class(result is not None, "-checked")  # the suggestions make room for the verdict and the taps
 
     def _say(self, text: str) -> None:
         self.query_one("#check-note", Static).update(text)
