@@ -1,5 +1,5 @@
-"""The help (``?``) as an operator reads it: at 80x24, the wizard's smallest terminal, every screen's help is on one
-page, with every key it can list; below that it scrolls by the keys and says when more is below."""
+"""The help (``?``) as an operator reads it: at 80x23, the wizard's smallest terminal (80x24 in tmux), every screen's
+help is on one page, with every key it can list; below that it scrolls by the keys and says when more is below."""
 
 import asyncio
 
@@ -18,6 +18,7 @@ from test_tui_app import SIZE, at_start, wizard
 from test_tui_keys import at_pivot, open_help, wizard_screens
 from tui_cell import PausedSolver, ScreenHost, wizard_context
 
+SMALLEST = (80, 23)
 SCREENS_WITH_HELP = [cls for cls in wizard_screens() if getattr(cls, "HELP_ABOUT", "")]
 
 
@@ -53,11 +54,11 @@ def test_every_key_s_help_line_fits_the_help_s_width_at_80_columns():
 
 @pytest.mark.asyncio
 @pytest.mark.parametrize("cls", SCREENS_WITH_HELP, ids=lambda cls: cls.__name__)
-async def test_every_screen_s_help_is_on_one_page_at_80x24(cls):
+async def test_every_screen_s_help_is_on_one_page_at_80x23(cls):
     """The pivot's and sampling's help scrolled at 80x24 (sampling's by 7 lines), with a scroll bar as the only
     sign of more."""
     app = ScreenHost(lambda: worst_help(cls))
-    async with app.run_test(size=SIZE) as pilot:
+    async with app.run_test(size=SMALLEST) as pilot:
         await until(pilot, lambda: isinstance(app.screen, HelpScreen) and bool(app.screen.query(VerticalScroll)))
         await pilot.pause()
         text = app.screen.query_one(VerticalScroll)
@@ -69,7 +70,7 @@ async def test_every_screen_s_help_is_on_one_page_at_80x24(cls):
 
 
 @pytest.mark.asyncio
-async def test_below_80x24_the_help_scrolls_by_the_keys_and_says_more_is_below():
+async def test_below_80x23_the_help_scrolls_by_the_keys_and_says_more_is_below():
     app = ScreenHost(lambda: worst_help(SamplingScreen))
     async with app.run_test(size=(60, 20)) as pilot:
         await until(pilot, lambda: isinstance(app.screen, HelpScreen) and bool(app.screen.query(VerticalScroll)))

@@ -1,6 +1,6 @@
 """The help screen (``?`` on every screen): what to do on this step in one paragraph, the keys of this screen
-and the ones that work everywhere, each with what it does, on one page at 80x24. Below that size it scrolls by
-the keys, and its bottom line says when more is below. Esc, n or ``?`` closes it."""
+and the ones that work everywhere, each with what it does, on one page from 80x23 (tmux's 80x24) on. Smaller,
+it scrolls by the keys, and its bottom line says when more is below. Esc, n or ``?`` closes it."""
 
 from dataclasses import replace
 
@@ -45,7 +45,7 @@ def help_text(about: str, screen_keys: list[tuple[keys.Key, bool]], stopped: boo
         text.append(f"STOPPED: the robot keys are refused until you re-arm ({keys.name(keys.REARM)}).\n", "bold")
     if screen_keys:
         not_now = [key.shown for key, enabled in screen_keys if not enabled]
-        text.append("\nKeys on this screen" + (f" (not now: {', '.join(not_now)})" if not_now else "") + ":\n",
+        text.append("Keys on this screen" + (f" (not now: {', '.join(not_now)})" if not_now else "") + ":\n",
                     "bold")
         text.append("\n".join(key_lines([key for key, _ in screen_keys])) + "\n")
     text.append("Keys everywhere:\n", "bold")
