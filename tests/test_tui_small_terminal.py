@@ -13,7 +13,7 @@ from fixwizard.tui.widgets.errors import ErrorModal
 from fixwizard.tui.widgets.too_small import TooSmall
 from pilot_wait import until
 from test_tui_app import SIZE, at_start, at_the_automatic_taps, rearm, wizard
-from test_tui_keys import assert_in_view
+from test_tui_keys import assert_in_view, at_pivot
 from tui_cell import record_spread_taps, wizard_context
 
 TMUX_SIZE = (80, 23)
@@ -101,3 +101,20 @@ def test_at_80x23_a_robot_problem_on_sampling_stays_above_the_footer_next_to_the
             await until(pilot, lambda: guide.display)
     asyncio.run(run())
     context.session.release()
+
+
+def test_re_armed_under_the_notice_the_pivot_has_its_freedrive_back(tmp_path):
+    """STOP ends freedrive and re-arming turns it on again on a step that guides the arm by hand: under the notice
+    the re-arm looked for that step on top of the screens, found the notice and left freedrive off."""
+    async def run():
+        app = FixwizardApp(wizard(tmp_path))
+        async with app.run_test(size=SIZE) as pilot:
+            await at_pivot(pilot)
+            await pilot.resize_terminal(60, 20)
+            await until(pilot, lambda: isinstance(app.screen, TooSmall))
+            await pilot.press("f12")
+            await until(pilot, lambda: app.stopped and app.cell.robot.status().mode == "idle")
+            await rearm(pilot)
+            await until(pilot, lambda: app.cell.robot.status().mode == "freedrive")
+            assert isinstance(app.screen, TooSmall)
+    asyncio.run(run())
