@@ -71,7 +71,7 @@ PAGE_UP = Key("pageup", "scroll_summary(-10)", "Scroll", SCROLL, display="PgUp")
 
 # --- dialogs ---
 YES = Key("y", "yes", "Yes", "answer yes (the button says what it does)")
-NO = Key("n,escape", "no", "No", "answer no, change nothing", display="n")
+NO = Key("n,escape", "no", "No", "answer no, or close a message; nothing changes", display="n")
 
 GLOBAL_KEYS = (HELP, QUIT, STOP, REARM)
 SCREEN_KEYS = (BACK, TAP, CAPTURE, UNDO, SOLVE, CHECK, GO, NEXT, FREEDRIVE, IDENTIFY, HANDS, UNLOCK, DETAILS, WRITE,
