@@ -138,6 +138,24 @@ def test_launch_shows_the_start_screen_marked_simulated(tmp_path):
     asyncio.run(run())
 
 
+def test_tab_on_the_start_screen_goes_from_field_to_field_and_round(tmp_path):
+    """Every Tab lands on a field or a button, whose focus mark shows: none on the screen's scroll area, which shows
+    none (one Tab seemed to do nothing)."""
+    async def run():
+        app = FixwizardApp(wizard(tmp_path))
+        async with app.run_test(size=SIZE) as pilot:
+            await at_start(pilot)
+            first, seen = app.focused, []
+            for _ in range(20):
+                await pilot.press("tab")
+                seen.append(app.focused)
+                assert isinstance(app.focused, (Input, Select, Button)), app.focused
+                if app.focused is first:
+                    break
+            assert app.focused is first and len(seen) >= 6
+    asyncio.run(run())
+
+
 def test_a_fixture_in_the_wrong_units_is_explained_and_switching_units_loads_it(tmp_path):
     bracket_m = demo_fixture().mesh.copy()
     (tmp_path / "fixtures").mkdir()

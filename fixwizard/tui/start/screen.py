@@ -71,7 +71,7 @@ class StartScreen(Screen[StartChoice]):
 
     def compose(self) -> ComposeResult:
         robot_note = " (no real arm moves)" if self.cell.simulated else ""
-        with VerticalScroll():
+        with VerticalScroll(can_focus=False):  # Tab goes from field to field; a focused field scrolls into view
             yield Static("Start: choose the fixture and the tip calibration. Tab moves between fields, Enter "
                          "opens a list or presses a button.", classes="title")
             if self.refusal is not None:
