@@ -7,6 +7,7 @@ users is of the ``cad`` frame.
 
 import hashlib
 import io
+import struct
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -27,8 +28,8 @@ from fixwizard.mesh_format import (
     STL_TRIANGLE_BYTES,
     archive_format,
     binary_stl_size_mismatch,
+    binary_stl_triangles,
     content_format,
-    is_binary_stl,
     unreadable_line_message,
 )
 from fixwizard.mesh_hygiene import ZIP_SHARE, clean_mesh, refuse_far_vertices, refuse_non_finite
@@ -327,11 +328,14 @@ def _trimesh_load(path: Path) -> object:
 
 
 def _stl_load(path: Path) -> object:
-    """What trimesh reads from an STL file; an ASCII one as ``stl_text.reader_text`` gives it (trimesh read CR alone
+    """What trimesh reads from an STL file; a binary one with the triangle count its size holds
+    (``mesh_format.binary_stl_triangles``); an ASCII one as ``stl_text.reader_text`` gives it (trimesh read CR alone
     as no line end), with every vertex line of three numbers and every solid ended."""
     raw = path.read_bytes()
-    if is_binary_stl(raw[:STL_HEADER_BYTES], len(raw)):
-        return trimesh.load(path, process=False)
+    count = binary_stl_triangles(raw[:STL_HEADER_BYTES], len(raw))
+    if count is not None:  # with the count its size holds in the header, where the header says 0
+        counted = raw[:80] + struct.pack("<I", count) + raw[STL_HEADER_BYTES:]
+        return trimesh.load(io.BytesIO(counted), file_type="stl", process=False)
     text = stl_text.reader_text(raw)
     unreadable = stl_text.unreadable_line(text)
     if unreadable is not None:

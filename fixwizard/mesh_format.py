@@ -19,11 +19,23 @@ _DECIMAL_COMMA = re.compile(r"\d,\d")
 ARCHIVE_MAGIC = {b"PK\x03\x04": "ZIP", b"\x1f\x8b": "gzip", b"7z\xbc\xaf\x27\x1c": "7z"}  # a 3MF is a ZIP too
 
 
+def binary_stl_triangles(head: bytes, size: int) -> int | None:
+    """How many triangles a file of ``size`` bytes starting with ``head`` holds as a binary STL: the count in its
+    header when its size is that count's (whatever the header's text: it may start with "solid" too), or, when the
+    header's count is 0 (some exporters write 0 and leave the count to the size), the whole number of triangles its
+    size holds; None for a file of any other size (no binary STL, or one cut short or with bytes added)."""
+    if size < STL_HEADER_BYTES:
+        return None
+    count = struct.unpack("<I", head[80:84])[0]
+    if size == STL_HEADER_BYTES + STL_TRIANGLE_BYTES * count:
+        return count
+    held, rest = divmod(size - STL_HEADER_BYTES, STL_TRIANGLE_BYTES)
+    return held if count == 0 and held > 0 and rest == 0 else None
+
+
 def is_binary_stl(head: bytes, size: int) -> bool:
-    """Whether a file of ``size`` bytes starting with ``head`` is a binary STL: its size is that of the triangle count
-    in its header (whatever the header says: it may start with "solid" too)."""
-    return size >= STL_HEADER_BYTES and size == STL_HEADER_BYTES + STL_TRIANGLE_BYTES * struct.unpack(
-        "<I", head[80:84])[0]
+    """Whether a file of ``size`` bytes starting with ``head`` is a binary STL (``binary_stl_triangles``)."""
+    return binary_stl_triangles(head, size) is not None
 
 
 def archive_format(path: Path) -> str | None:
@@ -58,15 +70,15 @@ def content_format(path: Path) -> str | None:
 
 def binary_stl_size_mismatch(path: Path) -> tuple[int, int] | None:
     """(triangles its header announces, bytes it holds) of a binary STL whose size does not fit that count (cut
-    short, or bytes added after it); None for any other file. Binary by a NUL byte after the header: float32
+    short, or bytes added after it; a count of 0 fits any whole number of triangles, ``binary_stl_triangles``); None
+    for any other file. Binary by a NUL byte after the header: float32
     coordinates and the attribute bytes are full of them, and an ASCII STL has none."""
     with path.open("rb") as file:
         head = file.read(HEAD_BYTES)
     size = path.stat().st_size
     if size < STL_HEADER_BYTES or b"\0" not in head[STL_HEADER_BYTES:]:
         return None
-    count = struct.unpack("<I", head[80:84])[0]
-    return None if size == STL_HEADER_BYTES + STL_TRIANGLE_BYTES * count else (count, size)
+    return None if is_binary_stl(head, size) else (struct.unpack("<I", head[80:84])[0], size)
 
 
 def unreadable_line_message(path: Path, number: int, line: str) -> str:

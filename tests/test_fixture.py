@@ -161,18 +161,32 @@ def _count_set(data: bytes, count: int) -> bytes:
     return data[:80] + count.to_bytes(4, "little") + data[84:]
 
 
-@pytest.mark.parametrize("change", ["cut short", "bytes added", "no count", "count too large"])
+@pytest.mark.parametrize("change", ["cut short", "bytes added", "no count, cut short", "count too large"])
 def test_a_binary_stl_whose_size_does_not_fit_its_triangle_count_is_called_damaged(tmp_path, change):
-    """An interrupted copy, bytes appended, or an exporter that wrote 0: it was refused as holding no triangles ("a
-    point cloud or an empty model?")."""
+    """An interrupted copy or bytes appended: it was refused as holding no triangles ("a point cloud or an empty
+    model?"). A count of 0 fits only a whole number of triangles."""
     data = _exported("binary STL", header=b"solid part")
     count = len(SHAPES["l_prism"]().faces)
     path = tmp_path / "fixture.stl"
-    path.write_bytes({"cut short": data[:-30], "bytes added": data + b"\0" * 7, "no count": _count_set(data, 0),
+    path.write_bytes({"cut short": data[:-30], "bytes added": data + b"\0" * 7,
+                      "no count, cut short": _count_set(data, 0)[:-30],
                       "count too large": _count_set(data, count + 3)}[change])
     with pytest.raises(MeshError, match="binary STL whose header announces .* triangles .* the file is cut short or "
                                         "has bytes added"):
         load_fixture(path)
+
+
+def test_a_binary_stl_whose_header_counts_no_triangles_is_read_as_the_triangles_its_size_holds(tmp_path):
+    """Some exporters write a count of 0 and leave it to the file's size: it was refused as cut short. Its triangles
+    are exactly those of the same file with its count."""
+    data = _exported("binary STL", header=b"solid part")
+    counted, uncounted = tmp_path / "counted.stl", tmp_path / "uncounted.stl"
+    counted.write_bytes(data)
+    uncounted.write_bytes(_count_set(data, 0))
+    expected, read = load_fixture(counted), load_fixture(uncounted)
+    assert np.array_equal(read.mesh.vertices, expected.mesh.vertices)
+    assert np.array_equal(read.mesh.faces, expected.mesh.faces)
+    assert len(read.mesh.faces) == len(SHAPES["l_prism"]().faces) and read.warnings == expected.warnings
 
 
 def test_a_point_cloud_has_no_faces(tmp_path):
