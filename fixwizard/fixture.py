@@ -57,6 +57,13 @@ RELIABLE_NORMAL_SINE = 1e-6
 MESH_SUFFIXES = (".stl", ".ply", ".obj")
 POINTS_SUFFIXES = (".yaml", ".yml", ".csv")  # a POINTS file given as the mesh: the arguments swapped
 PLAUSIBLE_SIZE_M = (0.005, 2.5)
+# A binary STL holds float32 numbers, whose spacing grows with their size: 0.06 mm at 1 km. Where the spacing at the
+# mesh's farthest coordinate exceeds FLOAT32_WARNED_M (1 % of a 0.1 mm sample bound; beyond 16 m from the origin)
+# the bounds carry it and a warning says so; beyond FLOAT32_REFUSED_M, the finest sample bound fixwizard accepts
+# (solver.solve.MIN_SAMPLE_BOUND_M; beyond 128 m), the file cannot place its surface as finely as a tap is placed,
+# and it is refused.
+FLOAT32_WARNED_M = 1e-6
+FLOAT32_REFUSED_M = 1e-5
 
 
 @dataclass(frozen=True)
@@ -464,22 +471,51 @@ def _warped_polygons_warning(name: str, warp_m: float) -> tuple[str, str]:
             "(they are looser). Export the mesh with triangulated faces (in Blender: Triangulate Faces), or as STL.")
 
 
+def _float32_spacing_m(path: Path, raw: bytes, mesh: trimesh.Trimesh, units: str) -> float:
+    """The spacing (m) of float32 numbers at the farthest coordinate of a binary STL (``mesh``, in the file's
+    ``units``), 0 for any other file or where it is under ``FLOAT32_WARNED_M``: each vertex lies within half of it
+    of the exporter's along each axis, so the surface within it. MeshError with the fix where it exceeds
+    ``FLOAT32_REFUSED_M``, unless the mesh's size is implausible in ``units`` (a millimetre file read as metres
+    lies far out too: ``_check_size`` names the units)."""
+    if path.suffix.lower() != ".stl" or binary_stl_triangles(raw[:STL_HEADER_BYTES], len(raw)) is None:
+        return 0.0
+    farthest = float(np.max(np.abs(mesh.vertices)))
+    spacing_m = float(np.spacing(np.float32(farthest))) * METRES_PER_UNIT[units]
+    if spacing_m > FLOAT32_REFUSED_M and _plausible(float(np.max(mesh.extents)) * METRES_PER_UNIT[units]):
+        raise MeshError(f"{path}: its coordinates reach {farthest * METRES_PER_UNIT[units]:.4g} m from the file's "
+                        "origin, too far for the precision of a binary STL's numbers (float32): the file's precision "
+                        f"there is {spacing_m * 1e3:.3g} mm, coarser than the finest sample bound "
+                        f"({FLOAT32_REFUSED_M * 1e3:g} mm), and small faces collapse. Export the mesh again with its "
+                        "origin near the part (the reports then give that origin's pose)")
+    return spacing_m if spacing_m > FLOAT32_WARNED_M else 0.0
+
+
+def _float32_warning(name: str, spacing_m: float) -> tuple[str, str]:
+    return ("mesh_float32_precision",
+            f"{name} lies far from its origin for a binary STL's numbers (float32): their precision there is "
+            f"{spacing_m * 1e3:.3g} mm, so its surface may lie that far from the exported part, and the bounds allow "
+            "for that (they are looser). Export the mesh with the origin near the part.")
+
+
 def fixture_from_mesh(mesh_m: trimesh.Trimesh, path: Path, units: str, sha256: str,
-                      polygon_warp_m: float = 0.0) -> Fixture:
+                      polygon_warp_m: float = 0.0, float32_spacing_m: float = 0.0) -> Fixture:
     """A Fixture from a mesh already in metres (``path``, ``units`` and ``sha256`` describe its source), checked
     and repaired by ``mesh_hygiene``. ``polygon_warp_m``: how far the mesh's surface may lie from another one
     spanning the file's polygon faces (``polygon_faces.checked_polygon_faces``), added to the surface's offset and
-    said where it is more than an export's rounding."""
+    said where it is more than an export's rounding; ``float32_spacing_m``: how far the file's float32 numbers
+    may have moved it (``_float32_spacing_m``), added and said where it is not 0."""
     clean = clean_mesh(mesh_m, path.name)
     _check_size(path, clean.mesh, units)
     ball = minimum_enclosing_ball(clean.mesh.vertices)
     warnings = clean.warnings
     if polygon_warp_m > ZIP_SHARE * float(np.linalg.norm(clean.mesh.extents)):
         warnings += (_warped_polygons_warning(path.name, polygon_warp_m),)
+    if float32_spacing_m > 0.0:
+        warnings += (_float32_warning(path.name, float32_spacing_m),)
     return Fixture(path=path, units=units, mesh=clean.mesh, cad_p_center=ball.center, radius_m=ball.radius,
                    sha256=sha256, signed=clean.signed, warnings=warnings,
                    meeting_faces=clean.meeting_faces if np.any(clean.meeting_faces) else None,
-                   surface_offset_m=clean.surface_offset_m + polygon_warp_m)
+                   surface_offset_m=clean.surface_offset_m + polygon_warp_m + float32_spacing_m)
 
 
 def warm_up_distance_queries() -> None:
@@ -499,9 +535,11 @@ def load_fixture(path: str | Path, units: str = "m") -> Fixture:
         raise MeshError(f"mesh units must be 'm' or 'mm', not {units!r}")
     try:
         mesh, warp = _load_trimesh(path)
-        sha256 = hashlib.sha256(path.read_bytes()).hexdigest()
+        raw = path.read_bytes()
     except OSError as error:  # no permission, a name too long, a disk error: a mesh that cannot be read
         raise MeshError(file_problem(error, path)) from error
+    spacing_m = _float32_spacing_m(path, raw, mesh, units)
     mesh = mesh.copy()
     mesh.apply_scale(METRES_PER_UNIT[units])
-    return fixture_from_mesh(mesh, path, units, sha256, warp * METRES_PER_UNIT[units])
+    return fixture_from_mesh(mesh, path, units, hashlib.sha256(raw).hexdigest(), warp * METRES_PER_UNIT[units],
+                             spacing_m)

@@ -189,6 +189,54 @@ def test_a_binary_stl_whose_header_counts_no_triangles_is_read_as_the_triangles_
     assert len(read.mesh.faces) == len(SHAPES["l_prism"]().faces) and read.warnings == expected.warnings
 
 
+@pytest.mark.parametrize("offset, units", [(1000.0, "m"), (1e6, "mm"), (200.0, "m")])
+def test_a_binary_stl_too_far_from_its_origin_for_float32_is_refused_naming_the_precision(tmp_path, offset, units):
+    """A binary STL holds float32 numbers: 0.06 mm apart at 1 km, where small faces collapse ("all faces zero area"
+    named no cause) and the rest moved without a word. Beyond the finest sample bound (0.01 mm) it is refused."""
+    plate = SHAPES["l_prism"]()
+    plate.apply_scale(1e3 if units == "mm" else 1.0)
+    plate.apply_translation([offset, 0.0, 0.0])
+    path = tmp_path / "plate.stl"
+    plate.export(path)
+    spacing_mm = np.spacing(np.float32(offset + np.max(plate.extents))) * (1.0 if units == "mm" else 1e3)
+    with pytest.raises(MeshError, match=rf"coordinates reach .* m from the file's origin, too far for the precision "
+                                        rf"of a binary STL's numbers \(float32\): the file's precision there is "
+                                        rf"{spacing_mm:.3g} mm.* Export the mesh again with its origin near the part"):
+        load_fixture(path, units)
+
+
+def test_a_millimetre_binary_stl_read_as_metres_is_a_unit_mistake_not_one_too_far_from_its_origin(tmp_path):
+    """Its coordinates, read as metres, lie hundreds of metres out: the units are named, as for any such mesh."""
+    plate = SHAPES["l_prism"]()
+    plate.apply_scale(1e3)
+    plate.apply_translation([300.0, 0.0, 0.0])
+    path = tmp_path / "plate.stl"
+    plate.export(path)
+    with pytest.raises(MeshUnitsError, match="if the file is in millimetres, its units are mm"):
+        load_fixture(path, "m")
+
+
+@pytest.mark.parametrize("offset", [20.0, 100.0])
+def test_a_binary_stl_far_enough_from_its_origin_to_lose_precision_widens_the_bounds_and_says_so(tmp_path, offset):
+    """Between 16 and 128 m from the origin float32 numbers are 0.002-0.008 mm apart: a tenth or more of a fine sample
+    bound, silently. The spacing is carried in the surface's offset (every vertex moved by half of it at most along
+    each axis), and a warning says why; near the origin nothing is."""
+    plate = SHAPES["l_prism"]()
+    plate.apply_translation([offset, 0.0, 0.0])
+    path = tmp_path / "plate.stl"
+    plate.export(path)
+    fixture = load_fixture(path)
+    spacing_m = float(np.spacing(np.float32(np.max(np.abs(fixture.mesh.vertices)))))
+    assert [code for code, _ in fixture.warnings] == ["mesh_float32_precision"]
+    assert f"their precision there is {spacing_m * 1e3:.3g} mm" in fixture.warnings[0][1]
+    assert fixture.surface_offset_m == spacing_m and fixture.oracle.surface_offset_m == spacing_m
+    moved = np.abs(trimesh.load(path, process=False).vertices - plate.vertices[plate.faces].reshape(-1, 3))
+    assert moved.max() <= spacing_m / 2
+    plate.apply_translation([-offset, 0.0, 0.0])
+    plate.export(path)
+    assert load_fixture(path).warnings == () and load_fixture(path).surface_offset_m == 0.0
+
+
 def test_a_point_cloud_has_no_faces(tmp_path):
     path = tmp_path / "cloud.ply"
     trimesh.PointCloud(np.random.default_rng(0).random((50, 3)) * 0.1).export(path)
