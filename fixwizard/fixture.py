@@ -36,6 +36,7 @@ from fixwizard.mesh_hygiene import ZIP_SHARE, clean_mesh, refuse_far_vertices, r
 from fixwizard.obj_lines import (
     corner_before_first_vertex,
     face_triangles,
+    not_finite_line,
     plain,
     reader_text,
     short_vertex_line,
@@ -312,8 +313,9 @@ def _trimesh_load(path: Path) -> object:
         return _surface_of(_stl_load(path))
     if path.suffix.lower() != ".obj":
         return _surface_of(trimesh.load(path, process=False))
-    lines = plain(path.read_bytes())
-    unreadable = unreadable_line(lines)
+    raw = path.read_bytes()
+    lines = plain(raw)
+    unreadable = not_finite_line(raw) or unreadable_line(lines)
     if unreadable is not None:
         raise MeshError(unreadable_line_message(path, *unreadable))
     before_first = corner_before_first_vertex(lines)

@@ -16,6 +16,9 @@ OBJ_KEYWORDS = {"v", "vn", "vt", "vp", "f", "l", "o", "g", "s", "mtllib", "usemt
 # (those are refused once read, naming the vertex)
 NUMBER = rb"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|[-+]?(?i:nan|inf(?:inity)?)"
 _DECIMAL_COMMA = re.compile(r"\d,\d")
+# NaN or infinity as Microsoft's C library printed them before 2015 (1.#QNAN, -1.#IND, 1.#INF) and since (-nan(ind))
+NOT_FINITE_WORD = rb"[-+]?(?:\d+\.\d*#(?:qnan|snan|ind|inf)\w*|nan\(\w*\))"
+_NOT_FINITE = re.compile(NOT_FINITE_WORD.decode(), re.IGNORECASE)
 ARCHIVE_MAGIC = {b"PK\x03\x04": "ZIP", b"\x1f\x8b": "gzip", b"7z\xbc\xaf\x27\x1c": "7z"}  # a 3MF is a ZIP too
 
 
@@ -83,9 +86,15 @@ def binary_stl_size_mismatch(path: Path) -> tuple[int, int] | None:
 
 def unreadable_line_message(path: Path, number: int, line: str) -> str:
     """What to say of line ``number`` (``line``, its text) of a mesh file that holds a word that is no number where
-    the format has numbers: a decimal comma is refused, not read, since ``1,500`` may be one and a half (a German
-    number format) or fifteen hundred (an English one)."""
-    if _DECIMAL_COMMA.search(line):
+    the format has numbers: NaN or infinity in Microsoft's spelling (``1.#QNAN``) is named as such, and a decimal
+    comma is refused, not read, since ``1,500`` may be one and a half (a German number format) or fifteen hundred
+    (an English one)."""
+    not_finite = _NOT_FINITE.search(line)
+    if not_finite is not None:
+        problem = (f"holds a number that is not finite ({quoted(not_finite.group())}: NaN or infinity, as Microsoft's "
+                   "C library writes them): the exporter could not compute a vertex; repair the model in CAD and "
+                   "export it again")
+    elif _DECIMAL_COMMA.search(line):
         problem = ("writes its numbers with a decimal comma (an exporter set to a German or French number format), "
                    "which fixwizard does not read: '1,500' may be one and a half or fifteen hundred. Export the mesh "
                    "again with decimal points (an English number format), or as binary STL")

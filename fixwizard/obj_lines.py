@@ -17,7 +17,7 @@ import bisect
 import re
 from collections.abc import Iterator
 
-from fixwizard.mesh_format import NUMBER, UTF8_BOM
+from fixwizard.mesh_format import NOT_FINITE_WORD, NUMBER, UTF8_BOM
 
 _CONTINUATION = re.compile(rb"\\[ \t]*\n")  # a backslash ending a line joins the next one to it (the OBJ spec)
 _COMMENT = re.compile(rb"#[^\n]*")  # from a '#' to the line's end
@@ -33,14 +33,29 @@ _CORNER = rb"[-+]?\d+(?:/[-+]?\d*){0,2}"  # vertex[/texture[/normal]], either of
 _UNREADABLE = re.compile(rb"^[ \t]*(?:(?:v|vt|vn|vp)[ \t](?![ \t]*(?:%s)(?:[ \t]+(?:%s))*[ \t]*$)"
                          rb"|f[ \t](?![ \t]*%s(?:[ \t]+%s)*[ \t]*$))[^\n]*" % (NUMBER, NUMBER, _CORNER, _CORNER),
                          re.MULTILINE)
+# A line with NaN or infinity as Microsoft's C library writes them (``v 1.#QNAN 2 3``) before any comment: its '#'
+# would start one, and the line be read as ``v 1.``
+_NOT_FINITE_LINE = re.compile(rb"^[^\n#]*?(?<![^ \t])(?:%s)[^\n]*" % NOT_FINITE_WORD, re.MULTILINE | re.IGNORECASE)
+
+
+def line_ended(raw: bytes) -> bytes:
+    """An OBJ file's bytes with the byte-order mark dropped and every line end an LF (CR LF as a space and an LF, CR
+    alone as an LF): every other byte stays where it was."""
+    return raw.removeprefix(UTF8_BOM).replace(b"\r\n", b" \n").replace(b"\r", b"\n")
 
 
 def plain(raw: bytes) -> bytes:
-    """An OBJ file's bytes with the byte-order mark dropped, every line end an LF (CR LF as a space and an LF, CR
-    alone as an LF) and every comment blanked (spaces): every other byte stays where it was, so a position's line
-    number (``line_number``) is that of the file's line it came from."""
-    text = raw.removeprefix(UTF8_BOM).replace(b"\r\n", b" \n").replace(b"\r", b"\n")
-    return _COMMENT.sub(lambda found: b" " * len(found.group()), text)
+    """An OBJ file's ``line_ended`` bytes with every comment blanked (spaces): every other byte stays where it was,
+    so a position's line number (``line_number``) is that of the file's line it came from."""
+    return _COMMENT.sub(lambda found: b" " * len(found.group()), line_ended(raw))
+
+
+def not_finite_line(raw: bytes) -> tuple[int, str] | None:
+    """The number and the words of the first line of an OBJ file's bytes that holds NaN or infinity as Microsoft's C
+    library writes them (``1.#QNAN``, ``-nan(ind)``) before any comment, None when there is none."""
+    text = line_ended(raw)
+    found = _NOT_FINITE_LINE.search(text)
+    return None if found is None else (line_number(text, found.start()), found.group().decode("latin-1").strip())
 
 
 def joined(text: bytes) -> bytes:

@@ -575,6 +575,28 @@ def test_numbers_with_a_decimal_comma_are_refused_naming_the_line(tmp_path, suff
         load_fixture(path)
 
 
+@pytest.mark.parametrize("suffix, line", [(".obj", 4), (".ply", 13), (".stl", 11)])
+@pytest.mark.parametrize("word", ["1.#QNAN", "-1.#IND", "1.#INF00", "-nan(ind)"])
+def test_nan_as_microsofts_c_library_writes_it_is_refused_as_not_finite_naming_the_line(tmp_path, suffix, line, word):
+    """Old exporters built with Microsoft's C library write NaN as '1.#QNAN': in an OBJ its '#' starts a comment,
+    and the line was refused as 'v 1.', a vertex of too few coordinates; elsewhere as a word that is no number.
+    (numpy's PLY reader reads '-nan(ind)' as NaN: that vertex is refused as not finite.)"""
+    box = trimesh.creation.box((0.1, 0.06, 0.03))
+    lines = MESH_TEXTS[suffix](box.vertices, box.faces).splitlines()
+    words = lines[line - 1].split()
+    lines[line - 1] = " ".join(words[:-3] + [word] + words[-2:])
+    path = tmp_path / f"box{suffix}"
+    path.write_text("\n".join(lines) + "\n")
+    named = (re.escape(f"box{suffix}: line {line} ({lines[line - 1]!r}) holds a number that is not finite ({word!r}: "
+                       "NaN or infinity, as Microsoft's C library writes them)"),
+             re.escape(f"box{suffix} has 1 vertices that are not finite numbers (NaN or infinity; the first is vertex"))
+    with pytest.raises(MeshError, match=named[1] if (suffix, word) == (".ply", "-nan(ind)") else named[0]):
+        load_fixture(path)
+    lines[line - 1] = " ".join(words) + (f" # was {word}" if suffix == ".obj" else "")
+    path.write_text("\n".join(lines) + "\n")
+    assert len(load_fixture(path).mesh.faces) == 12
+
+
 @pytest.mark.parametrize("line", ["v 0.1 0.2 x", "vn 0,1 0 1", "f 1 2 3/x"])
 def test_an_obj_line_with_a_word_that_is_no_number_is_refused_naming_it(tmp_path, line):
     box = trimesh.creation.box((0.1, 0.06, 0.03))
