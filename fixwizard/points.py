@@ -7,8 +7,9 @@ YAML ``{frame: base, points_m: [[x, y, z], ...]}`` or CSV with one ``x,y,z`` row
 import csv
 import io
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
@@ -24,14 +25,19 @@ MAX_POINTS_FILE_BYTES = 1_000_000
 _NUMBER_START = re.compile(r"\s*[-+]?(?:\d|\.\d|nan|inf)", re.IGNORECASE)
 
 
-def _rows_to_array(rows: Sequence[tuple[str, object]]) -> np.ndarray:
-    """Taps (N, 3) from ``(where, row)`` pairs; ``where`` names the row in messages ("tap 3 in taps.yaml")."""
+def _rows_to_array(rows: Sequence[tuple[str, Any]], row_problem: Callable[[Any], str | None] | None = None
+                   ) -> np.ndarray:
+    """Taps (N, 3) from ``(where, row)`` pairs; ``where`` names the row in messages ("tap 3 in taps.yaml");
+    ``row_problem``: what the file's format finds wrong with a row (with the fix), checked first."""
     points = []
     for where, row in rows:
+        problem = row_problem(row) if row_problem is not None else None
+        if problem is not None:
+            raise InputError(f"{where} {problem}")
         try:
-            if isinstance(row, bool) or any(isinstance(value, bool) for value in row):  # type: ignore[attr-defined]
+            if isinstance(row, bool) or any(isinstance(value, bool) for value in row):
                 raise TypeError("true or false is no coordinate")
-            values = [float(value) for value in row]  # type: ignore[attr-defined]
+            values = [float(value) for value in row]
         except (TypeError, ValueError):
             raise InputError(f"{where} is not three numbers: {quoted(row)}") from None
         if len(values) != 3:
@@ -56,10 +62,32 @@ def _read_csv(text: str, path: Path) -> np.ndarray:
     if lines and not any(_NUMBER_START.match(cell) for cell in lines[0][1]):
         lines = lines[1:]
     rows = [(f"tap {number} (line {line} of {path})", row) for number, (line, row) in enumerate(lines, start=1)]
-    if any(";" in cell for _, row in rows[:1] for cell in row):
-        raise InputError(f"{rows[0][0]} separates the numbers with ';': save the file with commas between x, y "
-                         "and z (and '.' as the decimal point)")
-    return _rows_to_array(rows)
+    return _rows_to_array(rows, _csv_row_problem)
+
+
+def _separator(row: list[str]) -> str | None:
+    """The separator a CSV row that is not three cells seems to use instead of commas (a semicolon, as spreadsheets
+    set to a German or French number format save it, tabs or spaces), None when none."""
+    text = ",".join(row)
+    if ";" in text:
+        return "';'"
+    if "\t" in text.strip():
+        return "tabs"
+    return "spaces" if len(row) == 1 and " " in text.strip() else None
+
+
+def _csv_row_problem(row: list[str]) -> str | None:
+    """What is wrong with a CSV row that a spreadsheet or an editor wrote otherwise than fixwizard reads it, with the
+    fix (a comment, another separator than commas); None for any other row (its numbers are checked apart). Nothing
+    is guessed: ``0,1;0,2;0,3`` may be decimal commas or not."""
+    if row and row[0].lstrip().startswith("#"):
+        return (f"is a comment ({quoted(','.join(row))}): a points CSV has no comments; delete the line (a first row "
+                "of column names, such as x,y,z, may stay)")
+    separator = _separator(row) if len(row) != 3 else None
+    if separator is None:
+        return None
+    return (f"separates the numbers with {separator} ({quoted(','.join(row))}): fixwizard reads CSV with commas "
+            "between x, y and z, one tap per line, and '.' as the decimal point; save the file so")
 
 
 def _read_yaml(text: str, path: Path) -> np.ndarray:

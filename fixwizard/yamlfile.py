@@ -12,6 +12,10 @@ from fixwizard.errors import InputError, file_problem, other_version, quoted
 
 def yaml_problem(error: yaml.YAMLError) -> str:
     """A YAML syntax error in one line: what and where (line, column)."""
+    if isinstance(error, yaml.composer.ComposerError) and error.problem == "but found another document":
+        line = error.problem_mark.line + 1 if error.problem_mark is not None else "?"
+        return (f"it holds more than one document (the second starts at line {line}; '---' separates them), and a "
+                "fixwizard file is one: keep the one meant and delete the others")
     if isinstance(error, yaml.MarkedYAMLError) and error.problem_mark is not None:
         mark = error.problem_mark
         return f"{error.problem} at line {mark.line + 1}, column {mark.column + 1}"

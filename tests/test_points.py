@@ -2,6 +2,7 @@
 YAML built to blow up. Every tap counts or the file is refused naming the row; messages stay short."""
 
 import os
+import re
 import time
 
 import numpy as np
@@ -152,10 +153,42 @@ def test_a_folder_as_points_file_is_called_a_folder(tmp_path):
         load_points(tmp_path)
 
 
-def test_semicolons_between_numbers_are_named(tmp_path):
+@pytest.mark.parametrize("separator, name", [(";", "';'"), ("\t", "tabs"), (" ", "spaces"), ("; ", "';'")])
+@pytest.mark.parametrize("header", [False, True])
+def test_other_separators_than_commas_are_named_with_the_one_fixwizard_reads(tmp_path, separator, name, header):
+    """Spaces and tabs were 'not three numbers' without the fix. Nothing is guessed: the file is refused."""
+    rows = [row.replace(",", separator) for row in tap_rows()]
     path = tmp_path / "taps.csv"
-    path.write_text(csv_text([row.replace(",", ";") for row in tap_rows()]))
-    with pytest.raises(InputError, match="tap 1 \\(line 1 of .*\\) separates the numbers with ';'"):
+    path.write_text(csv_text(([separator.join("xyz")] if header else []) + rows))
+    line = 1 + header
+    with pytest.raises(InputError, match=re.escape(f"tap 1 (line {line} of {path}) separates the numbers with {name} "
+                                                   f"({rows[0]!r}): fixwizard reads CSV with commas between x, y and "
+                                                   "z, one tap per line, and '.' as the decimal point")):
+        load_points(path)
+
+
+@pytest.mark.parametrize("line, comment", [(2, "# taps of 6 Dec"), (5, "# 3 mm ball, 0.5 mm"),
+                                           (1, "#0.1,0.2,0.3")])
+def test_a_comment_line_among_the_taps_is_named_as_a_comment_to_delete(tmp_path, line, comment):
+    """A first row of names is a header; a '#' line after it, or a first row with numbers in it (a tap commented
+    out), is a comment that fixwizard's CSV does not have (it was 'not three numbers')."""
+    lines = ["x,y,z", *tap_rows()] if line > 1 else tap_rows()
+    lines.insert(line - 1, comment)
+    path = tmp_path / "taps.csv"
+    path.write_text(csv_text(lines))
+    with pytest.raises(InputError, match=re.escape(f"(line {line} of {path}) is a comment ({comment!r}): a points "
+                                                   "CSV has no comments; delete the line")):
+        load_points(path)
+
+
+def test_a_yaml_points_file_of_several_documents_says_so(tmp_path):
+    """PyYAML's words were 'but found another document'."""
+    path = tmp_path / "taps.yaml"
+    one = "frame: base\npoints_m: [[0.1, 0.2, 0.3], [0.2, 0.3, 0.4], [0.3, 0.1, 0.2]]\n"
+    path.write_text(f"---\n{one}---\n{one}")
+    with pytest.raises(InputError, match=re.escape(f"{path} is not valid YAML: it holds more than one document (the "
+                                                   "second starts at line 4; '---' separates them), and a fixwizard "
+                                                   "file is one: keep the one meant")):
         load_points(path)
 
 
