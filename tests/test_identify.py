@@ -52,6 +52,16 @@ def test_a_mesh_given_twice_is_refused_not_called_ambiguous(tmp_path, capsys, se
     assert f"the mesh {DEMO_MESH}" in err and "is given twice: give each mesh once" in err
 
 
+@pytest.mark.parametrize("again", ["gone.stl", "./gone.stl", "sub/../gone.stl"])
+def test_a_missing_mesh_given_twice_is_refused_as_given_twice(tmp_path, capsys, monkeypatch, again):
+    """It was listed twice as unreadable, and closed with 'gone.stl and gone.stl could not be read'."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "sub").mkdir()
+    assert main(["identify", str(DEMO_TAPS), "gone.stl", again, str(DEMO_MESH), *FLAGS]) == 1
+    out, err = capsys.readouterr()
+    assert out == "" and "is given twice: give each mesh once" in err and err.count("\n") == 1
+
+
 def test_an_unreadable_mesh_is_reported_and_no_verdict_is_claimed_without_it(tmp_path, other_mesh, capsys):
     """The unreadable mesh might be the one that fits: neither "none fits" (2) nor "exactly one fits" (0)."""
     text_file = tmp_path / "notes.stl"

@@ -195,16 +195,21 @@ def _print_step(step: IdentifyStep) -> None:
     print(f"  {step.mesh.name}: {step.max_cells:.0e} cells: {step.status} ({step.elapsed_s:.1f} s)", file=sys.stderr)
 
 
+def _same_mesh(first: Path, second: Path) -> bool:
+    """Whether two paths name one file: the same file (through links too), or, where one cannot be looked at (a
+    missing mesh), the same path once links and '..' are resolved."""
+    try:
+        return os.path.samefile(first, second)
+    except OSError:
+        return os.path.realpath(first) == os.path.realpath(second)
+
+
 def _check_each_mesh_once(paths: list[Path]) -> None:
-    """InputError when a mesh file is given twice (by the same path, a link or another path to it): it would fit
-    twice and the taps be called ambiguous."""
+    """InputError when a mesh file is given twice (by the same path, a link or another path to it; also one that
+    does not exist): it would fit twice and the taps be called ambiguous, or be listed twice as unreadable."""
     for later, path in enumerate(paths):
         for earlier in paths[:later]:
-            try:
-                same = os.path.samefile(earlier, path)
-            except OSError:  # a missing mesh is reported with the others
-                same = False
-            if same:
+            if _same_mesh(earlier, path):
                 twice = f"{path}" if str(earlier) == str(path) else f"{earlier} (also given as {path})"
                 raise InputError(f"the mesh {twice} is given twice: give each mesh once")
 
