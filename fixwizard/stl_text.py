@@ -4,7 +4,7 @@ trimesh's ASCII STL reader takes each vertex's numbers up to the next LF: with C
 Mac OS) the words after a facet's last vertex (``endloop``, ``endfacet``, ``facet normal``) were read as numbers,
 refused in numpy's words or, with numpy before 2.3, cut short without a word. Numbers written with a decimal comma
 (``vertex 1,5 2,0 3,0``) are refused naming their line, as in OBJ and PLY files (``mesh_format``), and so is a
-``solid`` that no ``endsolid`` ends (cut short).
+``solid`` that no ``endsolid`` ends (cut short). The solids' names are left out: trimesh read keywords in them.
 """
 
 import re
@@ -15,12 +15,15 @@ from fixwizard.mesh_format import NUMBER
 _UNREADABLE_VERTEX = re.compile(rb"^[ \t]*vertex\b(?![ \t]+(?:%s)[ \t]+(?:%s)[ \t]+(?:%s)[ \t]*$)[^\n]*"
                                 % (NUMBER, NUMBER, NUMBER), re.MULTILINE | re.IGNORECASE)
 _SOLID_LINE = re.compile(rb"^[ \t]*(end)?solid", re.MULTILINE | re.IGNORECASE)  # a solid's start or end
+_SOLID_NAME = re.compile(rb"^([ \t]*(?:end)?solid)[^\n]*", re.MULTILINE | re.IGNORECASE)  # the keyword, then the name
 
 
 def reader_text(raw: bytes) -> bytes:
-    """An ASCII STL's bytes with every line end an LF (CR LF and CR alone too): its lines, and their count, as
-    written."""
-    return raw.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
+    """An ASCII STL's bytes with every line end an LF (CR LF and CR alone too) and each solid's name left out: its
+    lines, and their count, as written. A name is free text, and trimesh's reader looked for its keywords in it: a
+    solid named 'vertex 0.5 0 0 ...' gained a triangle, and one named 'endsolid part' or 'Part1 (vertex)' was
+    refused in the reader's words."""
+    return _SOLID_NAME.sub(rb"\1", raw.replace(b"\r\n", b"\n").replace(b"\r", b"\n"))
 
 
 def unended_solid(text: bytes) -> int | None:

@@ -634,6 +634,22 @@ def test_an_ascii_stl_with_old_mac_or_windows_line_ends_loads_as_the_same_file_w
     assert np.array_equal(read.mesh.vertices, clean.mesh.vertices) and np.array_equal(read.mesh.faces, clean.mesh.faces)
 
 
+@pytest.mark.parametrize("name", ["vertex 0.5 0 0 0 0.5 0 0 0 0.5", "bracket with vertex markers", "endsolid part",
+                                  "Part1 (vertex)"])
+def test_an_ascii_stl_solid_name_is_free_text_and_the_surface_is_the_files(tmp_path, name):
+    """trimesh's reader looked for 'vertex' and 'endsolid' in the name: the first gained a triangle without a word
+    (13 faces, open), the others were refused in the reader's words ('unmatched data', '`endsolid` precedes
+    `solid`!')."""
+    box = trimesh.creation.box((0.1, 0.06, 0.03))
+    lines = _ascii_stl(box.vertices, box.faces).splitlines()
+    lines[0], lines[-1] = f"solid {name}", f"endsolid {name}"
+    path = tmp_path / "box.stl"
+    path.write_text("\n".join(lines) + "\n")
+    fixture = load_fixture(path)
+    assert len(fixture.mesh.faces) == 12 and fixture.mesh.area == pytest.approx(box.area, rel=1e-12)
+    assert fixture.signed and fixture.warnings == ()
+
+
 def test_a_ply_whose_header_ends_its_lines_with_cr_alone_is_refused_with_the_fix(tmp_path):
     """trimesh read such a header as one line: "list index out of range"."""
     box = trimesh.creation.box((0.1, 0.06, 0.03))
