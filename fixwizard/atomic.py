@@ -40,13 +40,13 @@ def home_expanded(path: str | Path) -> str:
     return expanded
 
 
-def output_target(path: str | Path) -> Path:
+def output_target(path: str | Path, example: str = "report.yaml") -> Path:
     """The file a write to ``path`` replaces: ``path`` with ``~`` expanded (``home_expanded``) and symlinks
     followed. InputError when it is a folder (also one still to be made: a path ending in '/') or not a regular
-    file (a device such as /dev/null, a pipe)."""
+    file (a device such as /dev/null, a pipe), suggesting a file named ``example`` (the output's kind and suffix)."""
     if str(path).endswith(("/", os.sep)):
         raise InputError(f"{path} ends with '/', so it names a folder; give the path of a file in it, e.g. "
-                         f"{Path(path) / 'report.yaml'}")
+                         f"{Path(path) / example}")
     expanded = home_expanded(path)
     target = Path(os.path.realpath(expanded))
     try:
@@ -56,18 +56,19 @@ def output_target(path: str | Path) -> Path:
     except OSError as error:
         raise InputError(f"cannot write {path}: {file_problem(error)}") from error
     if stat.S_ISDIR(mode):
-        raise InputError(f"{path} is a folder; give the path of a file in it, e.g. {Path(path) / 'report.yaml'}")
+        raise InputError(f"{path} is a folder; give the path of a file in it, e.g. {Path(path) / example}")
     if not stat.S_ISREG(mode):
         raise InputError(f"{path} is a device or special file, not a regular file, so fixwizard will not "
-                         "replace it; give the path of a file, e.g. report.yaml")
+                         f"replace it; give the path of a file, e.g. {example}")
     return target
 
 
 def check_output(path: str | Path, inputs: Iterable[tuple[str, str | Path | None]] = (),
-                 fix: str = "choose another path") -> Path:
-    """The target of ``output_target``, also checked against ``inputs`` (what it is, path) and for a folder
-    that can take the file (made when missing); InputError saying ``fix`` otherwise. Call it before the work."""
-    target = output_target(path)
+                 fix: str = "choose another path", example: str = "report.yaml") -> Path:
+    """The target of ``output_target`` (``example``: a name for the output, suggested where ``path`` is a folder),
+    also checked against ``inputs`` (what it is, path) and for a folder that can take the file (made when missing);
+    InputError saying ``fix`` otherwise. Call it before the work."""
+    target = output_target(path, example)
     for what, input_path in inputs:
         if input_path is not None and same_file(target, Path(input_path)):
             raise InputError(f"{path} is the {what} ({input_path}); writing there would replace it: {fix}")

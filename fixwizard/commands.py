@@ -84,7 +84,8 @@ def solve_command(args: argparse.Namespace) -> int:
 def import_poses_command(args: argparse.Namespace) -> int:
     pose_files = sorted(Path(args.directory).glob("*.pose")) if Path(args.directory).is_dir() else []
     fix = "give another POINTS path with -o, e.g. -o points.yaml"
-    check_output(args.output, [("tip file", args.tip), *(("recorded pose file", path) for path in pose_files)], fix)
+    check_output(args.output, [("tip file", args.tip), *(("recorded pose file", path) for path in pose_files)], fix,
+                 "points.yaml")
     check_not_read_later(args.output, [args.directory], ".pose", "a recorded pose", fix)
     paths, base_p_taps = import_pose_dir(args.directory, load_tip(args.tip), args.tip)
     write_points(args.output, base_p_taps, source=[path.name for path in paths], tip=str(args.tip))

@@ -30,6 +30,8 @@ from fixwizard.cli import ROS_BASE_FRAME_ID as BASE_FRAME_ID
 from fixwizard.errors import InputError, one_line
 from fixwizard.robot.ur_script import pose_literal
 
+SUFFIXES = {"urscript": ".script", "ros2": ".yaml", "json": ".json"}  # of a file of each format, as suggested
+
 
 def _identifier(name: str) -> str:
     """A URScript or ROS name part from a fixture name: letters, digits and ``_``."""
@@ -144,7 +146,7 @@ def export_command(args: argparse.Namespace) -> int:
     output = None if args.output in (None, "", "-") else args.output
     if output:  # the mesh as ``verify.fixture_of`` finds it
         check_output(output, [("report", args.report), ("report's mesh", loaded.mesh)],
-                     "give another output path with -o")
+                     "give another output path with -o", f"{loaded.name}{SUFFIXES[args.format]}")
     text = export_text(loaded, args.format, args.frame_id, args.child_frame_id, args.allow_simulated)
     ahead_s = loaded.created.timestamp() - time.time()
     if ahead_s > report.FUTURE_TOLERANCE_S:

@@ -202,6 +202,20 @@ def test_the_output_file_is_written_and_never_the_report(real_report, tmp_path, 
     assert "is the report" in capsys.readouterr().err and real_report.read_text() == before
 
 
+@pytest.mark.parametrize("format_name, suffix", [("urscript", ".script"), ("ros2", ".yaml"), ("json", ".json")])
+@pytest.mark.parametrize("made", [False, True])
+def test_a_folder_as_the_output_is_refused_suggesting_a_file_of_the_formats_kind(real_report, tmp_path, capsys,
+                                                                                 format_name, suffix, made):
+    """It suggested report.yaml for URScript and ROS 2 too."""
+    folder = tmp_path / "programs"
+    if made:
+        folder.mkdir()
+    output = str(folder) if made else f"{folder}/"
+    assert main(["export", str(real_report), "--format", format_name, "-o", output]) == 1
+    err = capsys.readouterr().err
+    assert f"give the path of a file in it, e.g. {folder / ('cell2-bracket' + suffix)}\n" in err
+
+
 @pytest.mark.parametrize("format_name", ["urscript", "ros2", "json"])
 def test_the_output_file_is_never_the_reports_mesh_nor_a_link_to_it(mesh_report, tmp_path, capsys, format_name):
     path, mesh = mesh_report

@@ -88,6 +88,14 @@ def test_a_folder_still_to_be_made_as_output_is_refused_not_written_as_a_file(de
     assert not (demo / "reports").exists()
 
 
+def test_import_poses_given_a_folder_suggests_a_points_file(tmp_path, capsys):
+    """It suggested report.yaml, a name for solve's output."""
+    (tmp_path / "poses").mkdir()
+    (tmp_path / "tip.pose").write_text("0\n0\n0.05\n0\n0\n0\n")
+    refused(capsys, ["import-poses", str(tmp_path / "poses"), "--tip", str(tmp_path / "tip.pose"), "-o",
+                     f"{tmp_path / 'taps'}/"], f"e.g. {tmp_path / 'taps' / 'points.yaml'}\n")
+
+
 def test_a_path_starting_with_a_tilde_is_in_the_home_folder_never_in_a_folder_named_tilde(demo, capsys,
                                                                                           monkeypatch):
     """``--output=~/...`` (the shell leaves it as typed) or a path typed in the wizard: as the shell would have it,

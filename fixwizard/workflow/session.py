@@ -137,7 +137,8 @@ class SamplingSession:
         the journal itself (replaced, the taps after it would go to a file no longer in the folder)."""
         if not self._taps:
             raise SessionError(f"the session {self.path} has no taps to export; record some taps first")
-        check_output(path, [("session journal", self.path)], "give the points file another name, e.g. points.yaml")
+        check_output(path, [("session journal", self.path)], "give the points file another name, e.g. points.yaml",
+                     "points.yaml")
         return write_points(path, self.base_p_taps, source_session=str(self.path),
                             tap_ids=[tap.id for tap in self.taps])
 
