@@ -96,6 +96,18 @@ def test_import_poses_given_a_folder_suggests_a_points_file(tmp_path, capsys):
                      f"{tmp_path / 'taps'}/"], f"e.g. {tmp_path / 'taps' / 'points.yaml'}\n")
 
 
+def test_calibrate_tip_given_a_folder_still_to_be_made_refuses_it_and_suggests_a_calibration_file(tmp_path, capsys):
+    """'-o calibrations/' was read without its '/' and the calibration written as a file named 'calibrations'."""
+    folders = {name: tmp_path / name for name in ("pivot", "table", "tilted")}
+    for folder in folders.values():
+        folder.mkdir()
+        (folder / "pt_1.pose").write_text("0.4\n0\n0.2\n0\n3.14159\n0\n")
+    refused(capsys, ["calibrate-tip", *(f"--{name}={folder}" for name, folder in folders.items()),
+                     "--ball-diameter", "3mm", "-o", f"{tmp_path / 'calibrations'}/"],
+            "ends with '/', so it names a folder", f"e.g. {tmp_path / 'calibrations' / 'tip.yaml'}\n")
+    assert not (tmp_path / "calibrations").exists()
+
+
 def test_a_path_starting_with_a_tilde_is_in_the_home_folder_never_in_a_folder_named_tilde(demo, capsys,
                                                                                           monkeypatch):
     """``--output=~/...`` (the shell leaves it as typed) or a path typed in the wizard: as the shell would have it,

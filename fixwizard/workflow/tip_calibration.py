@@ -71,7 +71,8 @@ def calibrate_tip_command(args: argparse.Namespace) -> int:
     pose_files = [path for folder in folders if Path(folder).is_dir() for path in sorted(Path(folder).glob("*.pose"))]
     try:
         fix = "give another calibration path with -o, e.g. -o calibrations/NAME.yaml"
-        check_output(output, [("recorded pose file", path) for path in pose_files], fix)
+        # as typed: a Path drops a final '/', and '-o calibrations/' was the file 'calibrations'
+        check_output(args.output, [("recorded pose file", path) for path in pose_files], fix, "tip.yaml")
         check_not_read_later(output, folders, ".pose", "a recorded pose", fix)
         calibration = calibrate_tip_from_dirs(args.pivot, args.table, args.tilted, parse_length_m(args.ball_diameter),
                                               args.table_coarse, output.stem, args.robot)
