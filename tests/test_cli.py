@@ -214,10 +214,17 @@ def test_import_poses_refuses_a_tip_farther_than_a_tool_holds_it(tmp_path, capsy
 @pytest.mark.parametrize("text, read", [
     ("\ufeff0.4\n0\n0.2\n0\n3.14159\n0\n", None),  # saved by Notepad with a byte-order mark: read
     ("0.4\r\n0\r\n0.2\r\n0\r\n3.14159\r\n0\r\n", None),  # Windows line ends: read
-    ("0.4\n0\n0.2\n0\n3.14159\n", "must hold exactly six numbers x y z rx ry rz (metres, radians); it holds 5"),
+    ("0.4\n0\n0.2\n0\n3.14159\n", "must hold exactly six numbers x y z rx ry rz (metres, radians); it holds 5 "
+                                   "(cut short? record that pose again)"),
+    ("0.4\n0\n0.2\n0\n1\n0\n0\n", "it holds 7 (a position and a quaternion, as ABB or ROS write a pose? "
+                                    "fixwizard reads UR's rotation vector rx ry rz)"),
+    ("0.4\n0\n0.2\n0\n180\n0\n", "turns by 180 rad (rx ry rz [0.0, 180.0, 0.0]), more than a full turn: a .pose "
+                                   "file holds UR's rotation vector in radians, and these look like degrees"),
+    ("0.4\n0\n0.2\n-179.5\n0.3\n90\n", "turns by 200.8 rad"),
     ("0.4\nnan\n0.2\n0\n3.14159\n0\n", "holds a number that is not finite ([0.4, nan, 0.2, 0.0, 3.14159, 0.0])"),
     ("0x10\n0\n0.2\n0\n3.14159\n0\n", "could not convert string to float: '0x10'")])
 def test_a_pose_file_as_editors_save_it_is_read_and_a_damaged_one_named(tmp_path, capsys, text, read):
+    """Angles in degrees (a tool pointing down is 180) were read as radians, another rotation without a word."""
     _write_poses(tmp_path / "poses", [[0.5, 0.1, 0.2, 0.0, 3.14159, 0.0]])
     (tmp_path / "poses" / "base_t_tcp_1.pose").write_text(text, encoding="utf-8", newline="")
     (tmp_path / "tip.pose").write_text("0\n0\n0.05\n0\n0\n0\n")

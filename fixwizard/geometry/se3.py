@@ -87,7 +87,9 @@ def quaternion_angle_rad(q_a: np.ndarray, q_b: np.ndarray) -> np.ndarray:
 
 
 def read_pose_file(path: str | Path) -> np.ndarray:
-    """Read a ``*.pose`` file (six numbers ``x y z rx ry rz``, m and rad) as a 4x4 transform."""
+    """Read a ``*.pose`` file (six numbers ``x y z rx ry rz``, m and rad) as a 4x4 transform. ``InputError`` for any
+    other count, a number that is not finite, or a rotation vector of more than a full turn (no rotation needs one:
+    degrees read as radians were silently another rotation)."""
     path = Path(path)
     if path.exists() and not path.is_file():  # a pipe would wait for a writer: never read
         raise InputError(f"the pose file {path} is not a regular file; a .pose file holds six numbers "
@@ -101,11 +103,27 @@ def read_pose_file(path: str | Path) -> np.ndarray:
                          "x y z rx ry rz (metres, radians).") from error
     if values.shape != (6,):
         raise InputError(f"the pose file {path} must hold exactly six numbers x y z rx ry rz (metres, radians); "
-                         f"it holds {values.size}.")
+                         f"it holds {values.size}{_count_hint(values.size)}.")
     if not np.all(np.isfinite(values)):
         raise InputError(f"the pose file {path} holds a number that is not finite ({quoted(values.tolist())}); "
                          "record that pose again")
+    turn_rad = float(np.linalg.norm(values[3:]))
+    if turn_rad > 2.0 * np.pi:
+        raise InputError(f"the pose file {path} turns by {turn_rad:.4g} rad (rx ry rz {quoted(values[3:].tolist())}), "
+                         "more than a full turn: a .pose file holds UR's rotation vector in radians, and these look "
+                         "like degrees (or another robot's angles, such as KUKA's A B C); record the pose as UR "
+                         "writes it")
     return from_ur_pose(values)
+
+
+def _count_hint(count: int) -> str:
+    """What a pose file of ``count`` numbers (not six) may be: cut short, or another robot's convention."""
+    if count < 6:
+        return " (cut short? record that pose again)"
+    if count == 7:
+        return (" (a position and a quaternion, as ABB or ROS write a pose? fixwizard reads UR's rotation vector "
+                "rx ry rz)")
+    return ""
 
 
 def _natural_key(path: Path) -> tuple[int | str, ...]:
