@@ -1,5 +1,6 @@
 """The headless command line, as an operator would use it: good runs, and every kind of bad input."""
 
+import time
 from pathlib import Path
 
 import numpy as np
@@ -222,7 +223,11 @@ def test_import_poses_refuses_a_tip_farther_than_a_tool_holds_it(tmp_path, capsy
                                    "file holds UR's rotation vector in radians, and these look like degrees"),
     ("0.4\n0\n0.2\n-179.5\n0.3\n90\n", "turns by 200.8 rad"),
     ("0.4\nnan\n0.2\n0\n3.14159\n0\n", "holds a number that is not finite ([0.4, nan, 0.2, 0.0, 3.14159, 0.0])"),
-    ("0x10\n0\n0.2\n0\n3.14159\n0\n", "could not convert string to float: '0x10'")])
+    ("0x10\n0\n0.2\n0\n3.14159\n0\n", "'0x10' is no number. A .pose file holds six numbers"),
+    ("p[0.4, 0, 0.2, 0, 3.14159, 0]\n", "'p[0.4,' is no number. A .pose file holds six numbers x y z rx ry rz "
+                                      "(metres, radians), one per line or apart by spaces, with '.' as the decimal "
+                                      "point"),
+    pytest.param("x" * 10_000 + "\n", "'xxxxxxxx", id="one long word")])
 def test_a_pose_file_as_editors_save_it_is_read_and_a_damaged_one_named(tmp_path, capsys, text, read):
     """Angles in degrees (a tool pointing down is 180) were read as radians, another rotation without a word."""
     _write_poses(tmp_path / "poses", [[0.5, 0.1, 0.2, 0.0, 3.14159, 0.0]])
@@ -235,7 +240,20 @@ def test_a_pose_file_as_editors_save_it_is_read_and_a_damaged_one_named(tmp_path
         assert code == 0 and len(yaml.safe_load((tmp_path / "p.yaml").read_text())["points_m"]) == 2
     else:
         assert code == 1 and f"the pose file {tmp_path / 'poses' / 'base_t_tcp_1.pose'}" in err
-        assert read in err and "Traceback" not in err and err.count("\n") == 1
+        assert read in err and "Traceback" not in err and err.count("\n") == 1 and len(err) < 600
+
+
+def test_a_pose_file_too_large_for_a_pose_is_refused_without_reading_it_all(tmp_path, capsys):
+    """40 MB of numbers took 5 s and 470 MB to be told it held 20 million numbers."""
+    _write_poses(tmp_path / "poses", [[0.5, 0.1, 0.2, 0.0, 3.14159, 0.0]])
+    with (tmp_path / "poses" / "base_t_tcp_1.pose").open("w") as file:
+        file.write("1 " * 5_000_000)
+    (tmp_path / "tip.pose").write_text("0\n0\n0.05\n0\n0\n0\n")
+    started = time.monotonic()
+    assert main(["import-poses", str(tmp_path / "poses"), "--tip", str(tmp_path / "tip.pose"), "-o",
+                 str(tmp_path / "p.yaml")]) == 1
+    assert time.monotonic() - started < 0.5
+    assert "base_t_tcp_1.pose holds more than 64 kB, so it is no pose" in capsys.readouterr().err
 
 
 def test_import_poses_reads_a_tip_calibration(tmp_path, real_data):

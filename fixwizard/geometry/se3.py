@@ -86,6 +86,11 @@ def quaternion_angle_rad(q_a: np.ndarray, q_b: np.ndarray) -> np.ndarray:
     return angle
 
 
+POSE_FILE_HOLDS = ("A .pose file holds six numbers x y z rx ry rz (metres, radians), one per line or apart by spaces, "
+                   "with '.' as the decimal point")
+MAX_POSE_FILE_BYTES = 65_536  # six numbers take about 120 bytes: a larger file is read no further
+
+
 def read_pose_file(path: str | Path) -> np.ndarray:
     """Read a ``*.pose`` file (six numbers ``x y z rx ry rz``, m and rad) as a 4x4 transform. ``InputError`` for any
     other count, a number that is not finite, or a rotation vector of more than a full turn (no rotation needs one:
@@ -95,12 +100,18 @@ def read_pose_file(path: str | Path) -> np.ndarray:
         raise InputError(f"the pose file {path} is not a regular file; a .pose file holds six numbers "
                          "x y z rx ry rz (metres, radians)")
     try:
-        values = np.array(path.read_text(encoding="utf-8-sig").split(), dtype=float)  # a byte-order mark: Notepad
+        with path.open("rb") as stream:
+            data = stream.read(MAX_POSE_FILE_BYTES + 1)
+        words = data.decode("utf-8-sig").split()  # a byte-order mark: Notepad
     except OSError as error:
         raise InputError(f"cannot read the pose file: {file_problem(error, path)}") from error
-    except (ValueError, UnicodeDecodeError) as error:
-        raise InputError(f"cannot read the pose file {path}: {error}. A .pose file holds six numbers "
-                         "x y z rx ry rz (metres, radians).") from error
+    except UnicodeDecodeError as error:
+        raise InputError(f"cannot read the pose file {path}: it is not text ({error.reason}). {POSE_FILE_HOLDS}.") \
+            from error
+    if len(data) > MAX_POSE_FILE_BYTES:
+        raise InputError(f"the pose file {path} holds more than {MAX_POSE_FILE_BYTES // 1024} kB, so it is no pose "
+                         f"(a log or a point cloud?). {POSE_FILE_HOLDS}.")
+    values = _pose_numbers(words, path)
     if values.shape != (6,):
         raise InputError(f"the pose file {path} must hold exactly six numbers x y z rx ry rz (metres, radians); "
                          f"it holds {values.size}{_count_hint(values.size)}.")
@@ -114,6 +125,19 @@ def read_pose_file(path: str | Path) -> np.ndarray:
                          "like degrees (or another robot's angles, such as KUKA's A B C); record the pose as UR "
                          "writes it")
     return from_ur_pose(values)
+
+
+def _pose_numbers(words: list[str], path: Path) -> np.ndarray:
+    """The numbers of a pose file's words; InputError quoting the first that is none (cut short: a file of one long
+    word flooded the terminal with it)."""
+    values = []
+    for word in words:
+        try:
+            values.append(float(word))
+        except ValueError:
+            raise InputError(f"cannot read the pose file {path}: {quoted(word)} is no number. {POSE_FILE_HOLDS}.") \
+                from None
+    return np.array(values, float)
 
 
 def _count_hint(count: int) -> str:
