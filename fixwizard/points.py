@@ -22,6 +22,7 @@ from fixwizard.yamlfile import parse_yaml, yaml_problem
 POINTS_FRAME = "base"
 # 1000 taps (the solver's most) take under 100 kB; a larger file is a point cloud, refused before it is parsed.
 MAX_POINTS_FILE_BYTES = 1_000_000
+CSV_HEADER = "x_m,y_m,z_m"  # the header row of the CSV files fixwizard writes
 _NUMBER_START = re.compile(r"\s*[-+]?(?:\d|\.\d|nan|inf)", re.IGNORECASE)
 
 
@@ -135,7 +136,12 @@ def load_points(path: str | Path) -> np.ndarray:
 
 
 def write_points(path: str | Path, base_p_taps: np.ndarray, **extra) -> Path:
-    """Write taps (N, 3, metres, base frame) as a POINTS YAML file, atomically; ``extra`` keys are kept."""
+    """Write taps (N, 3, metres, base frame) as a POINTS file, atomically: CSV where ``path`` ends in ``.csv`` (a
+    header row and one ``x,y,z`` row per tap, every digit kept; ``extra`` is left out), YAML otherwise, ``extra``
+    keys kept. A YAML file named .csv was refused by every reader of POINTS."""
+    if Path(path).suffix.lower() == ".csv":
+        rows = [CSV_HEADER, *(",".join(repr(float(value)) for value in point) for point in base_p_taps)]
+        return write_text_atomic(path, "\n".join(rows) + "\n")
     data = {"frame": POINTS_FRAME, "points_m": [[float(value) for value in point] for point in base_p_taps]}
     data.update(extra)
     return write_text_atomic(path, yaml.safe_dump(data, sort_keys=False))

@@ -10,7 +10,7 @@ import pytest
 
 from conftest import piped
 from fixwizard.errors import QUOTE_LIMIT, InputError
-from fixwizard.points import load_points
+from fixwizard.points import load_points, write_points
 from fixwizard.report import load as load_report
 
 TAPS = np.random.default_rng(18).uniform(-0.5, 0.5, (20, 3))
@@ -235,3 +235,10 @@ def test_true_or_false_is_no_coordinate(tmp_path):
     path.write_text("frame: base\npoints_m:\n- [0.1, 0.2, 0.3]\n- [0.4, true, 0.2]\n")
     with pytest.raises(InputError, match="tap 2 in .* is not three numbers: \\[0.4, True, 0.2\\]"):
         load_points(path)
+
+
+@pytest.mark.parametrize("name", ["taps.csv", "taps.CSV", "taps.yaml", "taps.txt"])
+def test_points_written_are_read_back_exactly_whatever_the_suffix(tmp_path, name):
+    """import-poses -o taps.csv wrote YAML into taps.csv, which no reader of POINTS took ('not three numbers')."""
+    path = write_points(tmp_path / name, TAPS, source=["a.pose"])
+    assert np.array_equal(load_points(path), TAPS)
