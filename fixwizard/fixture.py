@@ -42,7 +42,7 @@ from fixwizard.obj_lines import (
     short_vertex_line,
     unreadable_line,
 )
-from fixwizard.ply_text import checked_ply
+from fixwizard.ply_text import checked_ply, float32_vertices
 from fixwizard.polygon_faces import checked_polygon_faces
 
 METRES_PER_UNIT = {"m": 1.0, "mm": 1e-3}
@@ -58,11 +58,11 @@ RELIABLE_NORMAL_SINE = 1e-6
 MESH_SUFFIXES = (".stl", ".ply", ".obj")
 POINTS_SUFFIXES = (".yaml", ".yml", ".csv")  # a POINTS file given as the mesh: the arguments swapped
 PLAUSIBLE_SIZE_M = (0.005, 2.5)
-# A binary STL holds float32 numbers, whose spacing grows with their size: 0.06 mm at 1 km. Where the spacing at the
-# mesh's farthest coordinate exceeds FLOAT32_WARNED_M (1 % of a 0.1 mm sample bound; beyond 16 m from the origin)
-# the bounds carry it and a warning says so; beyond FLOAT32_REFUSED_M, the finest sample bound fixwizard accepts
-# (solver.solve.MIN_SAMPLE_BOUND_M; beyond 128 m), the file cannot place its surface as finely as a tap is placed,
-# and it is refused.
+# A binary STL, and a PLY of float coordinates, hold float32 numbers, whose spacing grows with their size: 0.06 mm at
+# 1 km. Where the spacing at the mesh's farthest coordinate exceeds FLOAT32_WARNED_M (1 % of a 0.1 mm sample bound;
+# beyond 16 m from the origin) the bounds carry it and a warning says so; beyond FLOAT32_REFUSED_M, the finest sample
+# bound fixwizard accepts (solver.solve.MIN_SAMPLE_BOUND_M; beyond 128 m), the file cannot place its surface as
+# finely as a tap is placed, and it is refused.
 FLOAT32_WARNED_M = 1e-6
 FLOAT32_REFUSED_M = 1e-5
 
@@ -473,19 +473,28 @@ def _warped_polygons_warning(name: str, warp_m: float) -> tuple[str, str]:
             "(they are looser). Export the mesh with triangulated faces (in Blender: Triangulate Faces), or as STL.")
 
 
+def _float32_kind(path: Path, raw: bytes) -> str | None:
+    """What holds the file's (``raw``, its bytes) coordinates as float32 numbers: a binary STL, a PLY of float
+    coordinates; None for any other file."""
+    if path.suffix.lower() == ".stl" and binary_stl_triangles(raw[:STL_HEADER_BYTES], len(raw)) is not None:
+        return "a binary STL"
+    return "a PLY of float coordinates" if path.suffix.lower() == ".ply" and float32_vertices(raw) else None
+
+
 def _float32_spacing_m(path: Path, raw: bytes, mesh: trimesh.Trimesh, units: str) -> float:
-    """The spacing (m) of float32 numbers at the farthest coordinate of a binary STL (``mesh``, in the file's
-    ``units``), 0 for any other file or where it is under ``FLOAT32_WARNED_M``: each vertex lies within half of it
-    of the exporter's along each axis, so the surface within it. MeshError with the fix where it exceeds
-    ``FLOAT32_REFUSED_M``, unless the mesh's size is implausible in ``units`` (a millimetre file read as metres
-    lies far out too: ``_check_size`` names the units)."""
-    if path.suffix.lower() != ".stl" or binary_stl_triangles(raw[:STL_HEADER_BYTES], len(raw)) is None:
+    """The spacing (m) of float32 numbers at the farthest coordinate of a file that holds them (``_float32_kind``;
+    ``mesh``, in the file's ``units``), 0 for any other file or where it is under ``FLOAT32_WARNED_M``: each vertex
+    lies within half of it of the exporter's along each axis, so the surface within it. MeshError with the fix
+    where it exceeds ``FLOAT32_REFUSED_M``, unless the mesh's size is implausible in ``units`` (a millimetre file
+    read as metres lies far out too: ``_check_size`` names the units)."""
+    kind = _float32_kind(path, raw)
+    if kind is None:
         return 0.0
     farthest = float(np.max(np.abs(mesh.vertices)))
     spacing_m = float(np.spacing(np.float32(farthest))) * METRES_PER_UNIT[units]
     if spacing_m > FLOAT32_REFUSED_M and _plausible(float(np.max(mesh.extents)) * METRES_PER_UNIT[units]):
         raise MeshError(f"{path}: its coordinates reach {farthest * METRES_PER_UNIT[units]:.4g} m from the file's "
-                        "origin, too far for the precision of a binary STL's numbers (float32): the file's precision "
+                        f"origin, too far for the precision of the numbers of {kind} (float32): the file's precision "
                         f"there is {spacing_m * 1e3:.3g} mm, coarser than the finest sample bound "
                         f"({FLOAT32_REFUSED_M * 1e3:g} mm), and small faces collapse. Export the mesh again with its "
                         "origin near the part (the reports then give that origin's pose)")
@@ -494,7 +503,7 @@ def _float32_spacing_m(path: Path, raw: bytes, mesh: trimesh.Trimesh, units: str
 
 def _float32_warning(name: str, spacing_m: float) -> tuple[str, str]:
     return ("mesh_float32_precision",
-            f"{name} lies far from its origin for a binary STL's numbers (float32): their precision there is "
+            f"{name} lies far from its origin for its float32 numbers: their precision there is "
             f"{spacing_m * 1e3:.3g} mm, so its surface may lie that far from the exported part, and the bounds allow "
             "for that (they are looser). Export the mesh with the origin near the part.")
 

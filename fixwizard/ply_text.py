@@ -65,6 +65,15 @@ def _elements(header: bytes) -> list[_Element]:
     return elements
 
 
+def float32_vertices(raw: bytes) -> bool:
+    """Whether a PLY file's (``raw``, its bytes) vertex coordinates are float32 (``property float x``): stored so in a
+    binary file, and read so from an ASCII one (trimesh's reader rounds the text's further digits off)."""
+    end = _HEADER_END.search(raw)
+    vertex = next((element for element in _elements(raw[:end.start()]) if element.name == "vertex"), None) \
+        if end is not None else None
+    return vertex is not None and any(words in ((b"float",), (b"float32",)) for words in vertex.types[:3])
+
+
 def _row_end(raw: bytes, position: int, element: _Element, order: str) -> tuple[int, tuple[int, ...]]:
     """Where a binary row starting at ``position`` ends, and its lists' lengths (``order``: struct's byte order);
     past the end of ``raw`` when it is cut short there."""

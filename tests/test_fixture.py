@@ -189,19 +189,34 @@ def test_a_binary_stl_whose_header_counts_no_triangles_is_read_as_the_triangles_
     assert len(read.mesh.faces) == len(SHAPES["l_prism"]().faces) and read.warnings == expected.warnings
 
 
+FLOAT32_FILES = {".stl": ("stl", "a binary STL"), ".ply": ("ply", "a PLY of float coordinates"),
+                 "ascii .ply": ("ply_ascii", "a PLY of float coordinates")}
+
+
+def _export_float32(mesh: trimesh.Trimesh, folder, kind: str):
+    """``mesh`` exported as ``kind`` (a key of FLOAT32_FILES: float32 coordinates), its path."""
+    file_type = FLOAT32_FILES[kind][0]
+    path = folder / "plate.ply" if "ply" in file_type else folder / "plate.stl"
+    path.write_bytes(mesh.export(file_type="ply", encoding="ascii") if file_type == "ply_ascii"
+                     else mesh.export(file_type=file_type))
+    return path
+
+
+@pytest.mark.parametrize("kind", sorted(FLOAT32_FILES))
 @pytest.mark.parametrize("offset, units", [(1000.0, "m"), (1e6, "mm"), (200.0, "m")])
-def test_a_binary_stl_too_far_from_its_origin_for_float32_is_refused_naming_the_precision(tmp_path, offset, units):
-    """A binary STL holds float32 numbers: 0.06 mm apart at 1 km, where small faces collapse ("all faces zero area"
-    named no cause) and the rest moved without a word. Beyond the finest sample bound (0.01 mm) it is refused."""
+def test_a_float32_mesh_too_far_from_its_origin_is_refused_naming_the_precision(tmp_path, offset, units, kind):
+    """A binary STL holds float32 numbers (and trimesh reads a PLY's float coordinates as such, ASCII too): 0.06 mm
+    apart at 1 km, where small faces collapse ("all faces zero area" named no cause) and the rest moved without a
+    word. Beyond the finest sample bound (0.01 mm) it is refused."""
     plate = SHAPES["l_prism"]()
     plate.apply_scale(1e3 if units == "mm" else 1.0)
     plate.apply_translation([offset, 0.0, 0.0])
-    path = tmp_path / "plate.stl"
-    plate.export(path)
+    path = _export_float32(plate, tmp_path, kind)
     spacing_mm = np.spacing(np.float32(offset + np.max(plate.extents))) * (1.0 if units == "mm" else 1e3)
     with pytest.raises(MeshError, match=rf"coordinates reach .* m from the file's origin, too far for the precision "
-                                        rf"of a binary STL's numbers \(float32\): the file's precision there is "
-                                        rf"{spacing_mm:.3g} mm.* Export the mesh again with its origin near the part"):
+                                        rf"of the numbers of {FLOAT32_FILES[kind][1]} \(float32\): the file's "
+                                        rf"precision there is {spacing_mm:.3g} mm.* Export the mesh again with its "
+                                        "origin near the part"):
         load_fixture(path, units)
 
 
@@ -216,24 +231,27 @@ def test_a_millimetre_binary_stl_read_as_metres_is_a_unit_mistake_not_one_too_fa
         load_fixture(path, "m")
 
 
+@pytest.mark.parametrize("kind", sorted(FLOAT32_FILES))
 @pytest.mark.parametrize("offset", [20.0, 100.0])
-def test_a_binary_stl_far_enough_from_its_origin_to_lose_precision_widens_the_bounds_and_says_so(tmp_path, offset):
+def test_a_float32_mesh_far_enough_from_its_origin_to_lose_precision_widens_the_bounds_and_says_so(tmp_path, offset,
+                                                                                                   kind):
     """Between 16 and 128 m from the origin float32 numbers are 0.002-0.008 mm apart: a tenth or more of a fine sample
     bound, silently. The spacing is carried in the surface's offset (every vertex moved by half of it at most along
-    each axis), and a warning says why; near the origin nothing is."""
+    each axis), and a warning says why; near the origin nothing is, nor in a PLY of double coordinates."""
     plate = SHAPES["l_prism"]()
     plate.apply_translation([offset, 0.0, 0.0])
-    path = tmp_path / "plate.stl"
-    plate.export(path)
+    path = _export_float32(plate, tmp_path, kind)
     fixture = load_fixture(path)
     spacing_m = float(np.spacing(np.float32(np.max(np.abs(fixture.mesh.vertices)))))
     assert [code for code, _ in fixture.warnings] == ["mesh_float32_precision"]
     assert f"their precision there is {spacing_m * 1e3:.3g} mm" in fixture.warnings[0][1]
     assert fixture.surface_offset_m == spacing_m and fixture.oracle.surface_offset_m == spacing_m
-    moved = np.abs(trimesh.load(path, process=False).vertices - plate.vertices[plate.faces].reshape(-1, 3))
+    moved = np.abs(fixture.mesh.vertices[:, None, :] - plate.vertices[None, :, :]).max(axis=2).min(axis=1)
     assert moved.max() <= spacing_m / 2
+    path.with_suffix(".ply").write_text(_ascii_ply(plate.vertices, plate.faces))  # double coordinates, as written
+    assert load_fixture(path.with_suffix(".ply")).surface_offset_m == 0.0
     plate.apply_translation([-offset, 0.0, 0.0])
-    plate.export(path)
+    path = _export_float32(plate, tmp_path, kind)
     assert load_fixture(path).warnings == () and load_fixture(path).surface_offset_m == 0.0
 
 
