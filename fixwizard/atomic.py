@@ -77,11 +77,11 @@ def check_output(path: str | Path, inputs: Iterable[tuple[str, str | Path | None
 
 
 def check_not_read_later(path: str | Path, folders: Iterable[str | Path], suffix: str, what: str, fix: str) -> None:
-    """InputError when ``path`` would be a ``*suffix`` file of one of ``folders``, which the next run reads as
-    ``what`` (an output among the inputs)."""
+    """InputError when ``path`` would be a ``*suffix`` file (in any case) of one of ``folders``, which the next run
+    reads as ``what`` (an output among the inputs)."""
     target = Path(os.path.realpath(home_expanded(path)))
     for folder in folders:
-        if target.name.endswith(suffix) and same_file(target.parent, Path(folder)):
+        if target.name.lower().endswith(suffix.lower()) and same_file(target.parent, Path(folder)):
             raise InputError(f"{path} would be a {suffix} file of the folder {folder}, which the next run reads as "
                              f"{what}: {fix}")
 

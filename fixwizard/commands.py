@@ -10,6 +10,7 @@ from fixwizard import report
 from fixwizard.atomic import check_not_read_later, check_output
 from fixwizard.errors import InputError
 from fixwizard.exit_codes import EXIT_CODES, EXIT_OK
+from fixwizard.geometry.se3 import pose_files
 from fixwizard.interrupt import run_interruptibly
 from fixwizard.points import write_points
 from fixwizard.solver.search import SearchProgress
@@ -82,9 +83,9 @@ def solve_command(args: argparse.Namespace) -> int:
 
 
 def import_poses_command(args: argparse.Namespace) -> int:
-    pose_files = sorted(Path(args.directory).glob("*.pose")) if Path(args.directory).is_dir() else []
+    recorded = pose_files(Path(args.directory)) if Path(args.directory).is_dir() else []
     fix = "give another POINTS path with -o, e.g. -o points.yaml"
-    check_output(args.output, [("tip file", args.tip), *(("recorded pose file", path) for path in pose_files)], fix,
+    check_output(args.output, [("tip file", args.tip), *(("recorded pose file", path) for path in recorded)], fix,
                  "points.yaml")
     check_not_read_later(args.output, [args.directory], ".pose", "a recorded pose", fix)
     paths, base_p_taps = import_pose_dir(args.directory, load_tip(args.tip), args.tip)

@@ -189,6 +189,20 @@ def test_import_poses_takes_the_tip_file_in_the_folder_for_no_tap(tmp_path, caps
     assert points["source"] == ["base_t_tcp_0.pose", "base_t_tcp_1.pose"]
 
 
+def test_import_poses_reads_pose_files_whatever_the_case_of_their_suffix(tmp_path, capsys):
+    """A tool that writes upper-case suffixes (tap_1.POSE) gave 'no *.pose files'; -o onto such a name is still
+    refused as a file the next run reads as a recorded pose."""
+    _write_poses(tmp_path / "poses", [[0.4, 0.0, 0.2, 0.0, 3.14159, 0.0], [0.5, 0.1, 0.2, 0.0, 3.14159, 0.0]])
+    (tmp_path / "poses" / "base_t_tcp_1.pose").rename(tmp_path / "poses" / "base_t_tcp_1.POSE")
+    (tmp_path / "tip.pose").write_text("0\n0\n0.05\n0\n0\n0\n")
+    args = ["import-poses", str(tmp_path / "poses"), "--tip", str(tmp_path / "tip.pose"), "-o"]
+    assert main([*args, str(tmp_path / "p.yaml")]) == 0
+    assert yaml.safe_load((tmp_path / "p.yaml").read_text())["source"] == ["base_t_tcp_0.pose", "base_t_tcp_1.POSE"]
+    capsys.readouterr()
+    assert main([*args, str(tmp_path / "poses" / "new.Pose")]) == 1
+    assert "which the next run reads as a recorded pose" in capsys.readouterr().err
+
+
 def test_import_poses_refuses_poses_in_millimetres(tmp_path, capsys):
     """.pose files hold metres; poses written in millimetres made ball centres 400 m from the base, silently."""
     _write_poses(tmp_path / "poses", [[412.0, -95.0, 151.0, 2.1, -2.2, 0.1], [420.0, -90.0, 152.0, 2.1, -2.2, 0.1]])

@@ -155,12 +155,18 @@ def _natural_key(path: Path) -> tuple[int | str, ...]:
     return tuple(int(part) if part.isdigit() else part for part in re.split(r"(\d+)", path.name))
 
 
+def pose_files(directory: Path) -> list[Path]:
+    """The ``*.pose`` files of a folder (the suffix in any case: ``.POSE`` from a tool that writes upper case) in
+    natural name order."""
+    return sorted((path for path in directory.iterdir() if path.suffix.lower() == ".pose"), key=_natural_key)
+
+
 def read_pose_dir(directory: str | Path) -> tuple[list[Path], np.ndarray]:
     """Read every ``*.pose`` file of a folder in natural name order; returns (paths, (N, 4, 4) transforms)."""
     directory = Path(directory)
     if not directory.is_dir():
         raise InputError(f"{directory} is not a folder; give the folder that holds the *.pose files")
-    paths = sorted(directory.glob("*.pose"), key=_natural_key)
+    paths = pose_files(directory)
     if not paths:
         raise InputError(f"no *.pose files in {directory}")
     return paths, np.stack([read_pose_file(path) for path in paths])

@@ -16,7 +16,7 @@ from fixwizard.calibration.residuals import ResidualStats
 from fixwizard.calibration.store import TipCalibration, save_calibration
 from fixwizard.calibration.taps import PoseSeries
 from fixwizard.errors import FixwizardError
-from fixwizard.geometry.se3 import read_pose_dir
+from fixwizard.geometry.se3 import pose_files, read_pose_dir
 from fixwizard.units import parse_length_m
 
 
@@ -68,11 +68,11 @@ def calibrate_tip_command(args: argparse.Namespace) -> int:
     """Run ``calibrate-tip``: 0 when the calibration was written, 1 (message on stderr) for bad input."""
     output = Path(args.output)
     folders = [folder for folder in (args.pivot, args.table, args.tilted, args.table_coarse) if folder]
-    pose_files = [path for folder in folders if Path(folder).is_dir() for path in sorted(Path(folder).glob("*.pose"))]
+    recorded = [path for folder in folders if Path(folder).is_dir() for path in pose_files(Path(folder))]
     try:
         fix = "give another calibration path with -o, e.g. -o calibrations/NAME.yaml"
         # as typed: a Path drops a final '/', and '-o calibrations/' was the file 'calibrations'
-        check_output(args.output, [("recorded pose file", path) for path in pose_files], fix, "tip.yaml")
+        check_output(args.output, [("recorded pose file", path) for path in recorded], fix, "tip.yaml")
         check_not_read_later(output, folders, ".pose", "a recorded pose", fix)
         calibration = calibrate_tip_from_dirs(args.pivot, args.table, args.tilted, parse_length_m(args.ball_diameter),
                                               args.table_coarse, output.stem, args.robot)
