@@ -358,7 +358,7 @@ def _check_other_forms(section: dict, base_T_cad: np.ndarray, path: Path, where:
             quaternion = np.array(_not_bool(quaternion), float).reshape(4)
         except (TypeError, ValueError) as error:
             raise InputError(f"{path}: {where}.quaternion_xyzw must be four numbers") from error
-        if not (np.all(np.isfinite(quaternion)) and abs(np.linalg.norm(quaternion) - 1.0) < 1e-5):
+        if not (np.all(np.abs(quaternion) <= 1.0 + 1e-5) and abs(np.linalg.norm(quaternion) - 1.0) < 1e-5):
             raise InputError(f"{path}: {where}.quaternion_xyzw is not a unit quaternion")
         apart_rad = rotation_angle_rad(Rotation.from_quat(quaternion).as_matrix().T @ base_T_cad[:3, :3])
         if apart_rad > 2.0 * QUATERNION_ROUNDING_RAD:
