@@ -12,6 +12,7 @@ Only 0 means a pose a robot program can use.
 """
 
 import argparse
+import difflib
 import importlib
 import re
 import sys
@@ -111,6 +112,14 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         self.print_usage(sys.stderr)
         self.exit(EXIT_BAD_INPUT, f"fixwizard: {message}\n")
+
+    def refuse_unrecognized(self, extras: list[str]) -> NoReturn:
+        """The usage error for words ``extras`` this (sub-)command does not take, under its own usage (the whole
+        program's hid which command they were wrong for), with the option a mistyped one likely means."""
+        options = [option for action in self._actions for option in action.option_strings if option.startswith("--")]
+        hints = [f"{word} (did you mean {likely[0]}?)" if word.startswith("-") and (likely := difflib.get_close_matches(
+            word.split("=")[0], options, n=1, cutoff=0.6)) else word for word in extras]
+        self.error(f"unrecognized arguments: {' '.join(hints)}")
 
 
 def _add_solve(commands: argparse._SubParsersAction) -> None:
@@ -232,13 +241,18 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for add in (_add_solve, _add_import_poses, _add_calibrate_tip, _add_identify, _add_verify, _add_export, _add_serve):
         add(commands)
+    parser.set_defaults(command_parser=parser)
+    for command_parser in commands.choices.values():
+        command_parser.set_defaults(command_parser=command_parser)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit code (usage errors and ``--help`` included)."""
     try:
-        args = build_parser().parse_args(argv)
+        args, extras = build_parser().parse_known_args(argv)
+        if extras:
+            args.command_parser.refuse_unrecognized(extras)
     except SystemExit as leaving:  # argparse leaves after --help (0) or a usage error (1, said on stderr)
         return int(leaving.code or 0)
     try:

@@ -362,6 +362,19 @@ def test_bad_usage_exits_1_not_2(bracket, capsys):
     assert "the cell budget must be a number such as 1e7, not 'lots'" in capsys.readouterr().err
 
 
+def test_a_word_a_command_does_not_take_is_named_under_that_commands_usage_with_the_likely_option(bracket, capsys):
+    """``solve ... --units mm`` printed the whole program's usage (which hid that solve has ``--mesh-units``)."""
+    folder, _, _ = bracket
+    assert main([*solve_args(folder), "--units", "mm"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("usage: fixwizard solve ") and "--mesh-units {m,mm}" in err
+    assert "unrecognized arguments: --units (did you mean --mesh-units?) mm" in err
+    assert main(["export", str(folder / "report.yaml"), "--format", "json", "--frame-idd=world"]) == 1
+    assert "unrecognized arguments: --frame-idd=world (did you mean --frame-id?)" in capsys.readouterr().err
+    assert main([*solve_args(folder), "--zzz", "extra"]) == 1
+    assert capsys.readouterr().err.endswith("unrecognized arguments: --zzz extra\n")
+
+
 def test_an_unwritable_report_path_is_a_message_not_a_traceback(bracket, capsys):
     folder, _, _ = bracket
     blocker = folder / "not_a_folder"
