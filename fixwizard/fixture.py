@@ -304,16 +304,15 @@ def _surface_of(loaded: object) -> object:
     return trimesh.util.concatenate([part for part in loaded.dump() if isinstance(part, trimesh.Trimesh)])
 
 
-def _trimesh_load(path: Path) -> object:
-    """The triangles trimesh reads from the file (``_surface_of``); an OBJ as ``obj_lines.reader_text`` gives it
-    (trimesh skipped indented lines, tabs after a keyword and the first line after a byte-order mark without a
-    word, and read no comment nor old Mac line ends), with no line of words that are no numbers, checked to hold
-    every triangle of its faces."""
+def _trimesh_load(path: Path, raw: bytes) -> object:
+    """The triangles trimesh reads from the file at ``path`` (``raw``, its bytes; ``_surface_of``); an OBJ as
+    ``obj_lines.reader_text`` gives it (trimesh skipped indented lines, tabs after a keyword and the first line after
+    a byte-order mark without a word, and read no comment nor old Mac line ends), with no line of words that are no
+    numbers, checked to hold every triangle of its faces."""
     if path.suffix.lower() == ".stl":
-        return _surface_of(_stl_load(path))
+        return _surface_of(_stl_load(path, raw))
     if path.suffix.lower() != ".obj":
-        return _surface_of(trimesh.load(path, process=False))
-    raw = path.read_bytes()
+        return _surface_of(trimesh.load(io.BytesIO(raw), file_type=path.suffix.lower()[1:], process=False))
     lines = plain(raw)
     unreadable = not_finite_line(raw) or unreadable_line(lines)
     if unreadable is not None:
@@ -336,11 +335,10 @@ def _trimesh_load(path: Path) -> object:
     return loaded
 
 
-def _stl_load(path: Path) -> object:
-    """What trimesh reads from an STL file; a binary one with the triangle count its size holds
-    (``mesh_format.binary_stl_triangles``); an ASCII one as ``stl_text.reader_text`` gives it (trimesh read CR alone
-    as no line end), with every vertex line of three numbers and every solid ended."""
-    raw = path.read_bytes()
+def _stl_load(path: Path, raw: bytes) -> object:
+    """What trimesh reads from an STL file at ``path`` (``raw``, its bytes); a binary one with the triangle count its
+    size holds (``mesh_format.binary_stl_triangles``); an ASCII one as ``stl_text.reader_text`` gives it (trimesh
+    read CR alone as no line end), with every vertex line of three numbers and every solid ended."""
     count = binary_stl_triangles(raw[:STL_HEADER_BYTES], len(raw))
     if count is not None:  # with the count its size holds in the header, where the header says 0
         counted = raw[:80] + struct.pack("<I", count) + raw[STL_HEADER_BYTES:]
@@ -356,9 +354,10 @@ def _stl_load(path: Path) -> object:
     return trimesh.load(io.BytesIO(text), file_type="stl", process=False)
 
 
-def _load_trimesh(path: Path) -> tuple[trimesh.Trimesh, float]:
-    """The file's triangles, and how far (its units) their surface may lie from another one spanning its polygon faces
-    (``polygon_faces.checked_polygon_faces``); ``MeshError`` saying what to do for a file that is none."""
+def _mesh_bytes(path: Path) -> bytes:
+    """The bytes of the mesh file at ``path``, read once: every check, the reader and the hash take these, so a file
+    saved again while it loads (by a CAD tool) cannot be checked, solved and hashed as different files. ``MeshError``
+    saying what to do for a path that is no mesh file (a folder, a pipe, a points file, an empty file)."""
     if path.is_dir():
         raise MeshError(f"{path} is a folder, not a mesh file; give the path of an STL, PLY or OBJ file in it")
     if not path.exists():
@@ -373,20 +372,28 @@ def _load_trimesh(path: Path) -> tuple[trimesh.Trimesh, float]:
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise MeshError(f"{path} is not a mesh file fixwizard reads; export the fixture's CAD model as STL, "
                         "PLY or OBJ")
-    if path.stat().st_size == 0:
+    raw = path.read_bytes()
+    if not raw:
         raise MeshError(f"the mesh file {path} is empty; export the fixture's CAD model again")
-    archive = archive_format(path)
+    return raw
+
+
+def _load_trimesh(path: Path, raw: bytes) -> tuple[trimesh.Trimesh, float]:
+    """The triangles of the mesh file at ``path`` (``raw``, its bytes), and how far (its units) their surface may lie
+    from another one spanning its polygon faces (``polygon_faces.checked_polygon_faces``); ``MeshError`` saying what
+    to do for a file that is none."""
+    archive = archive_format(raw)
     if archive is not None:
         raise MeshError(f"{path} is a {archive} archive, not a mesh (a compressed download; a 3MF file is a ZIP too): "
                         "unpack the mesh from it, or export the fixture's CAD model as STL, PLY or OBJ")
-    found, suffix = content_format(path), path.suffix.lower()
+    found, suffix = content_format(raw), path.suffix.lower()
     if found is not None and found != suffix:
         raise MeshError(f"{path} holds a mesh in {FORMAT_NAMES[found]} format, not {FORMAT_NAMES[suffix]} as its name "
                         f"says (fixwizard reads a mesh by its suffix): rename it to {path.with_suffix(found).name}")
     if suffix == ".ply":
-        checked_ply(path)
-    warp = checked_polygon_faces(path)
-    mismatch = binary_stl_size_mismatch(path) if suffix == ".stl" else None
+        checked_ply(path, raw)
+    warp = checked_polygon_faces(path, raw)
+    mismatch = binary_stl_size_mismatch(raw) if suffix == ".stl" else None
     if mismatch is not None:
         count, size = mismatch
         raise MeshError(f"{path} is a binary STL whose header announces {count} triangles "
@@ -395,7 +402,7 @@ def _load_trimesh(path: Path) -> tuple[trimesh.Trimesh, float]:
                         "again")
     try:
         with np.errstate(all="ignore"):  # absurd coordinates overflow in the reader; they are refused below
-            mesh = _trimesh_load(path)
+            mesh = _trimesh_load(path, raw)
     except MeshError:
         raise
     except Exception as error:  # trimesh raises many types for malformed files
@@ -540,13 +547,14 @@ def warm_up_distance_queries() -> None:
 
 
 def load_fixture(path: str | Path, units: str = "m") -> Fixture:
-    """Load a fixture mesh (STL/PLY/OBJ) in ``units`` ('m' or 'mm'); refuses implausible sizes."""
+    """Load a fixture mesh (STL/PLY/OBJ) in ``units`` ('m' or 'mm'); refuses implausible sizes. The file is read once
+    (``_mesh_bytes``): ``sha256`` is that of the bytes checked and loaded."""
     path = Path(path)
     if units not in METRES_PER_UNIT:
         raise MeshError(f"mesh units must be 'm' or 'mm', not {units!r}")
     try:
-        mesh, warp = _load_trimesh(path)
-        raw = path.read_bytes()
+        raw = _mesh_bytes(path)
+        mesh, warp = _load_trimesh(path, raw)
     except OSError as error:  # no permission, a name too long, a disk error: a mesh that cannot be read
         raise MeshError(file_problem(error, path)) from error
     spacing_m = _float32_spacing_m(path, raw, mesh, units)

@@ -41,22 +41,19 @@ def is_binary_stl(head: bytes, size: int) -> bool:
     return binary_stl_triangles(head, size) is not None
 
 
-def archive_format(path: Path) -> str | None:
-    """The kind of archive (``ZIP``, ``gzip``, ``7z``) the file is by its first bytes, None for any other file (a
-    binary STL of that size whatever its header says)."""
-    with path.open("rb") as file:
-        head = file.read(HEAD_BYTES)
-    if is_binary_stl(head, path.stat().st_size):
+def archive_format(raw: bytes) -> str | None:
+    """The kind of archive (``ZIP``, ``gzip``, ``7z``) a file of bytes ``raw`` is by its first bytes, None for any
+    other file (a binary STL of that size whatever its header says)."""
+    if is_binary_stl(raw[:STL_HEADER_BYTES], len(raw)):
         return None
-    return next((kind for magic, kind in ARCHIVE_MAGIC.items() if head.startswith(magic)), None)
+    return next((kind for magic, kind in ARCHIVE_MAGIC.items() if raw.startswith(magic)), None)
 
 
-def content_format(path: Path) -> str | None:
-    """The suffix (``.stl``, ``.ply`` or ``.obj``) of the format the file's content is in, None when its first
-    bytes match none of them (then the reader of its suffix says what is wrong)."""
-    with path.open("rb") as file:
-        head = file.read(HEAD_BYTES)
-    if is_binary_stl(head, path.stat().st_size):
+def content_format(raw: bytes) -> str | None:
+    """The suffix (``.stl``, ``.ply`` or ``.obj``) of the format a file's content (``raw``, its bytes) is in, None
+    when its first bytes match none of them (then the reader of its suffix says what is wrong)."""
+    head = raw[:HEAD_BYTES]
+    if is_binary_stl(head, len(raw)):
         return ".stl"  # binary, whatever its header says (it may start with "solid" too)
     text = head.removeprefix(UTF8_BOM).lstrip()
     if text.startswith(b"ply") and text[3:4] in (b"\n", b"\r"):
@@ -71,14 +68,12 @@ def content_format(path: Path) -> str | None:
     return None
 
 
-def binary_stl_size_mismatch(path: Path) -> tuple[int, int] | None:
-    """(triangles its header announces, bytes it holds) of a binary STL whose size does not fit that count (cut
-    short, or bytes added after it; a count of 0 fits any whole number of triangles, ``binary_stl_triangles``); None
-    for any other file. Binary by a NUL byte after the header: float32
-    coordinates and the attribute bytes are full of them, and an ASCII STL has none."""
-    with path.open("rb") as file:
-        head = file.read(HEAD_BYTES)
-    size = path.stat().st_size
+def binary_stl_size_mismatch(raw: bytes) -> tuple[int, int] | None:
+    """(triangles its header announces, bytes it holds) of a binary STL (``raw``, its bytes) whose size does not fit
+    that count (cut short, or bytes added after it; a count of 0 fits any whole number of triangles,
+    ``binary_stl_triangles``); None for any other file. Binary by a NUL byte after the header: float32 coordinates
+    and the attribute bytes are full of them, and an ASCII STL has none."""
+    head, size = raw[:HEAD_BYTES], len(raw)
     if size < STL_HEADER_BYTES or b"\0" not in head[STL_HEADER_BYTES:]:
         return None
     return None if is_binary_stl(head, size) else (struct.unpack("<I", head[80:84])[0], size)

@@ -219,12 +219,11 @@ def _unreadable_line(raw: bytes, start: int) -> tuple[int, str] | None:
     return len(_LINE_END.findall(raw, 0, line_start)) + 1, line.decode("latin-1").strip()
 
 
-def checked_ply(path: Path) -> None:
-    """Raise ``MeshError`` saying what to do for a PLY file at ``path`` whose header ends its lines with CR alone,
-    that holds triangle strips, or, ASCII, a word that is no number (a decimal comma) or other rows than its header
-    announces, naming the line, or, binary, other data than its header announces or faces of different corner
-    counts; other files pass (trimesh's reader says what else is wrong)."""
-    raw = path.read_bytes()
+def checked_ply(path: Path, raw: bytes) -> None:
+    """Raise ``MeshError`` saying what to do for a PLY file at ``path`` (``raw``, its bytes) whose header ends its
+    lines with CR alone, that holds triangle strips, or, ASCII, a word that is no number (a decimal comma) or other
+    rows than its header announces, naming the line, or, binary, other data than its header announces or faces of
+    different corner counts; other files pass (trimesh's reader says what else is wrong)."""
     if _ends_lines_with_cr_alone(raw[:HEAD_BYTES]):
         raise MeshError(f"{path}: its header's lines end with a carriage return alone (CR, as classic Mac OS wrote "
                         "text), which fixwizard's PLY reader does not read; export the mesh again, or convert its "

@@ -12,6 +12,7 @@ vertices from 1 (negative numbers count back), and trimesh read a 0 as some othe
 lines are read as the loader hands them to trimesh (``obj_lines.plain``): ended by LF, CR LF or CR alone, comments
 left out, a backslash at the end joining the next line to it."""
 
+import io
 import re
 from collections.abc import Iterable
 from pathlib import Path
@@ -97,13 +98,13 @@ def _obj_polygons(text: bytes, lines: bytes) -> tuple[np.ndarray, list[tuple[str
     return vertices, found
 
 
-def _ply_polygons(path: Path) -> tuple[np.ndarray, list[tuple[str, np.ndarray]]]:
-    """The vertices of a PLY file and its faces, read by trimesh's own parser before it cuts them (empty where it
-    cannot be read: trimesh's reader then says what is wrong)."""
+def _ply_polygons(raw: bytes) -> tuple[np.ndarray, list[tuple[str, np.ndarray]]]:
+    """The vertices of a PLY file (``raw``, its bytes) and its faces, read by trimesh's own parser before it cuts them
+    (empty where it cannot be read: trimesh's reader then says what is wrong)."""
     try:
-        with path.open("rb") as file:
-            elements, is_ascii, _ = ply._parse_header(file)
-            (ply._ply_ascii if is_ascii else ply._ply_binary)(elements, file)
+        file = io.BytesIO(raw)
+        elements, is_ascii, _ = ply._parse_header(file)
+        (ply._ply_ascii if is_ascii else ply._ply_binary)(elements, file)
         vertex_data = elements["vertex"]["data"]
         vertices = np.column_stack([np.asarray(vertex_data[axis], np.float64) for axis in "xyz"])
         face_data = elements["face"]["data"]
@@ -127,14 +128,14 @@ def _face_naming_vertex_zero(text: bytes, lines: bytes) -> int | None:
     return None if zero is None else line_number(lines, zero.start())
 
 
-def checked_polygon_faces(path: Path) -> float:
-    """Raise ``MeshError`` naming the first face of the OBJ or PLY file at ``path`` that has four or more corners and
-    is not convex, or an OBJ face naming vertex 0 (see the module doc); other files pass, and so do other formats.
-    Returns how far (the file's units) the surface trimesh reads may lie from another surface spanning its polygons:
-    the largest polygon's ``_warp`` (0.0 for a file of triangles, or of another format)."""
+def checked_polygon_faces(path: Path, raw: bytes) -> float:
+    """Raise ``MeshError`` naming the first face of the OBJ or PLY file at ``path`` (``raw``, its bytes) that has four
+    or more corners and is not convex, or an OBJ face naming vertex 0 (see the module doc); other files pass, and so
+    do other formats. Returns how far (the file's units) the surface trimesh reads may lie from another surface
+    spanning its polygons: the largest polygon's ``_warp`` (0.0 for a file of triangles, or of another format)."""
     suffix = path.suffix.lower()
     if suffix == ".obj":
-        lines = plain(path.read_bytes())  # as the loader hands it to trimesh
+        lines = plain(raw)  # as the loader hands it to trimesh
         text = joined(lines)
         line = _face_naming_vertex_zero(text, lines)
         if line is not None:
@@ -142,5 +143,5 @@ def checked_polygon_faces(path: Path) -> float:
                             "counts vertices from 1); export the mesh again from CAD")
         return _checked(path, *_obj_polygons(text, lines))
     if suffix == ".ply":
-        return _checked(path, *_ply_polygons(path))
+        return _checked(path, *_ply_polygons(raw))
     return 0.0

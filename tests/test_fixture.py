@@ -1,6 +1,7 @@
 """Loading fixture meshes: units, bad files, open meshes; distance intervals and signs."""
 
 import gzip
+import hashlib
 import re
 import zipfile
 
@@ -253,6 +254,30 @@ def test_a_float32_mesh_far_enough_from_its_origin_to_lose_precision_widens_the_
     plate.apply_translation([-offset, 0.0, 0.0])
     path = _export_float32(plate, tmp_path, kind)
     assert load_fixture(path).warnings == () and load_fixture(path).surface_offset_m == 0.0
+
+
+@pytest.mark.parametrize("suffix", [".stl", ".ply", ".obj"])
+def test_a_mesh_saved_again_while_it_loads_is_hashed_as_the_bytes_that_were_loaded(tmp_path, monkeypatch, suffix):
+    """A CAD tool saving the mesh again while fixwizard reads it: the fixture's sha256 (the report's mesh_sha256, the
+    session's) is that of the very bytes checked and loaded. Each check, the reader and the hash read the file anew,
+    so the hash was of the file saved after the triangles were read: a report naming a mesh it was not solved on."""
+    path = tmp_path / f"bracket{suffix}"
+    first, second = (trimesh.creation.box(extents).export(file_type=suffix[1:])
+                     for extents in ((0.1, 0.06, 0.04), (0.12, 0.06, 0.04)))
+    first, second = (text.encode() if isinstance(text, str) else text for text in (first, second))
+    path.write_bytes(first)
+    read = trimesh.load
+
+    def read_then_saved_again(*args, **kwargs):
+        loaded = read(*args, **kwargs)
+        path.write_bytes(second)
+        return loaded
+
+    monkeypatch.setattr(trimesh, "load", read_then_saved_again)
+    fixture = load_fixture(path)
+    assert path.read_bytes() == second  # the file was saved again while it loaded
+    assert fixture.mesh.extents == pytest.approx([0.1, 0.06, 0.04])
+    assert fixture.sha256 == hashlib.sha256(first).hexdigest()
 
 
 def test_a_point_cloud_has_no_faces(tmp_path):
