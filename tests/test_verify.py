@@ -113,6 +113,21 @@ def test_a_changed_or_missing_mesh_is_refused_and_a_copy_elsewhere_is_taken(expe
     assert run_verify(tmp_path, moved_report, taps[:4], "--mesh", str(real_data / "meshes" / "matlab_logo.ply")) == 0
 
 
+def test_a_mesh_saved_again_between_its_check_and_its_loading_is_refused(tmp_path, monkeypatch):
+    """The report's mesh was hashed, then read again to load: a CAD tool saving it in between had the taps checked
+    against another mesh than the report's. The bytes loaded are checked too."""
+    mesh = tmp_path / "bracket.stl"
+    shutil.copy(DEMO_MESH, mesh)
+
+    def saved_again_then_loaded(path, units):
+        trimesh.creation.box((100.0, 60.0, 40.0)).export(mesh)  # another fixture, in the report's millimetres
+        return load_fixture(path, units)
+
+    monkeypatch.setattr("fixwizard.workflow.verify.load_fixture", saved_again_then_loaded)
+    with pytest.raises(InputError, match="is not the one the report .* was made with"):
+        fixture_of(report.load(V1_REPORT), mesh)
+
+
 def test_a_version_1_report_is_checked_with_its_mesh_given(tmp_path, capsys):
     taps = np.array(yaml.safe_load(DEMO_TAPS.read_text())["points_m"])
     assert run_verify(tmp_path, V1_REPORT, taps[:5]) == 1

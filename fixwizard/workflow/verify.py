@@ -69,14 +69,21 @@ def fixture_of(loaded: report.Report, mesh: str | Path | None = None) -> Fixture
         sha256 = hashlib.sha256(path.read_bytes()).hexdigest()
     except OSError as error:
         raise InputError(f"cannot read the report's mesh: {file_problem(error, path)}") from error
+    _check_same_mesh(sha256, path, loaded)  # before loading: a changed mesh is said to be one, not what it lacks
+    try:
+        fixture = load_fixture(path, loaded.mesh_units)
+    except MeshError as error:
+        raise InputError(f"the report's mesh cannot be used: {error}") from error
+    _check_same_mesh(fixture.sha256, path, loaded)  # the bytes loaded: the file may have been saved again since
+    return fixture
+
+
+def _check_same_mesh(sha256: str, path: Path, loaded: report.Report) -> None:
+    """InputError with the fix where ``sha256`` (of the mesh at ``path``) is not that of the report's mesh."""
     if sha256 != loaded.mesh_sha256:
         raise InputError(f"the mesh {path} is not the one the report {loaded.path} was made with (its content "
                          "changed: sha256 differs): put the original mesh back, or calibrate the fixture again with "
                          "this one")
-    try:
-        return load_fixture(path, loaded.mesh_units)
-    except MeshError as error:
-        raise InputError(f"the report's mesh cannot be used: {error}") from error
 
 
 def region_of(loaded: report.Report) -> AllowedRegion:
