@@ -2,8 +2,9 @@
 facets turned inside out (many, or a single one), is inside out as a whole, holds two bodies (one inside out),
 holds two bodies that overlap (an assembly exported without a union), repeats facets (some of the copies turned),
 is open, has T-junctions (on their edges, or off them by rounding) or cracks (a patch's corners written apart by
-rounding), or is a metre-long bar or rail of long thin facets (aspect up to 400). Noise up to the bound, 30 % of
-the taps exactly at the bound along the normal. Zero misses and zero false "inconsistent" allowed."""
+rounding), is a metre-long bar or rail of long thin facets (aspect up to 400), or is a binary STL far from its CAD
+origin (float32 coordinates 7.6 micrometres apart). Noise up to the bound, 30 % of the taps exactly at the bound
+along the normal. Zero misses and zero false "inconsistent" allowed."""
 
 import numpy as np
 import open3d as o3d
@@ -12,11 +13,12 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from descent import level_losing_the_true_cell
+from fixwizard.fixture import FLOAT32_REFUSED_M, FLOAT32_WARNED_M, load_fixture
 from fixwizard.geometry.se3 import invert, make_transform, transform_points
 from fixwizard.mesh_hygiene import ZIP_SHARE
 from fixwizard.solver.cells import root_cells
 from fixwizard.solver.search import SearchProblem, filter_cells, rotation_splits_first, start_position_grid
-from fixwizard.solver.solve import solve
+from fixwizard.solver.solve import MIN_SAMPLE_BOUND_M, solve
 from fixwizard.synthetic import bounded_noise, exact_distances_m, touching_ball_contacts
 from shapes import SHAPES, as_fixture, cracked, moved, with_t_junctions
 
@@ -215,6 +217,41 @@ def test_taps_beside_t_junctions_off_their_edges_keep_the_true_cell_down_to_subm
     assert np.all(closed_distances < ball_radius - bound - 0.5 * lift_m)  # beyond the bound from the closed surface
     lost_at = level_losing_the_true_cell(problem, base_T_cad @ invert(fixture.fix_T_cad), 0.5 * lift_m)
     assert (lost_at is None) is offset_in_band
+
+
+@pytest.mark.parametrize("widened", [True, False])
+def test_taps_on_a_binary_stl_far_from_its_origin_keep_the_true_cell_by_the_float32_widening(tmp_path, monkeypatch,
+                                                                                             widened):
+    """An L-plate about 100 m from its CAD origin (a plant's coordinates) exported as binary STL: its float32
+    coordinates are 7.6 micrometres apart there, so the loaded surface lies up to half of that off the exact one.
+    Taps made on the exact solid, pressed in by the smallest sample bound (0.01 mm) where the loaded surface lies
+    farthest out, are 3.7 micrometres beyond the bound from it: with every tap's band widened by the spacing
+    (``fixture._float32_spacing_m``) the true cell survives to cells of a micrometre; without (``widened`` false: the
+    spacing taken as 0) it is lost."""
+    truth = SHAPES["l_prism"]().apply_translation([97.3, -84.1, 71.9])  # every coordinate between 64 and 128 m
+    path = tmp_path / "far.stl"
+    truth.export(path)
+    if not widened:
+        monkeypatch.setattr("fixwizard.fixture._float32_spacing_m", lambda *_: 0.0)
+    fixture = load_fixture(path)
+    spacing_m = float(np.spacing(np.float32(np.max(np.abs(truth.vertices)))))
+    assert FLOAT32_WARNED_M < spacing_m < FLOAT32_REFUSED_M
+    assert fixture.surface_offset_m == (spacing_m if widened else 0.0)
+    ball_radius, bound = 0.0015, MIN_SAMPLE_BOUND_M
+    rng = np.random.default_rng(0)
+    centres, normals = touching_ball_contacts(truth, 3000, ball_radius, rng)
+    pressed_in = centres - bound * normals
+    beyond_m = ball_radius - bound - fixture.oracle.signed_distance_m(pressed_in - fixture.cad_p_center)
+    worst = np.argsort(-beyond_m)[:6]
+    assert beyond_m[worst[-1]] > 0.45 * spacing_m and beyond_m.max() < spacing_m  # out of the bound, in the widening
+    others, _ = touching_ball_contacts(truth, 6, ball_radius, rng)
+    cad_p_taps = np.vstack([pressed_in[worst], others + bounded_noise(6, bound, rng)])
+    rotation = Rotation.from_rotvec([0.3, -0.2, 0.5])
+    base_T_cad = make_transform(rotation, [0.4, 0.1, 0.2] - rotation.apply(truth.bounds.mean(axis=0)))  # on the table
+    problem = SearchProblem(fixture.oracle, fixture.radius_m, transform_points(base_T_cad, cad_p_taps), ball_radius,
+                            bound)
+    lost_at = level_losing_the_true_cell(problem, base_T_cad @ invert(fixture.fix_T_cad), 1e-6)
+    assert (lost_at is None) is widened
 
 
 @pytest.mark.parametrize("seed", range(2))
