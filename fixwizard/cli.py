@@ -16,6 +16,7 @@ import difflib
 import importlib
 import re
 import sys
+from collections.abc import Sequence
 from typing import NoReturn
 
 from fixwizard.errors import FixwizardError, command_line_text, file_problem, likely_units
@@ -108,18 +109,41 @@ class _Parser(argparse.ArgumentParser):
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = re.compile(r"^-(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?\s*(?:mm|m)?$")
+        self._words: list[str] = []
+
+    def parse_known_args(self, args: Sequence[str] | None = None,  # type: ignore[override]  # typeshed: overloads
+                         namespace: None = None) -> tuple[argparse.Namespace, list[str]]:
+        """argparse's, keeping the words parsed (``args``, or the command line's) for ``error``."""
+        self._words = list(sys.argv[1:] if args is None else args)
+        return super().parse_known_args(args, namespace)
 
     def error(self, message: str) -> NoReturn:
+        unknown = self._unknown_options_before_command(message)
+        if unknown:  # ``--robt 10.0.0.5``: argparse skipped the option and took its value for the command
+            message = self._unrecognized(unknown)
         self.print_usage(sys.stderr)
         self.exit(EXIT_BAD_INPUT, f"fixwizard: {message}\n")
 
     def refuse_unrecognized(self, extras: list[str]) -> NoReturn:
         """The usage error for words ``extras`` this (sub-)command does not take, under its own usage (the whole
-        program's hid which command they were wrong for), with the option a mistyped one likely means."""
+        program's hid which command they were wrong for)."""
+        self.error(self._unrecognized(extras))
+
+    def _unrecognized(self, words: list[str]) -> str:
+        """That ``words`` are not taken, with the option a mistyped one likely means."""
         options = [option for action in self._actions for option in action.option_strings if option.startswith("--")]
         hints = [f"{word} (did you mean {likely[0]}?)" if word.startswith("-") and (likely := difflib.get_close_matches(
-            word.split("=")[0], options, n=1, cutoff=0.6)) else word for word in extras]
-        self.error(f"unrecognized arguments: {' '.join(hints)}")
+            word.split("=")[0], options, n=1, cutoff=0.6)) else word for word in words]
+        return f"unrecognized arguments: {' '.join(hints)}"
+
+    def _unknown_options_before_command(self, message: str) -> list[str]:
+        """The options this parser does not know among the words before the one ``message`` calls no command."""
+        choice = re.match(r"argument COMMAND: invalid choice: '(.*?)'", message)
+        if choice is None or choice[1] not in self._words:
+            return []
+        options = [option for action in self._actions for option in action.option_strings]
+        return [word for word in self._words[:self._words.index(choice[1])] if word.startswith("--") and not any(
+            option.startswith(word.split("=")[0]) for option in options)]
 
 
 def _add_solve(commands: argparse._SubParsersAction) -> None:

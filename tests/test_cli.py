@@ -375,6 +375,16 @@ def test_a_word_a_command_does_not_take_is_named_under_that_commands_usage_with_
     assert capsys.readouterr().err.endswith("unrecognized arguments: --zzz extra\n")
 
 
+def test_a_mistyped_wizard_option_is_named_not_its_value_called_no_command(capsys):
+    """``fixwizard --robt 10.0.0.5`` said "invalid choice: '10.0.0.5' (choose from 'solve', ...)"."""
+    assert main(["--robt", "10.0.0.5"]) == 1
+    assert capsys.readouterr().err.endswith("unrecognized arguments: --robt (did you mean --robot?)\n")
+    assert main(["--rob=10.0.0.5", "--sed", "3"]) == 1  # an abbreviation argparse takes is no mistake
+    assert capsys.readouterr().err.endswith("unrecognized arguments: --sed (did you mean --seed?)\n")
+    assert main(["sovle"]) == 1
+    assert "invalid choice: 'sovle' (choose from 'solve', " in capsys.readouterr().err
+
+
 def test_an_unwritable_report_path_is_a_message_not_a_traceback(bracket, capsys):
     folder, _, _ = bracket
     blocker = folder / "not_a_folder"
