@@ -41,11 +41,15 @@ from fixwizard.robot.ur_script import (
     GO_TIMEOUT_S,
     KICK_REGISTER,
     MAX_MOVE_TRAVEL_M,
+    PHASE_BACK_OFF_STOPPED,
+    PHASE_BACKING_OFF,
     PHASE_NO_GO,
     PHASE_REGISTER,
+    PHASE_RETURN_BLOCKED,
     PHASE_TOO_FAR,
     REQUEST_GO,
     REQUEST_REGISTER,
+    REQUEST_STOP,
     freedrive_program,
     move_program,
     request_value,
@@ -520,6 +524,64 @@ def test_a_tap_whose_retract_meets_something_backs_off_and_keeps_the_contact(sta
     assert controller.contact_force_n() == 0.0
     above_contact_m = controller.flange_pose()[2, 3] - contact[2, 3]
     assert max(clearance_m / 2, clearance_m - BACK_OFF_M) <= above_contact_m < clearance_m
+    assert robot.status().mode == "ready"
+    assert_arm_stands(controller)
+
+
+
+@pytest.mark.parametrize("stop", [False, True])
+def test_the_move_program_reports_whether_its_back_off_ended_or_a_stop_cut_it_short(robot, controller, stop):
+    """The move program, sent as the link sends it, is blocked by the surface and on its way back meets something 3 mm
+    above the flange: it backs off and ends with PHASE_RETURN_BLOCKED, clear of what it met; a stop requested as its
+    back-off starts stops it there, and it ends with PHASE_BACK_OFF_STOPPED (it said PHASE_RETURN_BLOCKED, as if
+    clear), the arm still pressing on what it met."""
+    run_id = 5
+    target = flange_above_surface(-0.02)
+    program = move_program(run_id, robot.watchdog_hz, [*target[:3, 3], np.pi, 0.0, 0.0], 0.05)
+    back_off = program[program.index("def back_off_and_finish("):program.index("def retract_and_finish(")]
+    assert back_off.index("PHASE_BACKING_OFF)") < back_off.index("run back_off_motion()") \
+        < back_off.index("finish(PHASE_BACK_OFF_STOPPED)")
+    controller.when("blocked", "reach_over_the_arm", 0.003)
+    if stop:
+        controller.when("back_off", "write_input_int", REQUEST_REGISTER, request_value(run_id, REQUEST_STOP))
+    with socket.create_connection((HOST, 30003)) as script_port:
+        script_port.sendall(program.encode())
+        assert wait_until(lambda: [name for name, _, _ in controller.programs()] == ["setup", "move"])
+        controller.write_input_int(REQUEST_REGISTER, request_value(run_id, REQUEST_GO))  # the link's go
+        assert wait_until(lambda: not controller.program_running(), 5.0)
+    assert controller.output_int(PHASE_REGISTER) == (PHASE_BACK_OFF_STOPPED if stop else PHASE_RETURN_BLOCKED)
+    assert (controller.contact_force_n() > MOVE_FORCE_LIMIT_N / 2) == stop
+
+
+@pytest.mark.parametrize("motion", ["tap", "move"])
+def test_a_stop_that_cuts_the_back_off_short_says_the_arm_may_still_press_on_what_it_met(start_controller, connect,
+                                                                                         motion):
+    """STOP while the way back backs off from what it met (the speed slider turned down as it starts, so it takes
+    seconds): the tap said it 'backed off a few millimetres', the move only that it 'was stopped on request'; now
+    both say that STOP halted the back-off and the arm may still press on what it met (it does), whether the program
+    heeded the stop request or the dashboard's stop ended it first. A tap's contact is kept; nothing moves after."""
+    controller = start_controller(base_T_flange=flange_above_surface(0.02 if motion == "tap" else 0.01))
+    robot = connect()
+    if motion == "tap":
+        controller.when("settled", "reach_over_the_arm", 0.012)
+        call = lambda: robot.tap(max_travel_m=0.03, **FAST_TAP)  # noqa: E731
+    else:
+        controller.when("blocked", "reach_over_the_arm", 0.003)
+        call = lambda: robot.move_linear(flange_above_surface(-0.02), speed_m_s=0.05)  # noqa: E731
+    controller.when("back_off", "set_speed_slider", 0.01)
+    moving = MotionInThread(call, controller)
+    assert wait_until(lambda: controller.output_int(PHASE_REGISTER) == PHASE_BACKING_OFF, 5.0)
+    robot.stop()
+    outcome = moving.join(3.0)
+    kept = "; the contact was recorded" if motion == "tap" else ""
+    assert isinstance(outcome, RobotError) and re.match(
+        rf"the arm met something on its way back to where the {motion} began \((5[0-9]|6[0-9]) N\) and stopped; STOP "
+        rf"halted it while it backed off, so it may still press on what it met{kept}: look at what it met, turn "
+        "freedrive on and move the arm clear by hand, then retry$", str(outcome)), outcome
+    assert controller.output_int(PHASE_REGISTER) in (PHASE_BACK_OFF_STOPPED, PHASE_BACKING_OFF)
+    assert controller.contact_force_n() > MOVE_FORCE_LIMIT_N / 2
+    if motion == "tap":
+        np.testing.assert_allclose(outcome.tap_result.base_T_tcp_contact, controller.contact_poses()[-1], atol=2e-6)
     assert robot.status().mode == "ready"
     assert_arm_stands(controller)
 

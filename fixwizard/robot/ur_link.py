@@ -43,6 +43,8 @@ from fixwizard.robot.ur_script import (
     GO_TIMEOUT_S,
     KICK_REGISTER,
     PEAK_FORCE_REGISTER,
+    PHASE_BACK_OFF_STOPPED,
+    PHASE_BACKING_OFF,
     PHASE_BLOCKED,
     PHASE_DONE,
     PHASE_NO_CONTACT,
@@ -232,14 +234,14 @@ class Link:
         # there, or partway and back (blocked)
         duration_s = distance_m / speed_m_s + distance_m / RETRACT_SPEED_M_S
         state = self._until_ended(run_id, duration_s + 3.0, context, "the move")
+        if _way_back_blocked(state, self._stop_requested()):  # a STOP may have cut its back-off short
+            raise _return_blocked("move", state)
         if state.phase == PHASE_STOPPED or self._stop_requested():
             raise MotionStopped("move")
         if state.phase == PHASE_TOO_FAR:  # the program refused it on the controller
             raise move_too_far(distance_m)
         if state.phase == PHASE_BLOCKED:
             raise MoveBlocked(state.peak_force_n)
-        if state.phase == PHASE_RETURN_BLOCKED:
-            raise _return_blocked("move", state)
         if state.phase != PHASE_DONE:
             raise self._diagnose(context, state)
         remaining_m = float(np.linalg.norm(np.asarray(target[:3]) - state.base_T_tcp[:3, 3]))
@@ -373,7 +375,7 @@ class Link:
             return result
         if phase == PHASE_NO_CONTACT:
             raise NoContact(max_travel_m)
-        if phase == PHASE_RETURN_BLOCKED:
+        if _way_back_blocked(state, self._stop_requested()):
             raise _return_blocked("tap", state, recorded=result is not None)
         if phase == PHASE_STOPPED or (self._stop_requested() and phase not in FINAL_PHASES):
             if result is None:
@@ -575,13 +577,24 @@ class Link:
         self._conn.send(("step", what))
 
 
+def _way_back_blocked(state: ControllerState, stopped: bool) -> bool:
+    """Whether the program that ended in ``state`` met something on its way back and stopped: it backed off, or
+    STOP (``stopped``: the wizard pressed it) cut the back-off short, heeded by the program or ending it from
+    outside (the dashboard's stop) while it backed off."""
+    return state.phase in (PHASE_RETURN_BLOCKED, PHASE_BACK_OFF_STOPPED) or (state.phase == PHASE_BACKING_OFF
+                                                                            and stopped)
+
+
 def _return_blocked(motion: str, state: ControllerState, recorded: bool = False) -> RobotError:
-    """The error of a ``motion`` (tap, move) whose way back met something, stopped and backed off (``state``: its
-    end), saying whether a tap's contact was ``recorded``."""
+    """The error of a ``motion`` (tap, move) whose way back met something and stopped (``state``: its end, as
+    ``_way_back_blocked`` takes it), saying whether it backed off a few millimetres or STOP cut that short (the arm
+    may then still press on what it met), and whether a tap's contact was ``recorded``."""
     kept = "; the contact was recorded" if recorded else ""
-    return RobotError(f"the arm met something on its way back to where the {motion} began "
-                      f"({state.peak_force_n:.0f} N), stopped and backed off a few millimetres the way it came{kept}: "
-                      "look at what it met, turn freedrive on and move the arm clear by hand, then retry")
+    met = f"the arm met something on its way back to where the {motion} began ({state.peak_force_n:.0f} N)"
+    ended = ", stopped and backed off a few millimetres the way it came" if state.phase == PHASE_RETURN_BLOCKED \
+        else " and stopped; STOP halted it while it backed off, so it may still press on what it met"
+    return RobotError(f"{met}{ended}{kept}: look at what it met, turn freedrive on and move the arm clear by hand, "
+                      "then retry")
 
 
 def _exit_with(parent_pid: int) -> None:

@@ -12,7 +12,7 @@ feeding the watchdog, and the controller ends the program. A move refuses, on th
 than ``MAX_MOVE_TRAVEL_M`` from where the flange stands, and stops and goes back where the force on the tool
 has grown by ``MOVE_FORCE_LIMIT_N`` on its way. The way back of both (a tap's retract, a blocked move's return)
 stops where the force grows by ``MOVE_FORCE_LIMIT_N`` again, and backs off a little the way it came, so that
-nothing stays pressed.
+nothing stays pressed; its phase says whether that back-off ended or a STOP cut it short.
 
 Registers (integers unless told; the RTDE I/O interface's range 18-22, ur_rtde's receive range 12-19 for doubles):
   input 18   kick counter the link rewrites every ``KICK_PERIOD_S``; the programs' watchdog variable
@@ -61,9 +61,12 @@ PHASE_TOO_FAR = 7  # move: the target is farther than MAX_MOVE_TRAVEL_M from the
 PHASE_BLOCKED = 8  # move: the force grew by MOVE_FORCE_LIMIT_N on the way; back where it began
 PHASE_WAITING = 9  # started, waiting for REQUEST_GO; nothing moved
 PHASE_NO_GO = 10  # no REQUEST_GO within GO_TIMEOUT_S: ended without moving
-PHASE_RETURN_BLOCKED = 11  # tap, move: the way back met something (the force grew by MOVE_FORCE_LIMIT_N); stopped
+# tap, move: the way back met something (the force grew by MOVE_FORCE_LIMIT_N) and stopped; then ...
+PHASE_RETURN_BLOCKED = 11  # ... it backed off
+PHASE_BACKING_OFF = 12  # ... it backs off now (a program ended from outside, the dashboard's stop, keeps this phase)
+PHASE_BACK_OFF_STOPPED = 13  # ... stopped on request while it backed off: it may still press on what it met
 FINAL_PHASES = {PHASE_DONE, PHASE_NO_CONTACT, PHASE_STOPPED, PHASE_NOT_SETTLED, PHASE_TOO_FAR, PHASE_BLOCKED,
-                PHASE_NO_GO, PHASE_RETURN_BLOCKED}
+                PHASE_NO_GO, PHASE_RETURN_BLOCKED, PHASE_BACK_OFF_STOPPED}
 
 ACCELERATION_M_S2 = 0.5
 STOP_DECELERATION_M_S2 = 10.0
@@ -81,10 +84,11 @@ MIN_WATCHDOG_HZ = 2.0  # a watchdog period of 0.5 s: every program stops within 
 # A tap's and a move's way back: ``retract_and_finish(phase)`` moves the flange back to where the program began
 # and ends the program with ``phase``. A STOP on the way stops it there; so does something it meets on the way:
 # the force on the tool (the program's ``return_force_n()``) grown by ``return_force_limit_n`` over the least it
-# has been since the way back began (the contact it leaves eases off first), ``PHASE_RETURN_BLOCKED`` with that
-# growth in the peak-force register. Then, so that nothing stays pressed (a hand over the arm), it backs off
-# along the way it just came, half of it and at most ``back_off_m``: clear of what it met, short of where the way
-# back began (a tap's contact, a blocked move's obstacle). A STOP on that short way stops it there.
+# has been since the way back began (the contact it leaves eases off first), with that growth in the peak-force
+# register. Then, so that nothing stays pressed (a hand over the arm), it backs off (``PHASE_BACKING_OFF``) along
+# the way it just came, half of it and at most ``back_off_m``: clear of what it met, short of where the way back
+# began (a tap's contact, a blocked move's obstacle), and ends with ``PHASE_RETURN_BLOCKED``. A STOP on that short
+# way stops it there, still pressing on what it met perhaps: ``PHASE_BACK_OFF_STOPPED``.
 _RETURN_TO_START = """\
   global start = get_actual_tcp_pose()
   global back = False
@@ -99,6 +103,7 @@ _RETURN_TO_START = """\
     backed_off = True
   end
   def back_off_and_finish(return_began):
+    write_output_integer_register(PHASE_REGISTER, PHASE_BACKING_OFF)
     here = get_actual_tcp_pose()
     gone_m = point_dist(here, return_began)
     fraction = 0.5
@@ -111,7 +116,7 @@ _RETURN_TO_START = """\
       if requested(REQUEST_STOP):
         kill backing
         stopl(STOP_DECELERATION_M_S2)
-        finish(PHASE_RETURN_BLOCKED)
+        finish(PHASE_BACK_OFF_STOPPED)
       end
       sync()
     end
@@ -323,7 +328,8 @@ def _program(name: str, run_id: int, watchdog_hz: float, parameters: dict[str, f
                  "SETTLE_REGISTER": SETTLE_REGISTER, "PHASE_SETTLED": PHASE_SETTLED, "PHASE_DONE": PHASE_DONE,
                  "PHASE_NO_CONTACT": PHASE_NO_CONTACT, "PHASE_STOPPED": PHASE_STOPPED,
                  "PHASE_NOT_SETTLED": PHASE_NOT_SETTLED, "PHASE_TOO_FAR": PHASE_TOO_FAR,
-                 "PHASE_BLOCKED": PHASE_BLOCKED, "PHASE_RETURN_BLOCKED": PHASE_RETURN_BLOCKED}
+                 "PHASE_BLOCKED": PHASE_BLOCKED, "PHASE_RETURN_BLOCKED": PHASE_RETURN_BLOCKED,
+                 "PHASE_BACKING_OFF": PHASE_BACKING_OFF, "PHASE_BACK_OFF_STOPPED": PHASE_BACK_OFF_STOPPED}
     lines = [f"def fixwizard_{name}():", f"  # fixwizard {name}, run {run_id}: see fixwizard/robot/ur_script.py",
              f"  rtde_set_watchdog(\"input_int_register_{KICK_REGISTER}\", {_number(watchdog_hz)}, \"stop\")",
              f"  global run_id = {run_id}",

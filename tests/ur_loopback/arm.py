@@ -79,6 +79,7 @@ class SimulatedArm:
     sensor_zero_n: np.ndarray = field(default_factory=lambda: np.zeros(3))
     velocity_m_s: np.ndarray = field(default_factory=lambda: np.zeros(3))
     move: LinearMove | None = None
+    speed_fraction: float = 1.0  # the teach pendant's speed slider: linear moves go at this fraction of their speed
     force_mode: ForceMode | None = None
     freedrive: bool = False
 
@@ -146,7 +147,7 @@ class SimulatedArm:
 
     def _step_move(self, dt: float) -> None:
         move = self.move
-        move.elapsed_s += dt
+        move.elapsed_s += dt * self.speed_fraction
         fraction = 1.0 if move.duration_s == 0.0 else min(move.elapsed_s / move.duration_s, 1.0)
         self.base_T_flange = interpolate_pose(move.base_T_start, move.base_T_target, fraction)
         if fraction >= 1.0:

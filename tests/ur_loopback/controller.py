@@ -52,7 +52,8 @@ class LoopbackController:
 
     Stand-ins for the cell and its operator: ``when`` (a fault on an event), ``protective_stop``,
     ``unlock_on_pendant``, ``emergency_stop``, ``safeguard_stop``, ``release_emergency_stop``, ``power_on``,
-    ``set_remote_control``, ``move_by_hand``, ``reach_over_the_arm``, ``pause_on_pendant``, ``play_on_pendant``;
+    ``set_remote_control``, ``move_by_hand``, ``reach_over_the_arm``, ``pause_on_pendant``, ``play_on_pendant``,
+    ``set_speed_slider``;
     for the network: ``go_offline``, ``go_online``, ``drop_connections``, ``freeze_link``, ``thaw_link``,
     ``silence``, ``delay_programs``, ``garble``. Queries return copies of what the controller saw and did.
     """
@@ -169,7 +170,9 @@ class LoopbackController:
     def when(self, event: str, action: str, *args) -> None:
         """Call the method named ``action`` with ``args`` once, the next time ``event`` happens: ``contact``
         (the tool tip touches the surface), ``force_mode`` (force mode starts), ``movel`` (a linear move starts),
-        ``watchdog_check`` (the running program's watchdog found an input update within its period)."""
+        ``settled`` (a tap's contact settled), ``blocked`` (a move met something), ``back_off`` (a way back that met
+        something starts backing off), ``watchdog_check`` (the running program's watchdog found an input update
+        within its period)."""
         with self._lock:
             self._triggers.setdefault(event, []).append((action, args))
 
@@ -220,6 +223,12 @@ class LoopbackController:
         it from below (a ceiling at that height)."""
         with self._lock:
             self._arm.ceiling_z_m = float(self._arm.base_T_flange[2, 3]) + clearance_m
+
+    def set_speed_slider(self, fraction: float) -> None:
+        """The operator sets the teach pendant's speed slider to ``fraction`` (1: 100 %): from the next cycle every
+        linear move, the one under way too, goes at that fraction of its speed."""
+        with self._lock:
+            self._arm.speed_fraction = fraction
 
     def pause_on_pendant(self) -> None:
         """The operator presses pause on the teach pendant (or a client sends the dashboard's ``pause``): from the

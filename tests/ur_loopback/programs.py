@@ -37,6 +37,7 @@ TRAVEL_REGISTER, PEAK_FORCE_REGISTER, SETTLE_REGISTER = 17, 18, 19
 REQUEST_STOP, REQUEST_RETRACT, REQUEST_GO = 1, 2, 3
 PHASE_RUNNING, PHASE_SETTLED, PHASE_DONE, PHASE_NO_CONTACT, PHASE_STOPPED, PHASE_NOT_SETTLED = 1, 2, 3, 4, 5, 6
 PHASE_TOO_FAR, PHASE_BLOCKED, PHASE_WAITING, PHASE_NO_GO, PHASE_RETURN_BLOCKED = 7, 8, 9, 10, 11
+PHASE_BACKING_OFF, PHASE_BACK_OFF_STOPPED = 12, 13
 
 
 class Registers:
@@ -209,22 +210,26 @@ class FixwizardProgram:
             if force - least_n >= self.parameters["return_force_limit_n"]:
                 self.arm.halt()
                 self.registers.write_double(PEAK_FORCE_REGISTER, force - least_n)
-                yield from self._back_off(return_began)
-                return self._finish(PHASE_RETURN_BLOCKED)
+                yield from self._back_off_and_finish(return_began)
+                return
             yield
         self._finish(phase)
 
-    def _back_off(self, return_began: np.ndarray) -> Iterator[None]:
-        """Half the way back it came, at most ``back_off_m``, towards ``return_began`` (a STOP stops it there)."""
+    def _back_off_and_finish(self, return_began: np.ndarray) -> Iterator[None]:
+        """Half the way back it came, at most ``back_off_m``, towards ``return_began``, saying so (``back_off``
+        event); a STOP stops it there."""
+        self.registers.write_int(PHASE_REGISTER, PHASE_BACKING_OFF)
         here = self.arm.base_T_flange.copy()
         gone_m = float(np.linalg.norm(here[:3, 3] - return_began[:3, 3]))
         fraction = 0.5 if gone_m * 0.5 <= self.parameters["back_off_m"] else self.parameters["back_off_m"] / gone_m
         self._linear(interpolate_pose(here, return_began, fraction), self.parameters["retract_speed_m_s"])
+        self._event("back_off")
         while self.arm.moving():
             if self._requested(REQUEST_STOP):
                 self.arm.halt()
-                return
+                return self._finish(PHASE_BACK_OFF_STOPPED)
             yield
+        self._finish(PHASE_RETURN_BLOCKED)
 
     def _move(self) -> Iterator[None]:
         arm, p = self.arm, self.parameters
