@@ -34,7 +34,18 @@ from fixwizard.tui.widgets.dialog import Dialog
 from fixwizard.tui.widgets.help import HelpScreen
 from fixwizard.tui.widgets.too_small import TooSmall
 from pilot_wait import until
-from test_tui_app import REPO, SIZE, at_start, calibrate_by_hand, pivot_by_hand, press_button, rearm, status_of, wizard
+from test_tui_app import (
+    REPO,
+    SIZE,
+    at_start,
+    at_the_automatic_taps,
+    calibrate_by_hand,
+    pivot_by_hand,
+    press_button,
+    rearm,
+    status_of,
+    wizard,
+)
 from tui_cell import ScreenHost, record_spread_taps, wizard_context
 
 
@@ -364,6 +375,27 @@ def test_on_the_automatic_taps_esc_goes_back_and_next_answers_when_not_yet(tmp_p
     asyncio.run(run())
 
 
+def test_on_the_automatic_taps_the_footer_names_what_esc_does_now(tmp_path):
+    """The footer said 'esc Back' while Esc cancelled the running taps: while they run it says 'esc Cancel taps' and
+    Esc cancels them (the step stays); once they have ended it says 'esc Back' again, and Esc goes back."""
+    async def run():
+        async with at_the_automatic_taps(tmp_path, pace_s=0.05) as (_, app, pilot):
+            screen = app.screen
+            await until(pilot, lambda: footer_text(app, "escape") == "esc Back")
+            await pilot.press("g")
+            await until(pilot, lambda: app.motion_running())
+            await until(pilot, lambda: footer_text(app, "escape") == "esc Cancel taps")
+            await assert_in_view(pilot, "escape")
+            await pilot.press("escape")
+            await until(pilot, lambda: not app.motion_running())
+            assert app.screen is screen
+            assert "were cancelled after" in str(screen.query_one("#auto-state", Static).render())
+            await until(pilot, lambda: footer_text(app, "escape") == "esc Back")
+            await pilot.press("escape")
+            await until(pilot, lambda: isinstance(app.screen, TablePointsScreen))
+    asyncio.run(run())
+
+
 def test_leaving_sampling_asks_and_lands_on_the_start_screen_with_that_session_to_resume(tmp_path):
     async def run():
         context = wizard(tmp_path)
@@ -392,6 +424,12 @@ def test_leaving_sampling_asks_and_lands_on_the_start_screen_with_that_session_t
 
 def footer_keys(app) -> dict[str, FooterKey]:
     return {footer_key.key: footer_key for footer_key in app.screen.query_one(Footer).query(FooterKey)}
+
+
+def footer_text(app, key: str) -> str:
+    """What the footer shows for ``key`` (e.g. ``esc Back``); "" while it shows no such key."""
+    shown = footer_keys(app).get(key) if app.screen.query(Footer) else None
+    return "" if shown is None else " ".join(str(shown.render()).split())
 
 
 async def assert_in_view(pilot: Pilot, *key_names: str) -> None:

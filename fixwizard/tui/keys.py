@@ -9,6 +9,7 @@ STOPPED (after the STOP key or a protective stop) until the operator re-arms."""
 from dataclasses import dataclass
 
 from textual.binding import Binding
+from textual.dom import DOMNode
 
 
 @dataclass(frozen=True)
@@ -85,6 +86,17 @@ def binding(key: Key, label: str | None = None, show: bool = True, priority: boo
     """The Textual binding of ``key``; ``label`` only rewords the footer for this screen (the meaning stays)."""
     return Binding(key.keys, key.action, label or key.label, show=show, priority=priority,
                    key_display=key.display if "," in key.keys else None)
+
+
+def relabel(node: DOMNode, key: Key, label: str | None = None) -> None:
+    """Reword ``key``'s footer label on ``node`` alone while its state lasts (None: the key map's own label), e.g. Esc
+    while the step runs what Esc cancels; the meaning stays, and the footer and the help follow at once. (Textual
+    reads a node's bindings from its own copy of the map, ``_bindings``, and has no public way to change one.)"""
+    bound = node._bindings.key_to_bindings
+    for reworded in Binding.make_bindings([binding(key, label)]):
+        bound[reworded.key] = [reworded if each.action == key.action else each
+                               for each in bound.get(reworded.key, [])]
+    node.refresh_bindings()
 
 
 def name(key: Key) -> str:

@@ -23,11 +23,13 @@ CONTINUED_TEXT = (
     "freedrive on ({freedrive}) and bring the ball a few centimetres above the corner B first; then press {go}.")
 AUTO_STEPS: tuple[Step, ...] = ("table", "tilted")
 STEP_LABELS = {"table": "Table taps", "tilted": "Tilted taps"}
+CANCEL_LABEL = "Cancel taps"  # the footer's Esc while the taps run: it cancels them, it does not go back
 
 
 class AutoTapsScreen(CalibrationStepScreen):
-    """Run the table and tilted taps in a worker; Esc cancels between two taps (and goes back when none run). A
-    calibration continued after the wizard left it lets the operator guide the arm back near the corner B first."""
+    """Run the table and tilted taps in a worker; Esc cancels between two taps (and goes back when none run), and
+    the footer names what it does now. A calibration continued after the wizard left it lets the operator guide the
+    arm back near the corner B first."""
 
     STEP = 3
     TITLE_TEXT = "automatic taps"
@@ -38,7 +40,7 @@ class AutoTapsScreen(CalibrationStepScreen):
                   "continued after the wizard left it starts with the ball above the corner B: f (freedrive) lets "
                   "you guide it there.")
 
-    _cancel: threading.Event | None = None
+    _cancel: threading.Event | None = None  # set to cancel the taps that run; None while none run
 
     def body(self) -> ComposeResult:
         workflow = self.workflow
@@ -96,7 +98,7 @@ class AutoTapsScreen(CalibrationStepScreen):
     def action_go(self) -> None:
         robot, workflow, app = self.cell.robot, self.workflow, self.app
         cancel = threading.Event()
-        self._cancel = cancel
+        self._set_taps_cancel(cancel)
         services(self).cancel_on_stop(cancel)
 
         def progress(step: Step, done: int, total: int) -> None:
@@ -131,11 +133,15 @@ class AutoTapsScreen(CalibrationStepScreen):
             self.notify(f"Not yet: press {keys.name(keys.GO)} to start the automatic taps; the result comes once "
                         "they are done.", severity="warning")
 
+    def _set_taps_cancel(self, cancel: threading.Event | None) -> None:
+        """The taps run, ``cancel`` cancels them, and Esc's footer label says so; or none run (None: Esc goes back)."""
+        self._cancel = cancel
+        keys.relabel(self, keys.BACK, None if cancel is None else CANCEL_LABEL)
+
     def _ended(self, outcome: Exception | None) -> None:
         if self._cancel is not None:
             services(self).forget_cancel(self._cancel)
-        self._cancel = None
-        self.refresh_bindings()
+        self._set_taps_cancel(None)
         if outcome is None:
             dismiss_when_on_top(self, "next")
         elif services(self).stopped or isinstance(outcome, ProtectiveStop):  # g is refused until re-armed

@@ -1,7 +1,8 @@
 """The footer of every screen: Textual's, with the STOP key first whatever the width (``wizard.tcss`` docks it
 left), and when only which keys are enabled has changed (a robot call starting or ending disables and enables the
-robot keys) it dims and undims its keys in place. Textual's footer composes all its keys anew on every change, and
-mounting them held the event loop for up to a few hundred milliseconds, twice per robot call, while keys waited."""
+robot keys) it dims and undims its keys in place; a key reworded (``keys.relabel``) is composed anew. Textual's
+footer composes all its keys anew on every change, and mounting them held the event loop for up to a few hundred
+milliseconds, twice per robot call, while keys waited."""
 
 from textual.app import ComposeResult
 from textual.screen import Screen
@@ -32,17 +33,17 @@ class KeyFooter(Footer):
         super().bindings_changed(screen)
 
     def _enable_in_place(self) -> bool:
-        """Set each shown key's enabled state from the screen's bindings; False when other keys are to be shown
-        (then the footer composes them)."""
-        enabled_by_action: dict[str, tuple[str, bool]] = {}
+        """Set each shown key's enabled state from the screen's bindings; False when other keys or labels are to be
+        shown (then the footer composes them)."""
+        enabled_by_action: dict[str, tuple[str, str, bool]] = {}
         for _, binding, enabled, _ in self.screen.active_bindings.values():
             if binding.show:
-                enabled_by_action.setdefault(binding.action, (binding.key, enabled))
+                enabled_by_action.setdefault(binding.action, (binding.key, binding.description, enabled))
         shown = list(self.query(FooterKey))
-        if [(key.action, key.key) for key in shown] != [(action, key) for action, (key, _) in
-                                                        enabled_by_action.items()]:
+        if [(key.action, key.key, key.description) for key in shown] != \
+                [(action, key, label) for action, (key, label, _) in enabled_by_action.items()]:
             return False
-        for key, (_, enabled) in zip(shown, enabled_by_action.values(), strict=True):
+        for key, (_, _, enabled) in zip(shown, enabled_by_action.values(), strict=True):
             if key._disabled == enabled:
                 key._disabled = not enabled
                 key.set_class(not enabled, "-disabled")
