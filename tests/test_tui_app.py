@@ -124,6 +124,16 @@ async def rearm(pilot: Pilot) -> None:
     await until(pilot, lambda: not pilot.app.stopped)
 
 
+async def stop_and_rearm(pilot: Pilot) -> None:
+    """STOP, and once the robot stands still (every automatic step ended, a tap it cut short shown as an error) a
+    confirmed re-arm, with the robot call it started on the step's screen (if any) done."""
+    app = pilot.app
+    await pilot.press("f12")
+    await until(pilot, lambda: app.stopped and not app.motion_running() and app.cell.robot.status().mode == "idle")
+    await rearm(pilot)
+    await until(pilot, lambda: not app.step_screen().busy)
+
+
 def test_launch_shows_the_start_screen_marked_simulated(tmp_path):
     async def run():
         app = FixwizardApp(wizard(tmp_path))
@@ -397,6 +407,37 @@ def test_stop_during_the_automatic_taps_says_to_re_arm_before_going_on(tmp_path)
             state = str(screen.query_one("#auto-state", Static).render())
             assert state.startswith("Stopped: ") and state.endswith(
                 "Once the cell is checked and clear, re-arm (Ctrl+R), then press g to continue.")
+    asyncio.run(run())
+
+
+def test_re_arming_at_the_automatic_taps_leaves_freedrive_off(tmp_path):
+    """Re-arming after a STOP turned freedrive on at the automatic taps as on the steps where the operator guides the
+    arm by hand, though here the arm stands where the table point C or the taps left it and f is not offered: now
+    freedrive stays off, before the taps and after a STOP cut them short."""
+    async def run():
+        async with at_the_automatic_taps(tmp_path, pace_s=0.05) as (context, app, pilot):
+            await stop_and_rearm(pilot)
+            assert context.robot.status().mode == "idle"
+            await pilot.press("g")
+            await until(pilot, lambda: app.motion_running())
+            await stop_and_rearm(pilot)
+            assert context.robot.status().mode == "idle"
+    asyncio.run(run())
+
+
+def test_the_note_after_a_reconnect_at_the_automatic_taps_offers_no_freedrive(tmp_path):
+    """After Reconnect at the automatic taps the note said 'freedrive is off, press f to guide the arm by hand', as on
+    the steps guided by hand, where f is not offered: it says only that the robot is connected again."""
+    async def run():
+        async with at_the_automatic_taps(tmp_path) as (context, app, pilot):
+            context.robot.inject_fault("connection_loss")
+            await pilot.press("g")
+            await until(pilot, lambda: isinstance(app.screen, ErrorModal) and bool(app.screen.query("#reconnect")))
+            await press_button(pilot, "#reconnect")
+            await until(pilot, lambda: any("Connected to the robot again" in str(note.message)
+                                           for note in app._notifications))
+            assert "Connected to the robot again." in [str(note.message) for note in app._notifications]
+            assert context.robot.status().mode == "idle"
     asyncio.run(run())
 
 

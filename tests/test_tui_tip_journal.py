@@ -26,6 +26,7 @@ from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.errors import ErrorModal
 from fixwizard.workflow.calibration_journal import find_unfinished_calibrations
 from pilot_wait import until
+from test_tui_app import stop_and_rearm
 from test_tui_keys import assert_in_view, open_help
 from tui_cell import start_fixture
 from tui_tip_steps import press_when_ready, to_automatic_taps, to_result
@@ -57,6 +58,14 @@ async def continued(cell: Cell, size: tuple[int, int] = SIZE) -> AsyncIterator[t
         await at_start(pilot)
         await press_continue(pilot)
         yield app, pilot
+
+
+async def leave_at_the_automatic_taps(cell: Cell, size: tuple[int, int] = SIZE) -> None:
+    """A new tip calibration on ``cell`` taken to its automatic taps and left there unfinished (the wizard quits)."""
+    async with continued(cell, size) as (app, pilot):
+        await to_automatic_taps(pilot, cell.hands.pivot_count)
+        await pilot.press("ctrl+q")  # nothing moves: the wizard quits at once, the calibration left unfinished
+        await until(pilot, lambda: not app.is_running)
 
 
 def test_a_calibration_left_during_the_automatic_taps_continues_where_it_stopped(tmp_path):
@@ -152,12 +161,6 @@ def test_the_continued_automatic_taps_show_their_text_keys_and_help_whole_at_80x
     the footer, the help said nothing of it, and the step said 'Press g to start' with the taps half done."""
     cell = simulated_cell(SEED, pace_s=0.0, folder=tmp_path)
 
-    async def leave_at_the_automatic_taps() -> None:
-        async with continued(cell, TERMINAL) as (app, pilot):
-            await to_automatic_taps(pilot, cell.hands.pivot_count)
-            await pilot.press("ctrl+q")  # nothing moves: the wizard quits at once, the calibration left unfinished
-            await until(pilot, lambda: not app.is_running)
-
     async def continue_it() -> None:
         async with continued(simulated_cell(SEED, pace_s=0.0, folder=tmp_path), TERMINAL) as (app, pilot):
             await until(pilot, lambda: isinstance(app.screen, AutoTapsScreen) and bool(app.screen.query(FooterKey)))
@@ -173,5 +176,30 @@ def test_the_continued_automatic_taps_show_their_text_keys_and_help_whole_at_80x
             await assert_in_view(pilot, "f12", "escape", "g", "m", "f", "n", "ctrl+q", "ctrl+r", "question_mark")
             await open_help(pilot)
 
-    asyncio.run(leave_at_the_automatic_taps())
+    asyncio.run(leave_at_the_automatic_taps(cell, TERMINAL))
+    asyncio.run(continue_it())
+
+
+def test_re_arming_at_the_continued_automatic_taps_turns_freedrive_on_where_the_operator_had_it_on(tmp_path):
+    """Continued, the automatic taps let the operator guide the ball back above B in freedrive (f): a STOP meanwhile
+    ends freedrive, and the re-arm turns it on again, as on the steps guided by hand. Once the taps have run, the
+    taps hold the arm: a STOP and re-arm leave freedrive off."""
+    cell = simulated_cell(SEED, pace_s=0.0, folder=tmp_path)
+
+    async def continue_it() -> None:
+        cell = simulated_cell(SEED, pace_s=0.05, folder=tmp_path)  # the taps take long enough to stop them
+        robot = cell.robot
+        async with continued(cell) as (app, pilot):
+            await until(pilot, lambda: isinstance(app.screen, AutoTapsScreen) and app.screen.is_mounted)
+            await press_when_ready(pilot, "m")  # the simulated hands bring the ball back above the corner B
+            await press_when_ready(pilot, "f")
+            assert robot.status().mode == "freedrive"
+            await stop_and_rearm(pilot)
+            assert robot.status().mode == "freedrive"
+            await pilot.press("g")
+            await until(pilot, lambda: app.motion_running())
+            await stop_and_rearm(pilot)
+            assert robot.status().mode == "idle"
+
+    asyncio.run(leave_at_the_automatic_taps(cell))
     asyncio.run(continue_it())

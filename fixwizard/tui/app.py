@@ -217,13 +217,22 @@ class FixwizardApp(App[None]):
                             f"{keys.name(keys.REARM)}.", severity="warning")
             elif yes:
                 self.stopped = False
-                freedrive = getattr(self.step_screen(), "action_freedrive", None)  # a STOP ended its freedrive
+                freedrive = self._freedrive_by_hand()  # a STOP ended that freedrive
                 if freedrive is not None:
                     freedrive()
                 self.notify("Re-armed: the robot keys work again" + (" and freedrive is on." if freedrive else "."))
 
         self._ask_once(Confirm(REARM_QUESTION, "The robot keys (tap, go, the automatic steps) will move the arm "
                                "again. Is the cell checked and clear of people and objects?", "Re-arm"), answered)
+
+    def _freedrive_by_hand(self) -> Callable[[], None] | None:
+        """The step screen's freedrive action where the operator guides the arm by hand on it now (its freedrive is
+        on until a STOP or a lost link ends it), else None: a screen with ``action_freedrive`` guides by hand unless
+        its ``guided_by_hand()`` says it does not now (the automatic taps: only after f)."""
+        screen = self.step_screen()
+        freedrive: Callable[[], None] | None = getattr(screen, "action_freedrive", None)
+        guided_by_hand: Callable[[], bool] = getattr(screen, "guided_by_hand", lambda: True)
+        return freedrive if freedrive is not None and guided_by_hand() else None
 
     def _ask_once(self, question: Confirm, answered: Callable[[bool | None], None]) -> None:
         """Ask ``question`` unless it is asked already (a key pressed twice asked twice, one dialog over the other)."""
@@ -311,7 +320,7 @@ class FixwizardApp(App[None]):
     def _reconnected(self) -> None:
         """Say so; where the operator guides the arm by hand, that freedrive is off until turned on (the lost link
         ended it, and after a fault nothing starts by itself)."""
-        by_hand = getattr(self.step_screen(), "action_freedrive", None) is not None
+        by_hand = self._freedrive_by_hand() is not None
         self.notify("Connected to the robot again" + (f": freedrive is off, press {keys.name(keys.FREEDRIVE)} to "
                                                        "guide the arm by hand." if by_hand else "."))
 

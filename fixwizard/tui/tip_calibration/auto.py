@@ -29,7 +29,8 @@ CANCEL_LABEL = "Cancel taps"  # the footer's Esc while the taps run: it cancels 
 class AutoTapsScreen(CalibrationStepScreen):
     """Run the table and tilted taps in a worker; Esc cancels between two taps (and goes back when none run), and
     the footer names what it does now. A calibration continued after the wizard left it lets the operator guide the
-    arm back near the corner B first."""
+    arm back near the corner B first (f): only then is the arm guided by hand here, so that a re-arm after a STOP
+    turns freedrive on again."""
 
     STEP = 3
     TITLE_TEXT = "automatic taps"
@@ -41,6 +42,7 @@ class AutoTapsScreen(CalibrationStepScreen):
                   "you guide it there.")
 
     _cancel: threading.Event | None = None  # set to cancel the taps that run; None while none run
+    _freedrive_on = False  # the operator turned freedrive on (f) and no taps ran since
 
     def body(self) -> ComposeResult:
         workflow = self.workflow
@@ -73,8 +75,18 @@ class AutoTapsScreen(CalibrationStepScreen):
                 if self.cell.hands is not None else ""))
 
     def action_freedrive(self) -> None:
-        self.run_robot(lambda: self.cell.robot.freedrive(True), lambda _: self._show(
-            f"Freedrive is on: bring the ball a few centimetres above the corner B, then press {keys.name(keys.GO)}."))
+        def on(_: None) -> None:
+            self._freedrive_on = True
+            self._show(f"Freedrive is on: bring the ball a few centimetres above the corner B, then press "
+                       f"{keys.name(keys.GO)}.")
+
+        self.run_robot(lambda: self.cell.robot.freedrive(True), on)
+
+    def guided_by_hand(self) -> bool:
+        """Whether the operator guides the arm by hand here now (freedrive turned on with f, and no taps since): a
+        re-arm after a STOP turns freedrive on again only then. Elsewhere the taps hold the arm, or it stands where
+        the table point C or the last tap left it."""
+        return self._freedrive_on
 
     def action_simulated_hands(self) -> None:
         hands = self.cell.simulated_hands()
@@ -99,6 +111,7 @@ class AutoTapsScreen(CalibrationStepScreen):
         robot, workflow, app = self.cell.robot, self.workflow, self.app
         cancel = threading.Event()
         self._set_taps_cancel(cancel)
+        self._freedrive_on = False  # the taps turn it off first
         services(self).cancel_on_stop(cancel)
 
         def progress(step: Step, done: int, total: int) -> None:
