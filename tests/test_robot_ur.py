@@ -586,6 +586,26 @@ def test_a_stop_that_cuts_the_back_off_short_says_the_arm_may_still_press_on_wha
     assert_arm_stands(controller)
 
 
+@pytest.mark.parametrize("fault", ["protective_stop", "safeguard_stop"])
+def test_a_fault_that_ends_the_back_off_says_the_arm_may_still_press_on_what_it_met(start_controller, connect, fault):
+    """A protective or safeguard stop (not the wizard's STOP) ends the tap's program while its way back backs off from
+    what it met: the message said only which stop it was; now it also says the arm was backing off and may still
+    press on what it met (it does). Nothing moves after."""
+    controller = start_controller(base_T_flange=flange_above_surface(0.02))
+    robot = connect()
+    controller.when("settled", "reach_over_the_arm", 0.012)
+    controller.when("back_off", "set_speed_slider", 0.01)
+    moving = MotionInThread(lambda: robot.tap(max_travel_m=0.03, **FAST_TAP), controller)
+    assert wait_until(lambda: controller.output_int(PHASE_REGISTER) == PHASE_BACKING_OFF, 5.0)
+    getattr(controller, fault)()
+    outcome = moving.join(3.0)
+    assert isinstance(outcome, RobotError) and re.search(
+        r"stop(ped the arm)? during the tap as the arm backed off from something it met on its way back "
+        r"\((5[0-9]|6[0-9]) N\), so it may still press on it: ", str(outcome)), outcome
+    assert controller.contact_force_n() > MOVE_FORCE_LIMIT_N / 2
+    assert_arm_stands(controller)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("stall_s", [0.3, 1.0])
 def test_the_move_force_limit_holds_on_the_controller_when_the_pc_stalls(start_controller, connect, stall_s):

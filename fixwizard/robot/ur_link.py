@@ -423,7 +423,11 @@ class Link:
             time.sleep(POLL_S)
 
     def _diagnose(self, context: str, state: ControllerState) -> RobotError:
-        """The typed error that explains why the controller did not do what was asked."""
+        """The typed error that explains why the controller did not do what was asked; one that ended the program
+        as its way back backed off from what it met says so (the arm may still press on it)."""
+        if state.phase == PHASE_BACKING_OFF:
+            context += (f" as the arm backed off from something it met on its way back ({state.peak_force_n:.0f} N), "
+                        "so it may still press on it")
         if state.emergency_stop:
             return EmergencyStop()
         if state.protective_stop:
