@@ -1,18 +1,27 @@
 """A tap as the sampling and check screens make it: freedrive off, tap, record the contact; freedrive on again
 only after a tap that ended as planned (a contact, or none within its travel) and with no STOP meanwhile. After a
-stop or a fault the arm holds still: freedrive stays off until the operator turns it on, and the error says so."""
+stop or a fault the arm holds still: freedrive stays off until the operator turns it on, and the error says so. A
+motion whose key came before a STOP does not start after it (``unless_stopped``)."""
 
 import contextlib
 import threading
 from collections.abc import Callable
 from typing import TypeVar
 
-from fixwizard.robot.base import NoContact, Robot, RobotError, TapResult
+from fixwizard.robot.base import MotionStopped, NoContact, Robot, RobotError, TapResult
 from fixwizard.tui import keys
 
 T = TypeVar("T")
 FREEDRIVE_STAYS_OFF = (f"Freedrive stays off after this: press {keys.name(keys.FREEDRIVE)} to guide the arm by hand "
                        "again once the cell is safe (after a STOP, re-arming turns it on).")
+
+
+def unless_stopped(cancel: threading.Event, motion: str) -> None:
+    """Raise ``MotionStopped`` for ``motion`` (e.g. "tap") if STOP was pressed (``cancel``, which STOP sets) since its
+    key: called just before the robot call, so that a motion asked for before a STOP does not start after it (the
+    robot's own stop halts only a motion that has started)."""
+    if cancel.is_set():
+        raise MotionStopped(motion)
 
 
 def freedrive_again(robot: Robot, cancel: threading.Event) -> None:
@@ -32,6 +41,7 @@ def tap_and_record(robot: Robot, record: Callable[[TapResult], T], tap_count: Ca
     then stays off). Raises the robot's error."""
     robot.freedrive(False)
     try:
+        unless_stopped(cancel, "tap")
         result = robot.tap()
     except NoContact:
         freedrive_again(robot, cancel)

@@ -23,7 +23,7 @@ from textual.widgets import Static
 
 from fixwizard.errors import FixwizardError
 from fixwizard.plots.taps_view import taps_view
-from fixwizard.robot.base import MotionStopped, NoContact, ProtectiveStop, RobotError, TapResult
+from fixwizard.robot.base import NoContact, ProtectiveStop, RobotError, TapResult
 from fixwizard.solver.solve import MIN_TAPS
 from fixwizard.tui import keys
 from fixwizard.tui.cell import Cell, Sampling
@@ -39,7 +39,7 @@ from fixwizard.tui.sampling.text import (
 )
 from fixwizard.tui.solve.progress_text import progress_words
 from fixwizard.tui.start.choices import FixtureChoice, fixture_choices
-from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF, freedrive_again, tap_and_record
+from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF, freedrive_again, tap_and_record, unless_stopped
 from fixwizard.tui.widgets.confirm import Confirm, ConfirmMove
 from fixwizard.tui.widgets.dialog import Dialog
 from fixwizard.tui.widgets.doing import TICK_S, Doing, seconds_text
@@ -337,8 +337,7 @@ class SamplingScreen(Screen[bool]):
         robot.freedrive(False)
         try:
             for base_T_tcp in hover_path(plan, calibration.tcp_p_tip_m, robot.base_T_tcp()):
-                if cancel.is_set():
-                    raise MotionStopped("move above the suggested point")
+                unless_stopped(cancel, "move above the suggested point")
                 robot.move_linear(base_T_tcp, HOVER_SPEED_M_S)
         except RobotError as error:
             error.add_note(FREEDRIVE_STAYS_OFF)

@@ -12,7 +12,7 @@ from fixwizard.calibration.pivot import MIN_POSES
 from fixwizard.calibration.table import MIN_EDGE_M
 from fixwizard.errors import sentence
 from fixwizard.tui import keys
-from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF
+from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF, unless_stopped
 from fixwizard.tui.tip_calibration.step import CalibrationStepScreen
 from fixwizard.tui.workers import ShownError
 from fixwizard.workflow.robot_calibration import TABLE_POINTS
@@ -181,9 +181,10 @@ class TablePointsScreen(CalibrationStepScreen):
                         severity="warning")
 
     def _tap(self, cancel: threading.Event) -> None:
-        """Freedrive off, tap, and freedrive on again while points are left and no STOP came (``cancel``; worker
-        thread)."""
+        """Freedrive off, tap (not after a STOP pressed since the key), and freedrive on again while points are left
+        and no STOP came (``cancel``; worker thread)."""
         self.cell.robot.freedrive(False)
+        unless_stopped(cancel, "tap")
         self.workflow.tap_table_point()
         if self._tapped() < len(TABLE_POINTS) and not cancel.is_set():
             self.cell.robot.freedrive(True)
