@@ -63,18 +63,11 @@ def context_for(tmp_path, calibrated, push_m: float = 0.0, **report_changes) -> 
 
 
 class CheckHost(ScreenHost):
-    """The screen alone, with the two app services its workers use: the status refresh and the error modal
-    (here, the errors are kept)."""
-
-    def __init__(self, make_screen) -> None:
-        super().__init__(make_screen)
-        self.errors: list[Exception] = []
+    """The screen alone, with the app services its workers use: the status refresh and the error modal
+    (``ScreenHost`` keeps the errors)."""
 
     def refresh_robot_status(self) -> None:
         pass
-
-    def show_error(self, error: Exception) -> None:
-        self.errors.append(error)
 
 
 def check_host(cell: Cell, tip: SavedCalibration) -> CheckHost:

@@ -9,18 +9,20 @@ import json
 
 import numpy as np
 import pytest
-from textual.widgets import DataTable, Static
+from textual.widgets import Button, DataTable, Static
 from textual.widgets._footer import FooterKey
 
 from fixwizard.demo import disc_fixture
 from fixwizard.geometry.se3 import rotation_angle_rad
 from fixwizard.tui import keys
+from fixwizard.tui.app import FixwizardApp
 from fixwizard.tui.sampling.screen import SamplingScreen
 from fixwizard.tui.sampling.text import live_text
 from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF
 from fixwizard.tui.widgets.confirm import Confirm, ConfirmMove
 from fixwizard.tui.widgets.dialog import Dialog
 from fixwizard.tui.widgets.doing import seconds_text
+from fixwizard.tui.widgets.errors import ErrorModal
 from fixwizard.workflow.advice import TapAdvice
 from fixwizard.workflow.hover import HoverPlan
 from fixwizard.workflow.live import LiveView, quick_check
@@ -152,6 +154,30 @@ async def test_other_robot_problems_say_what_to_do_next(context, fault, shown):
         assert "Nothing recorded is lost: 1 tap is saved" in text_of(screen, "#problem")
         assert len(context.session.taps) == 1
 
+
+async def test_a_tap_that_finds_the_link_down_offers_reconnect_also_after_its_dialog_was_closed(context):
+    """The lost link's dialog closed with OK (its focused button): every tap after said "then reconnect" under the
+    table, with no way to (no key, no button; the status bar said DISCONNECTED until the wizard was restarted). The
+    dialog with Reconnect comes back with the tap, and reconnecting lets the next tap record."""
+    app = FixwizardApp(context.cell, sampling=context.sampling)
+    async with app.run_test(size=SIZE) as pilot:
+        await until(pilot, lambda: isinstance(app.screen, SamplingScreen) and not app.screen.busy)
+        screen = app.screen
+        cell_of(context).inject_fault("connection_loss")
+        for _ in range(2):  # the first tap loses the link, the second finds it lost
+            await tap(pilot, screen, "mt")
+            await until(pilot, lambda: isinstance(app.screen, ErrorModal) and bool(app.screen.query("#reconnect")),
+                        timeout_s=10)
+            await pilot.press("enter")  # OK
+            await until(pilot, lambda: app.screen is screen)
+        await tap(pilot, screen, "t")
+        await until(pilot, lambda: isinstance(app.screen, ErrorModal) and bool(app.screen.query("#reconnect")),
+                    timeout_s=10)
+        app.screen.query_one("#reconnect", Button).focus()
+        await pilot.press("enter")
+        await until(pilot, lambda: app.screen is screen and app.robot_status is not None and app.robot_status.connected)
+        await tap(pilot, screen, "mt")
+        assert len(context.session.taps) == 1
 
 async def test_solving_needs_three_taps(context):
     app = ScreenHost(lambda: context.sampling_screen())

@@ -196,8 +196,8 @@ class PausedSolver:
 
 
 class ScreenHost(App):
-    """An app that shows one screen on start and keeps what it dismisses with in ``results``; like the wizard,
-    with its style sheet and without the command palette."""
+    """An app that shows one screen on start and keeps what it dismisses with in ``results`` and the errors it is
+    asked to show in ``errors``; like the wizard, with its style sheet and without the command palette."""
 
     CSS_PATH = CSS_FILE
     ENABLE_COMMAND_PALETTE = False
@@ -206,6 +206,8 @@ class ScreenHost(App):
         super().__init__()
         self.make_screen = make_screen
         self.results: list = []
+        self.errors: list[Exception] = []  # what the wizard would show in its error dialog (``show_error``)
+        self.robot_status = None  # the wizard's latest robot status: unknown here
         self.motion_cancels: set[threading.Event] = set()  # what STOP would set (``cancel_on_stop``)
 
     def cancel_on_stop(self, cancel: threading.Event) -> None:
@@ -213,6 +215,9 @@ class ScreenHost(App):
 
     def forget_cancel(self, cancel: threading.Event) -> None:
         self.motion_cancels.discard(cancel)
+
+    def show_error(self, error: Exception) -> None:
+        self.errors.append(error)
 
     def on_mount(self) -> None:
         self.push_screen(self.make_screen(), self.results.append)

@@ -23,7 +23,7 @@ from textual.widgets import Static
 
 from fixwizard.errors import FixwizardError
 from fixwizard.plots.taps_view import taps_view
-from fixwizard.robot.base import NoContact, ProtectiveStop, RobotError, TapResult
+from fixwizard.robot.base import ConnectionLost, NoContact, ProtectiveStop, RobotError, TapResult
 from fixwizard.solver.solve import MIN_TAPS
 from fixwizard.tui import keys
 from fixwizard.tui.cell import Cell, Sampling
@@ -364,6 +364,14 @@ class SamplingScreen(Screen[bool]):
             text += (f"\nSIMULATED: press {keys.name(keys.HANDS)} and the simulated hands bring the ball above the "
                      "fixture.")
         self._problem(text)
+        if isinstance(error, ConnectionLost) and self._link_known_lost():
+            services(self).show_error(error)  # Reconnect: the lost link's dialog was shown, and may have been closed
+
+    def _link_known_lost(self) -> bool:
+        """Whether the app's status says the link is down: then it has shown the lost link's dialog (with Reconnect)
+        already; a link lost during this call it is about to show."""
+        status = services(self).robot_status
+        return status is None or not status.connected
 
     # --- the live check ---
 
