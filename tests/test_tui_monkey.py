@@ -343,7 +343,8 @@ class Monkey:
         if isinstance(screen, Dialog):
             return {"escape": 2.0, "enter": 2.0, "down": 0.3}, {}
         if isinstance(screen, StartScreen):
-            return {**noise, "escape": 0.2, "down": 0.2, "up": 0.1}, {"continue": (4.0, self.start_continue)}
+            return {**noise, "escape": 0.2, "down": 0.2, "up": 0.1}, {
+                "continue": (4.0, self.start_continue), "check": (0.3, lambda: self.press_button("#check"))}
         if isinstance(screen, PivotScreen):
             return {**noise, "m": 5.0, "n": 2.0, "space": 0.5, "f": 0.3}, {}
         if isinstance(screen, TablePointsScreen):
