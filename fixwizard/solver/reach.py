@@ -149,12 +149,46 @@ def _objectives(centre: BoundCentre, fix_p_origin: np.ndarray, cover: HullCover,
     return objectives
 
 
+def _chebyshev_fit(problem: SearchProblem, start: np.ndarray, extent_m: float) -> np.ndarray:
+    """The pose near ``start`` (within ``extent_m``) whose largest tap error ``|s(x_i) - r_ball|`` is least (a local
+    optimum), by SLSQP on the step and that error: it reaches poses that explain every tap however little room the
+    taps leave them (taps off by nearly the whole bound on both sides of a face leave poses with every error near
+    it, and none within ``FEASIBLE_SHARE`` of it)."""
+    offsets = DIFFERENCE_STEP_M * np.vstack([np.zeros(6), np.eye(6)])
+    free = np.ones((len(problem.base_p_taps), 1))
+    known: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+
+    def errors(step_and_error: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each tap's error over the sample bound at the step, and its Jacobian in the step (N, 6); the last step's
+        kept, as SLSQP asks for both constraints' values and Jacobians there in turn."""
+        key = step_and_error[:6].tobytes()
+        if key not in known:
+            values = _residuals_m(problem, start, step_and_error[:6] + offsets) / problem.sample_bound_m
+            known.clear()
+            known[key] = values[0], ((values[1:] - values[0]) / DIFFERENCE_STEP_M).T
+        return known[key]
+
+    constraints = [{"type": "ineq", "fun": lambda y: y[6] - errors(y)[0],
+                    "jac": lambda y: np.hstack([-errors(y)[1], free])},
+                   {"type": "ineq", "fun": lambda y: y[6] + errors(y)[0],
+                    "jac": lambda y: np.hstack([errors(y)[1], free])}]
+    worst = float(np.max(np.abs(errors(np.zeros(7))[0])))
+    result = minimize(lambda y: y[6], np.append(np.zeros(6), worst), jac=lambda _: np.append(np.zeros(6), 1.0),
+                      method="SLSQP", bounds=[(-extent_m, extent_m)] * 6 + [(0.0, None)], constraints=constraints,
+                      options={"maxiter": OPTIMISER_ITERATIONS, "ftol": 1e-12})
+    return _pose(start, result.x[:6], problem.fixture_radius_m)
+
+
 def certified_start(problem: SearchProblem, starts: list[np.ndarray], extent_m: float) -> np.ndarray | None:
     """The first certified pose of ``starts`` (poses ``base_T_fix``), else of their nearest least-squares fits and
-    the feasible poses pushed from them (within ``extent_m``, a bound on how far any pose of the set lies); None
-    when none certifies."""
+    the feasible poses pushed from them (within ``extent_m``, a bound on how far any pose of the set lies), else of
+    the Chebyshev fits from those least-squares fits (``_chebyshev_fit``, slower: for taps that leave no pose with
+    every error within ``FEASIBLE_SHARE`` of the bound); None when none certifies."""
     start = next((pose for pose in starts if certified(problem, pose)), None)
-    for pose in starts if start is None else ():
+    if start is not None:
+        return start
+    fits = []
+    for pose in starts:
         fitted = laplace_peak(problem.oracle, problem.base_p_taps, problem.ball_radius_m, problem.sample_bound_m / 3.0,
                               pose, problem.fixture_radius_m, extent_m).base_T_fix
         # a least-squares fit can leave one tap just outside the bound: look for any pose with every tap inside
@@ -162,7 +196,9 @@ def certified_start(problem: SearchProblem, starts: list[np.ndarray], extent_m: 
         for candidate in (fitted, feasible):
             if certified(problem, candidate):
                 return candidate
-    return start
+        fits.append(fitted)
+    return next((pose for pose in (_chebyshev_fit(problem, fitted, extent_m) for fitted in fits)
+                 if certified(problem, pose)), None)
 
 
 def reach(problem: SearchProblem, starts: list[np.ndarray], centre: BoundCentre, fix_p_origin: np.ndarray,

@@ -246,8 +246,9 @@ def _repeat_warnings(base_p_taps: np.ndarray) -> list[SolveWarning]:
 
 def _unexplained_warnings(problem: SearchProblem, modes: list[Mode], fix_T_cad: np.ndarray) -> list[SolveWarning]:
     """A warning when no pose could be found that explains every tap within the sample bound (from each mode's
-    expected pose: itself, its least-squares fit, a feasible pose near that): the set the cells hold may then be
-    empty, which only finer cells could prove, and its bounds rest on a sample bound the taps do not keep."""
+    expected pose: itself, its least-squares fit, a feasible pose near that, its Chebyshev fit): the set the cells
+    hold may then be empty, which only finer cells could prove, and its bounds rest on a sample bound the taps do not
+    keep."""
     for mode in modes:
         start = [mode.base_T_cad @ invert(fix_T_cad)]
         if certified_start(problem, start, mode.bounds.max_point_displacement_m) is not None:
