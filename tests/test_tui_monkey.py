@@ -536,13 +536,16 @@ def run_seed(seed: int, folder: Path, saved: bool) -> Monkey:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("seed, saved", CASES)
-def test_a_tired_operator_crashes_nothing_moves_nothing_when_stopped_and_loses_no_tap(tmp_path, seed, saved):
+def test_a_tired_operator_crashes_nothing_moves_nothing_when_stopped_and_loses_no_tap(tmp_path, monkeypatch, seed,
+                                                                                       saved):
+    monkeypatch.chdir(tmp_path)  # a report path typed at random is written relative to the working folder
     run_seed(int(os.environ.get("MONKEY_SEED", seed)), tmp_path, saved)
 
 
 @pytest.mark.slow
 @pytest.mark.skipif(EXTRA_RUNS == 0, reason="MONKEY_RUNS=N runs N more random seeds")
-def test_more_tired_operators(tmp_path):
+def test_more_tired_operators(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
     for run in range(EXTRA_RUNS):
         seed = random.SystemRandom().randrange(1 << 31)
         run_seed(seed, tmp_path / str(run), saved=seed % 2 == 0)
