@@ -37,7 +37,6 @@ import pytest
 from textual.pilot import Pilot
 from textual.widgets import Button, Input, Select
 from textual.widgets._select import SelectOverlay
-from textual.widgets._toast import Toast
 
 from fixwizard.calibration.store import load_calibration, save_calibration
 from fixwizard.demo import demo_fixture
@@ -485,28 +484,10 @@ class Monkey:
 
 
 @contextlib.contextmanager
-def toast_timers_not_negative() -> Iterator[None]:
-    """Textual 8.2.8 freezes its event loop for good (F12 and every key too) when a toast is made for a notification
-    that expired after the rack looked (a thread held the GIL in between): the toast's timer gets a negative delay,
-    and ``Timer._run`` then loops without awaiting. A run met it once in about 7000 steps; the product is exposed,
-    this test keeps its runs clear of it."""
-    on_mount = Toast._on_mount
-
-    def at_least_a_moment(toast: Toast, event) -> None:
-        toast._timeout = max(toast._timeout, 0.01)
-        on_mount(toast, event)
-
-    Toast._on_mount = at_least_a_moment
-    try:
-        yield
-    finally:
-        Toast._on_mount = on_mount
-
-
-@contextlib.contextmanager
 def no_frozen_loop(seconds: float) -> Iterator[None]:
     """A run whose event loop stops for ``seconds`` (no step ends) dumps every thread's stack and ends the process, so
-    that a freeze fails CI instead of holding it to its time limit."""
+    that a freeze fails CI instead of holding it to its time limit (a toast froze Textual's loop once: see
+    ``fixwizard.tui.toasts``)."""
     faulthandler.dump_traceback_later(seconds, exit=True, file=sys.__stderr__)
     try:
         yield
@@ -517,11 +498,6 @@ def no_frozen_loop(seconds: float) -> Iterator[None]:
 async def monkey_run(seed: int, folder: Path, steps: int, saved: bool) -> Monkey:
     """``steps`` random steps of a tired operator from the start screen with a fresh folder (with a saved tip
     calibration of this robot if ``saved``); the run's record."""
-    with toast_timers_not_negative():
-        return await monkey_steps(seed, folder, steps, saved)
-
-
-async def monkey_steps(seed: int, folder: Path, steps: int, saved: bool) -> Monkey:
     rng = random.Random(seed)
     cell, robot = monkey_cell(seed, folder, rng.choice(PACES_S))
     if saved:

@@ -32,6 +32,7 @@ from fixwizard.tui.solve.screen import SolveScreen
 from fixwizard.tui.start.screen import StartScreen
 from fixwizard.tui.start.sessions import resume_refusal, resume_session, start_session, started_text
 from fixwizard.tui.tip_calibration.steps import calibrate_tip_on_screens, open_tip_calibration
+from fixwizard.tui.toasts import keep_toast_delays_positive
 from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.errors import ErrorModal, Recovery, ResumeRefused
 from fixwizard.tui.widgets.help import HelpScreen, help_text, keys_of
@@ -64,6 +65,7 @@ class FixwizardApp(App[None]):
 
     def __init__(self, cell: Cell, resume: str | None = None, sampling: Sampling | None = None) -> None:
         super().__init__()
+        keep_toast_delays_positive()  # a toast of an expired notification froze Textual's event loop
         self.cell = cell
         self.resume = resume
         self._first_sampling = sampling
