@@ -9,7 +9,7 @@ import pytest
 
 from fixwizard.calibration.errors import CalibrationError
 from fixwizard.calibration.taps import ball_centres_m
-from fixwizard.robot import ProtectiveStop
+from fixwizard.robot import MotionStopped, ProtectiveStop
 from fixwizard.robot.sim import SimulatedCell
 from fixwizard.robot.sim_hands import SimulatedHands
 from fixwizard.solver.solve import solve
@@ -31,9 +31,9 @@ class MoveLog:
         self.cell = cell
         self.targets: list[np.ndarray] = []
 
-    def move_linear(self, base_T_tcp: np.ndarray, speed_m_s: float = 0.05) -> None:
+    def move_linear(self, base_T_tcp: np.ndarray, speed_m_s: float = 0.05, stop_mark: int | None = None) -> None:
         self.targets.append(np.array(base_T_tcp))
-        self.cell.move_linear(base_T_tcp, speed_m_s)
+        self.cell.move_linear(base_T_tcp, speed_m_s, stop_mark)
 
     def __getattr__(self, name: str):
         return getattr(self.cell, name)
@@ -136,19 +136,64 @@ def test_a_stop_as_a_move_ends_lets_no_tap_start(ready):
     taps: list[float] = []
 
     class StopAsTheMoveEnds(MoveLog):
-        def move_linear(self, base_T_tcp: np.ndarray, speed_m_s: float = 0.05) -> None:
-            super().move_linear(base_T_tcp, speed_m_s)
+        def move_linear(self, base_T_tcp: np.ndarray, speed_m_s: float = 0.05, stop_mark: int | None = None) -> None:
+            super().move_linear(base_T_tcp, speed_m_s, stop_mark)
             if len(self.targets) == 3:  # the lift, then two hover poses
                 cancel.set()
 
-        def tap(self, max_travel_m: float = 0.02, speed_m_s: float = 0.01, force_limit_n: float = 10.0):
+        def tap(self, max_travel_m: float = 0.02, speed_m_s: float = 0.01, force_limit_n: float = 10.0,
+                stop_mark: int | None = None):
             taps.append(max_travel_m)
-            return self.cell.tap(max_travel_m, speed_m_s, force_limit_n)
+            return self.cell.tap(max_travel_m, speed_m_s, force_limit_n, stop_mark)
 
     workflow.robot = StopAsTheMoveEnds(cell)
     with pytest.raises(Cancelled, match="table taps were cancelled after 1 of 16 taps"):
         workflow.run_table_taps(None, cancel)
     assert len(taps) == 1 and len(workflow.poses("table")) == 1
+
+
+class StopAsTheCallLeaves(MoveLog):
+    """STOP (the wizard sets the cancel request, then stops the robot) landing after the workflow looked at the cancel
+    request and before its call reaches the robot, at the ``nth`` call of ``motion`` ("move_linear" or "tap")."""
+
+    def __init__(self, cell: SimulatedCell, cancel: threading.Event, motion: str, nth: int) -> None:
+        super().__init__(cell)
+        self.cancel, self.motion, self.left = cancel, motion, nth
+        self.started: list[str] = []
+
+    def move_linear(self, base_T_tcp: np.ndarray, speed_m_s: float = 0.05, stop_mark: int | None = None) -> None:
+        self._maybe_stop("move_linear")
+        super().move_linear(base_T_tcp, speed_m_s, stop_mark)
+        self.started.append("move")
+
+    def tap(self, max_travel_m: float = 0.02, speed_m_s: float = 0.01, force_limit_n: float = 10.0,
+            stop_mark: int | None = None):
+        self._maybe_stop("tap")
+        result = self.cell.tap(max_travel_m, speed_m_s, force_limit_n, stop_mark)
+        self.started.append("tap")
+        return result
+
+    def _maybe_stop(self, motion: str) -> None:
+        if motion == self.motion:
+            self.left -= 1
+            if self.left == 0:
+                self.cancel.set()
+                self.cell.stop()
+
+
+@pytest.mark.parametrize("motion, nth, started", [("move_linear", 1, []), ("move_linear", 3, ["move", "move", "tap"]),
+                                                  ("tap", 2, ["move", "move", "tap", "move"])])
+def test_a_stop_between_the_look_at_cancel_and_the_robot_call_moves_nothing(ready, motion, nth, started):
+    """The workflow looks at the cancel request before each motion; a STOP landing right after that look let the
+    motion start (the robot counted STOPs from the call). The robot now gets the STOP count read before the look and
+    refuses the motion; the taps before it stay recorded."""
+    cell, workflow = ready
+    cancel = threading.Event()
+    workflow.robot = robot = StopAsTheCallLeaves(cell, cancel, motion, nth)
+    with pytest.raises(MotionStopped, match="stopped on request"):
+        workflow.run_table_taps(None, cancel)
+    assert robot.started == started
+    assert len(workflow.poses("table")) == started.count("tap")
 
 
 def test_protective_stop_names_the_step_and_keeps_the_recorded_taps(ready):

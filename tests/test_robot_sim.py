@@ -142,6 +142,30 @@ def test_stop_ends_freedrive_as_a_controllers_stop_ends_its_program(cell):
     assert cell.status().mode == "freedrive"
 
 
+MOTIONS = {"tap": lambda cell, mark: cell.tap(stop_mark=mark),
+           "move": lambda cell, mark: cell.move_linear(cell.base_T_tcp() @ make_transform(np.eye(3), [0, 0, -0.01]),
+                                                       stop_mark=mark),
+           "freedrive": lambda cell, mark: cell.freedrive(True, stop_mark=mark)}
+
+
+@pytest.mark.parametrize("motion", MOTIONS)
+def test_a_motion_asked_for_before_a_stop_never_starts_after_it(fixture, motion):
+    """A motion whose ``stop_mark`` was read before a STOP is refused, however late it reaches the cell (the
+    cell forgot every STOP before a motion began); asked for after the STOP, it runs."""
+    cell = SimulatedCell.with_fixture(fixture, seed=3)
+    cell.connect()
+    cell.place_tip_near("table", np.random.default_rng(8))
+    before = cell._base_T_tcp.copy()
+    stop_mark = cell.stop_count()
+    cell.stop()
+    with pytest.raises(MotionStopped, match=f"the {motion} was stopped on request"):
+        MOTIONS[motion](cell, stop_mark)
+    assert cell.status().mode == "idle"
+    np.testing.assert_array_equal(cell._base_T_tcp, before)
+    MOTIONS[motion](cell, cell.stop_count())
+    MOTIONS[motion](cell, None)
+
+
 def test_tap_pointing_away_finds_no_contact(cell):
     cell.move_linear(make_transform(np.eye(3), [0.3, 0.0, 0.3]))  # tool z points up, into free space
     with pytest.raises(NoContact, match="no surface within 20 mm: move the tool closer"):

@@ -670,6 +670,26 @@ def test_stop_refuses_a_motion_asked_for_before_it_that_had_not_started(start_co
     robot.move_linear(flange_above_surface(0.06))  # asked for after the STOP: it runs
 
 
+@pytest.mark.parametrize("motion", ["tap", "move", "freedrive"])
+def test_a_motion_whose_stop_mark_is_older_than_a_stop_never_starts(start_controller, connect, motion):
+    """The wizard reads the STOP count before it looks at its own STOP request, then asks for the motion with that
+    mark: a STOP landing in between refuses the motion on the link, however late the call comes (the link counted
+    STOPs from the call, so such a motion started after the STOP). Asked for with a fresh mark, it runs."""
+    controller = start_controller(base_T_flange=flange_above_surface(0.01))
+    robot = connect()
+    ask = {"tap": lambda mark: robot.tap(stop_mark=mark),
+           "move": lambda mark: robot.move_linear(flange_above_surface(0.02), stop_mark=mark),
+           "freedrive": lambda mark: robot.freedrive(True, stop_mark=mark)}[motion]
+    stop_mark = robot.stop_count()
+    robot.stop()
+    with pytest.raises(MotionStopped, match=f"the {motion} was stopped on request"):
+        ask(stop_mark)
+    assert [name for name, _, _ in controller.programs()] == ["setup"]
+    assert_arm_stands(controller)
+    ask(robot.stop_count())
+    assert [name for name, _, _ in controller.programs()] == ["setup", motion]
+
+
 def test_stop_before_the_controller_starts_a_sent_program_ends_it_before_it_moves(robot, controller):
     """STOP after the link sent a move but before the controller started it (the dashboard's stop finds nothing
     running): the link writes the stop request for that run, and the program ends before its movel starts

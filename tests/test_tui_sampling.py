@@ -271,8 +271,8 @@ async def test_a_stop_between_the_moves_above_a_point_lets_no_further_move_start
         screen.advice, screen.hover_plan = advice, HoverPlan(advice, 0.01, point + [0.0, 0.0, 0.01], point[2] + 0.02)
         moves, move_linear = [], cell.move_linear
 
-        def stopped_after_the_first(base_T_tcp, speed_m_s):
-            move_linear(base_T_tcp, speed_m_s)
+        def stopped_after_the_first(base_T_tcp, speed_m_s, stop_mark=None):
+            move_linear(base_T_tcp, speed_m_s, stop_mark)
             moves.append(base_T_tcp)
             for cancel in app.motion_cancels:  # STOP pressed as the move ends
                 cancel.set()
@@ -304,9 +304,9 @@ async def test_a_dialog_shown_as_the_screen_finishes_its_work_stays_until_closed
         released, freedrive = asyncio.Event(), cell.freedrive
         loop = asyncio.get_running_loop()
 
-        def held_freedrive(on: bool) -> None:
+        def held_freedrive(on: bool, stop_mark: int | None = None) -> None:
             asyncio.run_coroutine_threadsafe(released.wait(), loop).result(timeout=30)
-            freedrive(on)
+            freedrive(on, stop_mark)
 
         cell.freedrive = held_freedrive
         await pilot.press("s")
@@ -321,6 +321,26 @@ async def test_a_dialog_shown_as_the_screen_finishes_its_work_stays_until_closed
         await pilot.press("escape")
         await until(pilot, lambda: app.results == [True])
         assert screen not in app.screen_stack
+
+
+async def tap_or_move_above_a_point(pilot, context, motion: str) -> None:
+    """On the sampling screen (freedrive on): ``motion`` "tap" places the ball with the simulated hands and taps;
+    "move_linear" asks for the three moves above a suggested point 3 cm away and confirms them."""
+    app, cell = pilot.app, cell_of(context)
+    screen = app.screen
+    if motion == "tap":
+        await pilot.press("m")
+        await until(pilot, lambda: not screen.busy and cell.status().mode == "freedrive")
+        await pilot.press("t")
+        return
+    base_p_ball = cell.base_T_tcp()[:3, 3] + cell.base_T_tcp()[:3, :3] @ context.calibration.tcp_p_tip_m
+    point = base_p_ball + [0.03, 0.0, -0.01]
+    advice = TapAdvice(point, point, np.array([0.0, 0.0, 1.0]), 0.002)
+    screen.advice = advice
+    screen.hover_plan = HoverPlan(advice, 0.01, point + [0.0, 0.0, 0.01], point[2] + 0.02)
+    await pilot.press("g")
+    await until(pilot, lambda: isinstance(app.screen, ConfirmMove))
+    await pilot.press("y")
 
 
 @pytest.mark.parametrize("motion", ["tap", "move_linear"])
@@ -345,25 +365,44 @@ async def test_a_stop_as_a_tap_or_the_last_move_above_a_point_ends_leaves_freedr
             return result
 
         setattr(cell, motion, stopped_as_it_ends)
-        if motion == "tap":
-            await pilot.press("m")
-            await until(pilot, lambda: not screen.busy and cell.status().mode == "freedrive")
-            await pilot.press("t")
-        else:
-            base_p_ball = cell.base_T_tcp()[:3, 3] + cell.base_T_tcp()[:3, :3] @ context.calibration.tcp_p_tip_m
-            point = base_p_ball + [0.03, 0.0, -0.01]
-            advice = TapAdvice(point, point, np.array([0.0, 0.0, 1.0]), 0.002)
-            screen.advice = advice
-            screen.hover_plan = HoverPlan(advice, 0.01, point + [0.0, 0.0, 0.01], point[2] + 0.02)
-            await pilot.press("g")
-            await until(pilot, lambda: isinstance(app.screen, ConfirmMove))
-            await pilot.press("y")
+        await tap_or_move_above_a_point(pilot, context, motion)
         await until(pilot, lambda: app.screen is screen and not screen.busy and "STOP was pressed"
                     in text_of(screen, "#note"))
         await pilot.pause(0.1)
         assert cell.status().mode == "idle" and not app.motion_cancels
         assert FREEDRIVE_STAYS_OFF in text_of(screen, "#note")
         assert (len(context.session.taps), len(calls)) == ((1, 1) if motion == "tap" else (0, 3))
+
+
+@pytest.mark.parametrize("motion", ["tap", "move_linear"])
+async def test_a_stop_just_after_the_look_at_stop_still_keeps_the_motion_from_starting(context, motion):
+    """STOP landing after the worker looked whether STOP was pressed and before its call reached the robot (the GIL
+    switching just then): the tap, or the second move above a suggested point, started after the STOP (the robot
+    counted STOPs from the call). The robot now gets the STOP count read before that look, and refuses."""
+    app = ScreenHost(lambda: context.sampling_screen())
+    cell = cell_of(context)
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        await until(pilot, lambda: not screen.busy and cell.status().mode == "freedrive")
+        motion_call, asked, started = getattr(cell, motion), [], []
+
+        def stop_lands_first(*args, **kwargs):
+            asked.append(args)
+            if motion == "tap" or len(asked) == 2:  # STOP as the wizard presses it: the cancels, then the robot
+                for cancel in app.motion_cancels:
+                    cancel.set()
+                cell.stop()
+            result = motion_call(*args, **kwargs)
+            started.append(args)
+            return result
+
+        setattr(cell, motion, stop_lands_first)
+        await tap_or_move_above_a_point(pilot, context, motion)
+        await until(pilot, lambda: app.screen is screen and not screen.busy and "stopped on request"
+                    in text_of(screen, "#problem"))
+        assert (len(context.session.taps), len(started)) == (0, 0 if motion == "tap" else 1)
+        await pilot.pause(0.1)
+        assert cell.status().mode == "idle" and not app.motion_cancels
 
 
 @pytest.mark.parametrize("fault, freedrive_after", [("no_surface", True), ("protective_stop_during_tap", False),

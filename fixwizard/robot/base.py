@@ -121,21 +121,31 @@ class Robot(Protocol):
     def base_T_tcp(self) -> np.ndarray:
         """Current flange pose as the controller reports it (4x4, base frame, m)."""
 
-    def freedrive(self, on: bool) -> None:
-        """Let the operator move the arm by hand (True) or hold it (False)."""
+    def freedrive(self, on: bool, stop_mark: int | None = None) -> None:
+        """Let the operator move the arm by hand (True) or hold it (False); ``stop_mark``: see ``stop_count``."""
 
-    def tap(self, max_travel_m: float = 0.02, speed_m_s: float = 0.01, force_limit_n: float = 10.0) -> TapResult:
+    def tap(self, max_travel_m: float = 0.02, speed_m_s: float = 0.01, force_limit_n: float = 10.0,
+            stop_mark: int | None = None) -> TapResult:
         """Approach along the tool z axis until ``force_limit_n`` (N), at most ``max_travel_m`` (m) at
-        ``speed_m_s`` (m/s); settle, record the contact flange pose, retract to the start."""
+        ``speed_m_s`` (m/s); settle, record the contact flange pose, retract to the start. ``stop_mark``: see
+        ``stop_count``."""
 
-    def move_linear(self, base_T_tcp: np.ndarray, speed_m_s: float = 0.05) -> None:
-        """Move the flange in a straight line to ``base_T_tcp`` (4x4, base frame, m) at ``speed_m_s`` (m/s)."""
+    def move_linear(self, base_T_tcp: np.ndarray, speed_m_s: float = 0.05, stop_mark: int | None = None) -> None:
+        """Move the flange in a straight line to ``base_T_tcp`` (4x4, base frame, m) at ``speed_m_s`` (m/s).
+        ``stop_mark``: see ``stop_count``."""
 
     def status(self) -> RobotStatus:
         """Current controller state; never raises for a lost connection (it shows ``connected=False``)."""
 
     def stop(self) -> None:
-        """Stop any motion now."""
+        """Stop any motion now (one that was asked for with a ``stop_mark`` older than this STOP and has not
+        started yet never starts); never waits for a motion."""
+
+    def stop_count(self) -> int:
+        """How many times ``stop`` was called. Read before a motion is decided on and passed to it as its
+        ``stop_mark``, it makes the motion refuse to start (``MotionStopped``) after any STOP since the reading,
+        however late the call reaches the robot; a motion asked for with no mark counts STOPs from the call on
+        (freedrive off ignores the mark: holding the arm is always allowed)."""
 
 
 def check_tap_request(max_travel_m: float, speed_m_s: float, force_limit_n: float) -> None:

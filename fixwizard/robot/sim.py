@@ -97,7 +97,8 @@ class SimulatedCell:
         self._protective_stop = False
         self._freedrive = False
         self._fault: Fault | None = None
-        self._stop_requested = threading.Event()
+        self._stop_count = 0  # ``stop`` calls (see ``base.Robot.stop_count``), under ``_stopped``
+        self._stopped = threading.Condition()  # notified by ``stop``; not ``_lock``, which a move holds
         self._moving = threading.Event()  # set while a tap or move takes its time (``status`` says so)
 
     @classmethod
@@ -133,14 +134,17 @@ class SimulatedCell:
             self._require_connected()
             return self._reported(self._base_T_tcp)
 
-    def freedrive(self, on: bool) -> None:
+    def freedrive(self, on: bool, stop_mark: int | None = None) -> None:
         with self._lock:
             self._require_connected()
+            if on and self._stopped_since(stop_mark):
+                raise MotionStopped("freedrive")
             self._freedrive = on
 
-    def tap(self, max_travel_m: float = 0.02, speed_m_s: float = 0.01, force_limit_n: float = 10.0) -> TapResult:
+    def tap(self, max_travel_m: float = 0.02, speed_m_s: float = 0.01, force_limit_n: float = 10.0,
+            stop_mark: int | None = None) -> TapResult:
         check_tap_request(max_travel_m, speed_m_s, force_limit_n)
-        self._move_for_pace("tap")
+        self._move_for_pace("tap", stop_mark)
         with self._lock:
             self._require_ready()
             fault, self._fault = self._fault, None
@@ -159,14 +163,14 @@ class SimulatedCell:
             base_T_contact[:3, 3] += travel_m * self._base_T_tcp[:3, 2]
             return TapResult(self._reported(base_T_contact), travel_m, force_limit_n, SETTLE_S)
 
-    def move_linear(self, base_T_tcp: np.ndarray, speed_m_s: float = 0.05) -> None:
+    def move_linear(self, base_T_tcp: np.ndarray, speed_m_s: float = 0.05, stop_mark: int | None = None) -> None:
         """Move the flange straight to ``base_T_tcp``; if the ball would hit the fixture or the table on the
         way, go back to the start and raise ``MoveBlocked``, as fixwizard's move program on a UR does when the
         contact force reaches ``MOVE_FORCE_LIMIT_N``."""
         check_limit("linear speed", speed_m_s, MAX_LINEAR_SPEED_M_S, "mm/s", 1e3)
         with self._lock:  # as a UR's move program: a target too far is refused before anything moves
             check_move_travel(float(np.linalg.norm(np.asarray(base_T_tcp, float)[:3, 3] - self._base_T_tcp[:3, 3])))
-        self._move_for_pace("move")
+        self._move_for_pace("move", stop_mark)
         with self._lock:
             self._require_ready()
             path = self._flange_path(np.array(base_T_tcp, float))
@@ -185,8 +189,14 @@ class SimulatedCell:
     def stop(self) -> None:
         """Cut short a tap or move that is waiting out its pace (it raises ``MotionStopped``) and end freedrive, as
         a UR controller's stop ends the program that holds it; never waits for the lock a move holds."""
-        self._stop_requested.set()
-        self._freedrive = False
+        with self._stopped:
+            self._stop_count += 1
+            self._freedrive = False
+            self._stopped.notify_all()
+
+    def stop_count(self) -> int:
+        with self._stopped:
+            return self._stop_count
 
     # --- stand-ins for the operator and the teach pendant ---
 
@@ -231,18 +241,27 @@ class SimulatedCell:
 
     # --- internals (call with the lock held, except ``_move_for_pace``) ---
 
-    def _move_for_pace(self, motion: str) -> None:
+    def _move_for_pace(self, motion: str, stop_mark: int | None) -> None:
         """Let ``pace_s`` pass as the motion's duration, ``status`` saying "moving" meanwhile; a motion the cell
-        refuses does not start, and a ``stop()`` meanwhile aborts it."""
+        refuses does not start, nor one with a STOP since ``stop_mark`` (None: since now), and a ``stop()``
+        meanwhile aborts it."""
         with self._lock:
             self._require_ready()
-        self._stop_requested.clear()
-        self._moving.set()
-        try:
-            if self.pace_s > 0.0 and self._stop_requested.wait(self.pace_s):
+        with self._stopped:
+            mark = self._stop_count if stop_mark is None else stop_mark
+            if self._stop_count != mark:
                 raise MotionStopped(motion)
-        finally:
-            self._moving.clear()
+            self._moving.set()
+            try:
+                if self.pace_s > 0.0 and self._stopped.wait_for(lambda: self._stop_count != mark, self.pace_s):
+                    raise MotionStopped(motion)
+            finally:
+                self._moving.clear()
+
+    def _stopped_since(self, stop_mark: int | None) -> bool:
+        """Whether ``stop`` was called since the STOP count was ``stop_mark`` (None: never)."""
+        with self._stopped:
+            return stop_mark is not None and self._stop_count != stop_mark
 
     def _require_connected(self) -> None:
         if not self._connected:

@@ -144,20 +144,21 @@ class URRobot:
         """Current flange pose (4x4, base frame, m)."""
         return self._live_state(self._live_link("")).base_T_tcp
 
-    def freedrive(self, on: bool) -> None:
+    def freedrive(self, on: bool, stop_mark: int | None = None) -> None:
         """Let the operator move the arm by hand (teach mode, in a program with its watchdog) or hold it."""
-        stop_mark = self._stop_count.value
+        stop_mark = self._mark(stop_mark)
         with self._locked("switch freedrive"):
             link = self._live_link(" while switching freedrive")
             self._freedrive_run = self._call(link, "freedrive", (on, stop_mark), COMMAND_DEADLINE_S,
                                              " while switching freedrive")
 
-    def tap(self, max_travel_m: float = 0.02, speed_m_s: float = 0.01, force_limit_n: float = 10.0) -> TapResult:
+    def tap(self, max_travel_m: float = 0.02, speed_m_s: float = 0.01, force_limit_n: float = 10.0,
+            stop_mark: int | None = None) -> TapResult:
         """Approach along the tool z axis at ``speed_m_s`` (m/s) until the force reaches ``force_limit_n`` (N),
         at most ``max_travel_m`` (m), every limit held by the controller; wait for the contact to settle,
         record the flange pose, retract to the start. See the class docstring for ``tap_result``."""
         check_tap_request(max_travel_m, speed_m_s, force_limit_n)
-        stop_mark = self._stop_count.value
+        stop_mark = self._mark(stop_mark)
         with self._locked("tap"), self._motion():
             link = self._live_link(" before the tap")
             self._refuse_in_freedrive()
@@ -168,13 +169,13 @@ class URRobot:
             except ConnectionLost as error:
                 raise _with_tap_note(error) from None
 
-    def move_linear(self, base_T_tcp: np.ndarray, speed_m_s: float = 0.05) -> None:
+    def move_linear(self, base_T_tcp: np.ndarray, speed_m_s: float = 0.05, stop_mark: int | None = None) -> None:
         """Move the flange in a straight line to ``base_T_tcp`` (4x4, base frame, m) at ``speed_m_s`` (m/s), at most
         ``base.MAX_MOVE_TRAVEL_M`` (m) from where it stands; ``MoveBlocked`` (the arm back where it began) if the
         contact force reaches ``base.MOVE_FORCE_LIMIT_N`` on the way. Both limits are held by the controller."""
         check_limit("linear speed", speed_m_s, MAX_LINEAR_SPEED_M_S, "mm/s", 1e3)
         target = _checked_target(base_T_tcp)
-        stop_mark = self._stop_count.value
+        stop_mark = self._mark(stop_mark)
         with self._locked("move"), self._motion():
             link = self._live_link(" before the move")
             self._refuse_in_freedrive()
@@ -200,6 +201,10 @@ class URRobot:
         self._stop_count.value += 1
         threading.Thread(target=_dashboard_stop, args=(self.host,), name="ur-dashboard-stop", daemon=True).start()
 
+    def stop_count(self) -> int:
+        """STOP presses so far (see ``base.Robot.stop_count``)."""
+        return int(self._stop_count.value)
+
     # --- beyond the protocol ---
 
     def unlock_protective_stop(self) -> None:
@@ -210,6 +215,10 @@ class URRobot:
             self._call(link, "unlock_protective_stop", (), COMMAND_DEADLINE_S, " while unlocking the protective stop")
 
     # --- the link process ---
+
+    def _mark(self, stop_mark: int | None) -> int:
+        """The STOP count a motion counts STOPs from: ``stop_mark``, or now."""
+        return int(self._stop_count.value) if stop_mark is None else stop_mark
 
     def _call(self, link: _LinkProcess, command: str, args: tuple, deadline_s: float, context: str,
               watch_state: bool = True) -> Any:

@@ -171,7 +171,9 @@ class FixwizardApp(App[None]):
         self._link_up = False
 
     def action_stop_robot(self) -> None:
-        """STOP: cancel automatic steps and halt the robot's motion now, from any screen; STOPPED until re-armed."""
+        """STOP: cancel automatic steps and halt the robot's motion now, from any screen; STOPPED until re-armed.
+        The cancels are set before the robot's stop: a worker that found its cancel unset had read the robot's STOP
+        count before, so the robot refuses the motion it then asks for (``tapping.unless_stopped``)."""
         for cancel in self._motion_cancels:
             cancel.set()
         in_thread(self, self.cell.robot.stop)

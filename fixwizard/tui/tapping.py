@@ -1,7 +1,7 @@
 """A tap as the sampling and check screens make it: freedrive off, tap, record the contact; freedrive on again
 only after a tap that ended as planned (a contact, or none within its travel) and with no STOP meanwhile. After a
 stop or a fault the arm holds still: freedrive stays off until the operator turns it on, and the error says so. A
-motion whose key came before a STOP does not start after it (``unless_stopped``)."""
+motion whose key came before a STOP does not start after it (``unless_stopped``, whose mark the motion gets)."""
 
 import contextlib
 import threading
@@ -16,22 +16,24 @@ FREEDRIVE_STAYS_OFF = (f"Freedrive stays off after this: press {keys.name(keys.F
                        "again once the cell is safe (after a STOP, re-arming turns it on).")
 
 
-def unless_stopped(cancel: threading.Event, motion: str) -> None:
-    """Raise ``MotionStopped`` for ``motion`` (e.g. "tap") if STOP was pressed (``cancel``, which STOP sets) since its
-    key: called just before the robot call, so that a motion asked for before a STOP does not start after it (the
-    robot's own stop halts only a motion that has started)."""
+def unless_stopped(robot: Robot, cancel: threading.Event, motion: str) -> int:
+    """The ``stop_mark`` to ask ``robot`` for ``motion`` (e.g. "tap") with; ``MotionStopped`` if STOP was pressed
+    since its key (``cancel``, which STOP sets before it stops the robot). Called just before the robot call, so that
+    a motion asked for before a STOP does not start after it (the robot's own stop halts only a motion that has
+    started). The mark is read before ``cancel`` is looked at: a STOP after that look stops the robot after the
+    reading too, so the robot refuses the motion, however late the call reaches it."""
+    stop_mark = robot.stop_count()
     if cancel.is_set():
         raise MotionStopped(motion)
+    return stop_mark
 
 
 def freedrive_again(robot: Robot, cancel: threading.Event) -> None:
     """Freedrive on, unless STOP was pressed meanwhile (``cancel``, which STOP sets: then the arm holds still, even
     when the motion had ended before the STOP reached the robot); a robot that refuses leaves it to the next robot
     call to tell the operator."""
-    if cancel.is_set():
-        return
     with contextlib.suppress(RobotError):
-        robot.freedrive(True)
+        robot.freedrive(True, stop_mark=unless_stopped(robot, cancel, "freedrive"))
 
 
 def tap_and_record(robot: Robot, record: Callable[[TapResult], T], tap_count: Callable[[], int],
@@ -41,8 +43,7 @@ def tap_and_record(robot: Robot, record: Callable[[TapResult], T], tap_count: Ca
     then stays off). Raises the robot's error."""
     robot.freedrive(False)
     try:
-        unless_stopped(cancel, "tap")
-        result = robot.tap()
+        result = robot.tap(stop_mark=unless_stopped(robot, cancel, "tap"))
     except NoContact:
         freedrive_again(robot, cancel)
         raise

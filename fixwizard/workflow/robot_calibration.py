@@ -147,13 +147,13 @@ class RobotTipCalibration:
         what to capture next while there are too few poses or too little tilt."""
         return fit_pivot(self.poses("pivot"))
 
-    def tap_table_point(self) -> np.ndarray:
+    def tap_table_point(self, stop_mark: int | None = None) -> np.ndarray:
         """Tap the table below the ball (the operator placed it a few mm above the next of A, B, C) and
-        record the contact flange pose (4, 4), which is returned."""
+        record the contact flange pose (4, 4), which is returned; ``stop_mark``: the robot's (``Robot.stop_count``)."""
         done = len(self._poses["table_coarse"])
         if done == len(TABLE_POINTS):
             raise CalibrationError("the table points A, B and C are recorded already; go on with the table taps")
-        contact = _call(f"table point {TABLE_POINTS[done]}", self.robot.tap).base_T_tcp_contact
+        contact = _call(f"table point {TABLE_POINTS[done]}", self.robot.tap, stop_mark=stop_mark).base_T_tcp_contact
         self._record("table_coarse", contact)
         return contact
 
@@ -219,20 +219,21 @@ class RobotTipCalibration:
         tip = self.pivot_fit().tcp_p_tip_m
         base_p_hover = ball_centres_m(plan, tip)
 
-        def unless_cancelled() -> None:
+        def unless_cancelled() -> int:
+            """The robot's STOP count, read before ``cancel`` is looked at (see ``tapping.unless_stopped``)."""
+            stop_mark = self.robot.stop_count()
             if cancel is not None and cancel.is_set():
                 raise Cancelled(step, len(recorded), total)
+            return stop_mark
 
         for index in range(first, total):
             where = f"{STEP_TITLES[step]}, tap {index + 1} of {total}"
             if index == first:
-                unless_cancelled()
+                stop_mark = unless_cancelled()
                 self._check_above_corner(_call(where, self.robot.base_T_tcp), base_T_table, tip, base_p_hover)
-                _call(where, self._lift, tip, base_n_up, base_p_hover[index])
-            unless_cancelled()
-            _call(where, self.robot.move_linear, plan[index])
-            unless_cancelled()
-            result = _call(where, self.robot.tap, max_travel_m=self._tap_travel_m)
+                _call(where, self._lift, tip, base_n_up, base_p_hover[index], stop_mark)
+            _call(where, self.robot.move_linear, plan[index], stop_mark=unless_cancelled())
+            result = _call(where, self.robot.tap, max_travel_m=self._tap_travel_m, stop_mark=unless_cancelled())
             self._record(step, result.base_T_tcp_contact)
             if progress is not None:
                 progress(step, len(recorded), total)
@@ -254,13 +255,14 @@ class RobotTipCalibration:
                 "taps run, so the robot did not move: bring it a few centimetres above the corner B in freedrive, "
                 "then start them again")
 
-    def _lift(self, tcp_p_tip_m: np.ndarray, base_n_up: np.ndarray, base_p_hover: np.ndarray) -> None:
-        """Move straight along the table normal until the ball centre is at least as high as the hover point."""
+    def _lift(self, tcp_p_tip_m: np.ndarray, base_n_up: np.ndarray, base_p_hover: np.ndarray, stop_mark: int) -> None:
+        """Move straight along the table normal until the ball centre is at least as high as the hover point (not
+        after a STOP since the robot's ``stop_mark``)."""
         base_T_tcp = self.robot.base_T_tcp()
         rise_m = (base_p_hover - ball_centres_m(base_T_tcp[None], tcp_p_tip_m)[0]) @ base_n_up
         if rise_m > 0.0:
             base_T_tcp[:3, 3] += rise_m * base_n_up
-            self.robot.move_linear(base_T_tcp)
+            self.robot.move_linear(base_T_tcp, stop_mark=stop_mark)
 
 
 def _call(where: str, action: Callable[..., T], *args, **kwargs) -> T:

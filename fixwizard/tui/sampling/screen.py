@@ -337,8 +337,8 @@ class SamplingScreen(Screen[bool]):
         robot.freedrive(False)
         try:
             for base_T_tcp in hover_path(plan, calibration.tcp_p_tip_m, robot.base_T_tcp()):
-                unless_stopped(cancel, "move above the suggested point")
-                robot.move_linear(base_T_tcp, HOVER_SPEED_M_S)
+                robot.move_linear(base_T_tcp, HOVER_SPEED_M_S,
+                                  stop_mark=unless_stopped(robot, cancel, "move above the suggested point"))
         except RobotError as error:
             error.add_note(FREEDRIVE_STAYS_OFF)
             raise

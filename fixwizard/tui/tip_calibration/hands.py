@@ -183,11 +183,11 @@ class TablePointsScreen(CalibrationStepScreen):
     def _tap(self, cancel: threading.Event) -> None:
         """Freedrive off, tap (not after a STOP pressed since the key), and freedrive on again while points are left
         and no STOP came (``cancel``; worker thread)."""
-        self.cell.robot.freedrive(False)
-        unless_stopped(cancel, "tap")
-        self.workflow.tap_table_point()
+        robot = self.cell.robot
+        robot.freedrive(False)
+        self.workflow.tap_table_point(stop_mark=unless_stopped(robot, cancel, "tap"))
         if self._tapped() < len(TABLE_POINTS) and not cancel.is_set():
-            self.cell.robot.freedrive(True)
+            robot.freedrive(True, stop_mark=unless_stopped(robot, cancel, "freedrive"))
 
     def _tap_ended(self, cancel: threading.Event) -> None:
         stopped = cancel.is_set() and self._tapped() < len(TABLE_POINTS)
