@@ -60,6 +60,11 @@ class Cancelled(FixwizardError):
                          "are kept: run the step again to continue")
 
 
+class AwayFromCorner(CalibrationError):
+    """An automatic step did not start: the ball is away from the table corner where it runs, and the operator brings
+    it back above the corner B (in freedrive) before starting it again."""
+
+
 class RobotTipCalibration:
     """One tip calibration on ``robot``: ball diameter (m), approach height of the automatic taps above the
     table (m, ball centre above its contact plane), the table grid (rows, columns) and its spacing (m),
@@ -250,7 +255,7 @@ class RobotTipCalibration:
         low, high = table_xy_corner.min(axis=0) - START_MARGIN_M, table_xy_corner.max(axis=0) + START_MARGIN_M
         outside_m = float(np.linalg.norm(table_xy_ball - np.clip(table_xy_ball, low, high)))
         if outside_m > 0.0:
-            raise CalibrationError(
+            raise AwayFromCorner(
                 f"the ball is {outside_m * 1e3:.0f} mm away from the table corner of A, B and C, where the automatic "
                 "taps run, so the robot did not move: bring it a few centimetres above the corner B in freedrive, "
                 "then start them again")

@@ -12,12 +12,13 @@ from fixwizard.tui import keys
 from fixwizard.tui.dismiss import dismiss_when_on_top
 from fixwizard.tui.tip_calibration.step import CalibrationStepScreen
 from fixwizard.tui.workers import services
-from fixwizard.workflow.robot_calibration import Cancelled, Step
+from fixwizard.workflow.robot_calibration import AwayFromCorner, Cancelled, Step
 
 AUTO_TEXT = (
     "The robot now moves by itself: it lifts the ball {height_mm:.0f} mm above the table, taps a {rows} x {cols} "
     "grid in the corner between A, B and C, then taps {tilted} times near B with the tool tilted. Keep clear of "
     "the cell; the STOP key (F12) halts it at once. Press {go} to {start}.")
+AWAY_TEXT = "Press {freedrive} to turn freedrive on, guide the ball there, then press {go}."
 CONTINUED_TEXT = (
     "This calibration goes on where it stopped, with every tap recorded before. If the arm was moved since, turn "
     "freedrive on ({freedrive}) and bring the ball a few centimetres above the corner B first; then press {go}.")
@@ -28,21 +29,23 @@ CANCEL_LABEL = "Cancel taps"  # the footer's Esc while the taps run: it cancels 
 
 class AutoTapsScreen(CalibrationStepScreen):
     """Run the table and tilted taps in a worker; Esc cancels between two taps (and goes back when none run), and
-    the footer names what it does now. A calibration continued after the wizard left it lets the operator guide the
-    arm back near the corner B first (f): only then is the arm guided by hand here, so that a re-arm after a STOP
-    turns freedrive on again."""
+    the footer names what it does now. The taps start only with the ball above the corner B: a calibration continued
+    after the wizard left it, or taps refused to start with the ball away from it (the arm moved at the pivot
+    meanwhile), let the operator guide the arm back there first (f, and m on the simulated cell): only once turned on
+    with f is the arm guided by hand here, so that a re-arm after a STOP turns freedrive on again."""
 
     STEP = 3
     TITLE_TEXT = "automatic taps"
     BINDINGS = [keys.binding(keys.GO), keys.binding(keys.HANDS), keys.binding(keys.FREEDRIVE), keys.binding(keys.NEXT)]
     HELP_ABOUT = ("The robot taps the table by itself: a grid in the corner of A, B and C, then tilted taps near "
                   "B. Keep clear of the cell; STOP (F12) halts it at once, Esc cancels after the current tap and "
-                  "going on continues where it stopped. Once all taps are done, go on to the result. A calibration "
-                  "continued after the wizard left it starts with the ball above the corner B: f (freedrive) lets "
-                  "you guide it there.")
+                  "going on continues where it stopped. Once all taps are done, go on to the result. The taps start "
+                  "with the ball above the corner B: when it is away (a calibration continued, the arm moved), f "
+                  "(freedrive) lets you guide it there.")
 
     _cancel: threading.Event | None = None  # set to cancel the taps that run; None while none run
     _freedrive_on = False  # the operator turned freedrive on (f) and no taps ran since
+    _away = False  # the taps refused to start with the ball away from the corner, and none started since
 
     def body(self) -> ComposeResult:
         workflow = self.workflow
@@ -70,9 +73,13 @@ class AutoTapsScreen(CalibrationStepScreen):
         if self._finished():
             self._show("All taps are done: press n for the result.")
         elif self._continued():
-            self._show(CONTINUED_TEXT.format(freedrive=keys.name(keys.FREEDRIVE), go=keys.name(keys.GO)) + (
-                f"\nSIMULATED: press {keys.name(keys.HANDS)} and the simulated hands bring the ball above B."
-                if self.cell.hands is not None else ""))
+            self._show(CONTINUED_TEXT.format(freedrive=keys.name(keys.FREEDRIVE), go=keys.name(keys.GO))
+                       + self._simulated_hands_line())
+
+    def _simulated_hands_line(self) -> str:
+        """On the simulated cell, the line that offers its hands to bring the ball above B (else nothing)."""
+        return (f"\nSIMULATED: press {keys.name(keys.HANDS)} and the simulated hands bring the ball above B."
+                if self.cell.hands is not None else "")
 
     def action_freedrive(self) -> None:
         def on(_: None) -> None:
@@ -96,7 +103,7 @@ class AutoTapsScreen(CalibrationStepScreen):
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
         if action in (keys.BACK.action, keys.NEXT.action) and self._cancel is not None:
             return True  # Esc cancels the running taps, n says they are running
-        if action in (keys.FREEDRIVE.action, keys.HANDS.action) and not self._continued():
+        if action in (keys.FREEDRIVE.action, keys.HANDS.action) and not (self._continued() or self._away):
             return False  # the arm is where the table point C left it: nothing to guide by hand
         allowed = super().check_action(action, parameters)
         if allowed and action == keys.GO.action and self._finished():
@@ -112,6 +119,7 @@ class AutoTapsScreen(CalibrationStepScreen):
         cancel = threading.Event()
         self._set_taps_cancel(cancel)
         self._freedrive_on = False  # the taps turn it off first
+        self._away = False  # they start only with the ball above the corner
         services(self).cancel_on_stop(cancel)
 
         def progress(step: Step, done: int, total: int) -> None:
@@ -160,6 +168,11 @@ class AutoTapsScreen(CalibrationStepScreen):
         elif services(self).stopped or isinstance(outcome, ProtectiveStop):  # g is refused until re-armed
             self._show(f"Stopped: {outcome}\nOnce the cell is checked and clear, re-arm ({keys.name(keys.REARM)}), "
                        f"then press {keys.name(keys.GO)} to continue.")
+        elif isinstance(outcome, AwayFromCorner):
+            self._away = True
+            self.refresh_bindings()
+            away = AWAY_TEXT.format(freedrive=keys.name(keys.FREEDRIVE), go=keys.name(keys.GO))
+            self._show(f"Not started: {outcome}.\n{away}{self._simulated_hands_line()}")
         elif isinstance(outcome, Cancelled):
             self._show(f"{outcome}. Press {keys.name(keys.GO)} to continue.")
         else:
