@@ -222,12 +222,19 @@ def test_two_taps_that_fit_are_too_few_and_the_verdict_says_to_tap_more(tmp_path
     asyncio.run(run())
 
 
-def test_the_start_screen_opens_the_check_with_a_stored_tip_calibration(tmp_path, calibrated):
+def wizard_with_a_report(tmp_path, calibrated) -> tuple[Cell, Path]:
+    """The wizard's simulated cell of SEED in ``tmp_path`` with the calibrated report in reports/, and a stored tip
+    calibration (its path) in calibrations/."""
     context = simulated_cell(SEED, pace_s=0.0, folder=tmp_path)
-    context_for(tmp_path, calibrated)  # the report in reports/
+    context_for(tmp_path, calibrated)
     path = tmp_path / "calibrations" / "example.yaml"
     path.parent.mkdir()
     shutil.copy(EXAMPLE_CALIBRATION, path)
+    return context, path
+
+
+def test_the_start_screen_opens_the_check_with_a_stored_tip_calibration(tmp_path, calibrated):
+    context, path = wizard_with_a_report(tmp_path, calibrated)
 
     async def run():
         app = FixwizardApp(context)

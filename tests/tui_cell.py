@@ -208,6 +208,7 @@ class ScreenHost(App):
         self.results: list = []
         self.errors: list[Exception] = []  # what the wizard would show in its error dialog (``show_error``)
         self.robot_status = None  # the wizard's latest robot status: unknown here
+        self.stopped = False  # the wizard is not STOPPED here
         self.motion_cancels: set[threading.Event] = set()  # what STOP would set (``cancel_on_stop``)
 
     def cancel_on_stop(self, cancel: threading.Event) -> None:

@@ -29,6 +29,7 @@ from fixwizard.solver.search import SearchCancelled
 from fixwizard.tui import keys
 from fixwizard.tui.cell import Cell, SavedCalibration
 from fixwizard.tui.dismiss import dismiss_when_on_top
+from fixwizard.tui.freedrive import freedrive_unless_stopped
 from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF, tap_and_record
 from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.errors import error_message
@@ -91,6 +92,7 @@ class CheckScreen(Screen[None]):
         self.journal: SamplingSession | None = None
         self._next_point = 0
         self._cancel = threading.Event()
+        self._off_said = False  # the note says freedrive is off while STOPPED
 
     def compose(self) -> ComposeResult:
         simulated = " (SIMULATED)" if self.cell.simulated else ""
@@ -117,11 +119,20 @@ class CheckScreen(Screen[None]):
                       "back).")
             return
         self._choose(str(self.query_one("#check-fixture", Select).value))
-        self.action_freedrive()
+        freedrive_unless_stopped(self, self.action_freedrive, self._say_off)
 
     def action_freedrive(self) -> None:
         """Freedrive on (a STOP ends it; re-arming calls this)."""
-        self._run(lambda: self.cell.robot.freedrive(True), lambda _: None)
+        def on(_: None) -> None:
+            if self._off_said:  # it is on now
+                self._say("")
+
+        self._run(lambda: self.cell.robot.freedrive(True), on)
+
+    def _say_off(self, off: str) -> None:
+        """Say that freedrive is off (``off``: how to turn it on), until it is on or the note says more."""
+        self._say(off)
+        self._off_said = True
 
     def on_unmount(self) -> None:
         self._cancel.set()
@@ -362,4 +373,5 @@ class CheckScreen(Screen[None]):
         self.set_class(result is not None, "-checked")  # the suggestions make room for the verdict and the taps
 
     def _say(self, text: str) -> None:
+        self._off_said = False
         self.query_one("#check-note", Static).update(text)

@@ -28,6 +28,7 @@ from fixwizard.solver.solve import MIN_TAPS
 from fixwizard.tui import keys
 from fixwizard.tui.cell import Cell, Sampling
 from fixwizard.tui.dismiss import dismiss_when_on_top
+from fixwizard.tui.freedrive import freedrive_unless_stopped
 from fixwizard.tui.sampling.text import (
     NO_SAFE_HOVER,
     guide_text,
@@ -66,6 +67,8 @@ from fixwizard.workflow.solver_process import (
 
 ROBOT_ACTIONS = {key.method for key in (keys.TAP, keys.UNDO, keys.SOLVE, keys.BACK, keys.GO, keys.HANDS, keys.UNLOCK)}
 HOVER_SPEED_M_S = 0.1
+HOW_TO_TAP = ("Freedrive is on: guide the ball 5-10 mm above the fixture, tool pointing at the surface, then press "
+              f"{keys.name(keys.TAP)}. Spread 10-20 taps over several faces.")
 COLUMNS = ("#", "x mm", "y mm", "z mm", "off surface mm")
 T = TypeVar("T")
 ShownError = FixwizardError | OSError
@@ -116,8 +119,7 @@ class SamplingScreen(Screen[bool]):
 
     def compose(self) -> ComposeResult:
         yield Static("", id="title", markup=False)
-        yield Static("Freedrive is on: guide the ball 5-10 mm above the fixture, tool pointing at the surface, "
-                     "then press t. Spread 10-20 taps over several faces.", id="help", markup=False)
+        yield Static(HOW_TO_TAP, id="help", markup=False)
         with Horizontal(id="middle"):
             yield TapsTable(id="taps")
             yield PictureView(self._draw_top_view, id="top-view")
@@ -138,7 +140,7 @@ class SamplingScreen(Screen[bool]):
         self.set_interval(TICK_S, self._count_live_seconds)
         self.run_worker(self.solver.start, thread=True, group="solver")  # warm (fixture loaded) by the third tap
         self._start_live_check()
-        self._run_robot(lambda: self.cell.robot.freedrive(True), lambda _: None)
+        freedrive_unless_stopped(self, self.action_freedrive, self.query_one("#help", Static).update)
 
     def on_unmount(self) -> None:
         self._cancel_live()  # nobody is left to show them; the solver process stays for the solve
@@ -146,7 +148,8 @@ class SamplingScreen(Screen[bool]):
 
     def action_freedrive(self) -> None:
         """Freedrive on again (a STOP ends it; re-arming calls this)."""
-        self._run_robot(lambda: self.cell.robot.freedrive(True), lambda _: None)
+        self._run_robot(lambda: self.cell.robot.freedrive(True), lambda _: self.query_one("#help", Static).update(
+            HOW_TO_TAP))
 
     # --- keys ---
 

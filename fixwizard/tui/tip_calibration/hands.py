@@ -12,13 +12,15 @@ from fixwizard.calibration.pivot import MIN_POSES
 from fixwizard.calibration.table import MIN_EDGE_M
 from fixwizard.errors import sentence
 from fixwizard.tui import keys
+from fixwizard.tui.freedrive import freedrive_unless_stopped
 from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF, unless_stopped
 from fixwizard.tui.tip_calibration.step import CalibrationStepScreen
 from fixwizard.tui.workers import ShownError
 from fixwizard.workflow.robot_calibration import TABLE_POINTS
 
+FREEDRIVE_ON = "Freedrive is on."
 PIVOT_TEXT = (
-    "Freedrive is on. Put the ball on one fixed point of the table, away from the fixture (a small dimple or "
+    "{freedrive} Put the ball on one fixed point of the table, away from the fixture (a small dimple or "
     "centre-punch mark helps). Keep the ball on that point, tilt the tool 20-30 degrees in different directions "
     "(forwards, sideways, backwards) and press Space after each pose. 5 to 8 poses are good.")
 TABLE_POINTS_TEXT = (
@@ -45,7 +47,7 @@ class PivotScreen(CalibrationStepScreen):
                   "points. Going back to the start screen drops the captured poses (it asks first).")
 
     def body(self) -> ComposeResult:
-        yield Static(PIVOT_TEXT)
+        yield Static(PIVOT_TEXT.format(freedrive=FREEDRIVE_ON), id="pivot-text")
         if self.cell.hands is not None:
             yield Static(f"SIMULATED: no hands can move a simulated arm. Press {keys.name(keys.HANDS)} and the "
                          "simulated hands put the tool in the next pivot pose, then the pose is captured.",
@@ -56,7 +58,7 @@ class PivotScreen(CalibrationStepScreen):
 
     def on_mount(self) -> None:
         self._show_fit()
-        self.action_freedrive()
+        freedrive_unless_stopped(self, self.action_freedrive, self._show_freedrive)
 
     def action_back(self) -> None:
         count = len(self.workflow.poses("pivot"))
@@ -66,7 +68,11 @@ class PivotScreen(CalibrationStepScreen):
             super().action_back()
 
     def action_freedrive(self) -> None:
-        self.run_robot(lambda: self.cell.robot.freedrive(True), lambda _: None)
+        self.run_robot(lambda: self.cell.robot.freedrive(True), lambda _: self._show_freedrive(FREEDRIVE_ON))
+
+    def _show_freedrive(self, state: str) -> None:
+        """The pivot's text, starting with the state of freedrive in words."""
+        self.query_one("#pivot-text", Static).update(PIVOT_TEXT.format(freedrive=state))
 
     def action_capture(self) -> None:
         self.run_robot(self.workflow.capture_pivot_pose, lambda _: self._show_fit(), doing="Capturing the pose")
@@ -131,10 +137,21 @@ class TablePointsScreen(CalibrationStepScreen):
                          "the next point, then the robot taps it.", classes="simulated")
         yield Static("", id="points-state", classes="state", markup=False)
 
+    _off_said = False  # the points' state says freedrive is off while STOPPED
+
     def on_mount(self) -> None:
         self._show_points()
         if self._tapped() < len(TABLE_POINTS):
-            self.action_freedrive()
+            self._freedrive_unless_stopped()
+
+    def _freedrive_unless_stopped(self, note: str = "") -> None:
+        """Freedrive on, with ``note`` under the points; while STOPPED it stays off, and the note says so."""
+        def say_off(off: str) -> None:
+            self._show_points(f"{note}\n{off}" if note else off)
+            self._off_said = True
+
+        self._show_points(note)
+        freedrive_unless_stopped(self, self.action_freedrive, say_off)
 
     def _tapped(self) -> int:
         return len(self.workflow.poses("table_coarse"))
@@ -146,7 +163,11 @@ class TablePointsScreen(CalibrationStepScreen):
         return allowed
 
     def action_freedrive(self) -> None:
-        self.run_robot(lambda: self.cell.robot.freedrive(True), lambda _: None)
+        self.run_robot(lambda: self.cell.robot.freedrive(True), lambda _: self._freedrive_on())
+
+    def _freedrive_on(self) -> None:
+        if self._off_said:  # it is on now
+            self._show_points()
 
     def action_tap(self) -> None:
         cancel = threading.Event()  # STOP sets it: no freedrive after the tap then
@@ -171,9 +192,8 @@ class TablePointsScreen(CalibrationStepScreen):
             try:
                 self.workflow.accept_table_points()
             except CalibrationError as error:
-                self._show_points(f"{sentence(error)}. The points were cleared: tap A, B and C again, "
-                                  f"{TABLE_SPREAD_HINT}.")
-                self.action_freedrive()
+                self._freedrive_unless_stopped(f"{sentence(error)}. The points were cleared: tap A, B and C again, "
+                                               f"{TABLE_SPREAD_HINT}.")
                 return
             self.dismiss("next")
         else:
@@ -198,6 +218,7 @@ class TablePointsScreen(CalibrationStepScreen):
                           f"{keys.name(keys.FREEDRIVE)} and place the ball again.")
 
     def _show_points(self, note: str = "") -> None:
+        self._off_said = False
         tapped = self._tapped()
         marks = ["tapped" if index < tapped else "next" if index == tapped else "-"
                  for index in range(len(TABLE_POINTS))]
