@@ -96,12 +96,13 @@ class WatchedCell(SimulatedCell):
 
     on_motion: Callable[[str], None] | None = None
 
-    def _move_for_pace(self, motion: str) -> None:
+    def _move_for_pace(self, motion: str, stop_mark: int | None) -> None:
         with self._lock:
             self._require_ready()  # refused motions do not start
-        if self.on_motion is not None:
-            self.on_motion(motion)
-        super()._move_for_pace(motion)
+        with self._stopped:  # a STOP waits until the motion has started, or been refused for an earlier one
+            if self.on_motion is not None and (stop_mark is None or stop_mark == self._stop_count):
+                self.on_motion(motion)
+            super()._move_for_pace(motion, stop_mark)
 
 
 class WatchedApp(FixwizardApp):

@@ -405,6 +405,29 @@ async def test_a_stop_just_after_the_look_at_stop_still_keeps_the_motion_from_st
         assert cell.status().mode == "idle" and not app.motion_cancels
 
 
+async def test_freedrive_asked_for_before_a_stop_does_not_come_on_after_it(context):
+    """f, then STOP before the worker's call reached the robot (a busy computer): freedrive came on after the STOP,
+    as the robot counted STOPs from the call. The key's STOP count goes with the call now: the arm holds still."""
+    app = ScreenHost(lambda: context.sampling_screen())
+    cell = cell_of(context)
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        await until(pilot, lambda: not screen.busy and cell.status().mode == "freedrive")
+        cell.stop()
+        freedrive = cell.freedrive
+
+        def stop_lands_first(on: bool, stop_mark: int | None = None) -> None:
+            if on:
+                cell.stop()
+            freedrive(on, stop_mark)
+
+        cell.freedrive = stop_lands_first
+        await pilot.press("f")
+        await until(pilot, lambda: not screen.busy and "Freedrive did not come on: STOP was pressed"
+                    in text_of(screen, "#problem"))
+        assert cell.status().mode == "idle"
+
+
 @pytest.mark.parametrize("fault, freedrive_after", [("no_surface", True), ("protective_stop_during_tap", False),
                                                     ("stop", False)])
 async def test_freedrive_comes_back_after_a_tap_only_when_it_ended_as_planned(context, fault, freedrive_after):

@@ -63,11 +63,16 @@ class NoContact(RobotError):
 
 
 class MotionStopped(RobotError):
-    """The operator stopped a motion (the STOP key) before it finished; nothing was recorded from it."""
+    """The operator stopped a motion (the STOP key) before it finished, or freedrive before it came on; nothing was
+    recorded from it."""
 
     def __init__(self, motion: str) -> None:
-        super().__init__(f"the {motion} was stopped on request; nothing was recorded from it: check the cell, "
-                         "then retry")
+        if motion == "freedrive":
+            super().__init__("freedrive did not come on: STOP was pressed after it was asked for, so the arm holds "
+                             "still: check the cell, then turn freedrive on again")
+        else:
+            super().__init__(f"the {motion} was stopped on request; nothing was recorded from it: check the cell, "
+                             "then retry")
 
 
 class MoveBlocked(RobotError):

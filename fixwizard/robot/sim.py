@@ -135,9 +135,9 @@ class SimulatedCell:
             return self._reported(self._base_T_tcp)
 
     def freedrive(self, on: bool, stop_mark: int | None = None) -> None:
-        with self._lock:
+        with self._stopped, self._lock:  # ``_stopped`` before ``_lock``, wherever both are held
             self._require_connected()
-            if on and self._stopped_since(stop_mark):
+            if on and stop_mark is not None and self._stop_count != stop_mark:
                 raise MotionStopped("freedrive")
             self._freedrive = on
 
@@ -257,11 +257,6 @@ class SimulatedCell:
                     raise MotionStopped(motion)
             finally:
                 self._moving.clear()
-
-    def _stopped_since(self, stop_mark: int | None) -> bool:
-        """Whether ``stop`` was called since the STOP count was ``stop_mark`` (None: never)."""
-        with self._stopped:
-            return stop_mark is not None and self._stop_count != stop_mark
 
     def _require_connected(self) -> None:
         if not self._connected:

@@ -7,6 +7,7 @@ from collections.abc import Callable
 
 from textual.dom import DOMNode
 
+from fixwizard.robot.base import Robot
 from fixwizard.tui import keys
 from fixwizard.tui.workers import services
 
@@ -21,3 +22,11 @@ def freedrive_unless_stopped(node: DOMNode, turn_on: Callable[[], None], say_off
         say_off(OFF_WHILE_STOPPED)
     else:
         turn_on()
+
+
+def freedrive_on(robot: Robot) -> Callable[[], None]:
+    """The call that turns ``robot``'s freedrive on, for a worker thread. Made as the key (or re-arm, or the screen's
+    opening) is handled, it reads the robot's STOP count then: a STOP pressed before the worker's call reaches the
+    robot keeps the arm held (``MotionStopped``), as it does for a tap asked for before a STOP."""
+    stop_mark = robot.stop_count()
+    return lambda: robot.freedrive(True, stop_mark=stop_mark)

@@ -29,7 +29,7 @@ from fixwizard.solver.search import SearchCancelled
 from fixwizard.tui import keys
 from fixwizard.tui.cell import Cell, SavedCalibration
 from fixwizard.tui.dismiss import dismiss_when_on_top
-from fixwizard.tui.freedrive import freedrive_unless_stopped
+from fixwizard.tui.freedrive import freedrive_on, freedrive_unless_stopped
 from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF, tap_and_record
 from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.errors import error_message
@@ -127,7 +127,7 @@ class CheckScreen(Screen[None]):
             if self._off_said:  # it is on now
                 self._say("")
 
-        self._run(lambda: self.cell.robot.freedrive(True), on)
+        self._run(freedrive_on(self.cell.robot), on)
 
     def _say_off(self, off: str) -> None:
         """Say that freedrive is off (``off``: how to turn it on), until it is on or the note says more."""

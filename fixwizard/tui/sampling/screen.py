@@ -28,7 +28,7 @@ from fixwizard.solver.solve import MIN_TAPS
 from fixwizard.tui import keys
 from fixwizard.tui.cell import Cell, Sampling
 from fixwizard.tui.dismiss import dismiss_when_on_top
-from fixwizard.tui.freedrive import freedrive_unless_stopped
+from fixwizard.tui.freedrive import freedrive_on, freedrive_unless_stopped
 from fixwizard.tui.sampling.text import (
     NO_SAFE_HOVER,
     guide_text,
@@ -148,7 +148,7 @@ class SamplingScreen(Screen[bool]):
 
     def action_freedrive(self) -> None:
         """Freedrive on again (a STOP ends it; re-arming calls this)."""
-        self._run_robot(lambda: self.cell.robot.freedrive(True), lambda _: self.query_one("#help", Static).update(
+        self._run_robot(freedrive_on(self.cell.robot), lambda _: self.query_one("#help", Static).update(
             HOW_TO_TAP))
 
     # --- keys ---

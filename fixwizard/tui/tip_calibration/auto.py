@@ -10,6 +10,7 @@ from textual.widgets import ProgressBar, Static
 from fixwizard.robot.base import ProtectiveStop
 from fixwizard.tui import keys
 from fixwizard.tui.dismiss import dismiss_when_on_top
+from fixwizard.tui.freedrive import freedrive_on
 from fixwizard.tui.tip_calibration.step import CalibrationStepScreen
 from fixwizard.tui.workers import services
 from fixwizard.workflow.robot_calibration import AwayFromCorner, Cancelled, Step
@@ -87,7 +88,7 @@ class AutoTapsScreen(CalibrationStepScreen):
             self._show(f"Freedrive is on: bring the ball a few centimetres above the corner B, then press "
                        f"{keys.name(keys.GO)}.")
 
-        self.run_robot(lambda: self.cell.robot.freedrive(True), on)
+        self.run_robot(freedrive_on(self.cell.robot), on)
 
     def guided_by_hand(self) -> bool:
         """Whether the operator guides the arm by hand here now (freedrive turned on with f, and no taps since): a
@@ -179,8 +180,9 @@ class AutoTapsScreen(CalibrationStepScreen):
             self._show(f"Stopped: {outcome}\nPress {keys.name(keys.GO)} to continue once the cell is ready.")
 
     def _progress(self, step: Step, done: int) -> None:
-        if self.is_attached:
-            self.query_one(f"#progress-{step}", ProgressBar).update(progress=done)
+        """A tap of ``step`` done (from the taps' thread): the wizard may be quitting, its widgets gone already."""
+        for bar in self.query(f"#progress-{step}").results(ProgressBar):
+            bar.update(progress=done)
 
     def _show(self, text: str) -> None:
         self.query_one("#auto-state", Static).update(text)

@@ -12,7 +12,7 @@ from fixwizard.calibration.pivot import MIN_POSES
 from fixwizard.calibration.table import MIN_EDGE_M
 from fixwizard.errors import sentence
 from fixwizard.tui import keys
-from fixwizard.tui.freedrive import freedrive_unless_stopped
+from fixwizard.tui.freedrive import freedrive_on, freedrive_unless_stopped
 from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF, unless_stopped
 from fixwizard.tui.tip_calibration.step import CalibrationStepScreen
 from fixwizard.tui.workers import ShownError
@@ -68,7 +68,7 @@ class PivotScreen(CalibrationStepScreen):
             super().action_back()
 
     def action_freedrive(self) -> None:
-        self.run_robot(lambda: self.cell.robot.freedrive(True), lambda _: self._show_freedrive(FREEDRIVE_ON))
+        self.run_robot(freedrive_on(self.cell.robot), lambda _: self._show_freedrive(FREEDRIVE_ON))
 
     def _show_freedrive(self, state: str) -> None:
         """The pivot's text, starting with the state of freedrive in words."""
@@ -163,7 +163,7 @@ class TablePointsScreen(CalibrationStepScreen):
         return allowed
 
     def action_freedrive(self) -> None:
-        self.run_robot(lambda: self.cell.robot.freedrive(True), lambda _: self._freedrive_on())
+        self.run_robot(freedrive_on(self.cell.robot), lambda _: self._freedrive_on())
 
     def _freedrive_on(self) -> None:
         if self._off_said:  # it is on now
