@@ -260,10 +260,13 @@ def random_starts(taps: Taps, rng: np.random.Generator, count: int) -> list[np.n
 
 def feasible_poses(taps: Taps, rng: np.random.Generator, known: list[np.ndarray], starts: int = 12,
                    pushes: int = 12) -> list[np.ndarray]:
-    """Feasible poses: ``known`` ones (checked), fits from ``starts`` random poses that check out, and ``pushes``
-    pushes along random directions, each from one of those picked at random."""
-    found = [known_pose for known_pose in known if taps.feasible(known_pose)]
-    for start in random_starts(taps, rng, starts):
+    """Feasible poses: ``known`` ones that check out, fits from the others and from ``starts`` random poses that check
+    out, and ``pushes`` pushes along random directions, each from one of those picked at random."""
+    found = []
+    for start in [*known, *random_starts(taps, rng, starts)]:
+        if taps.feasible(start):
+            found.append(start)
+            continue
         candidate = fitted(taps, start)
         if taps.feasible(candidate):
             found.append(candidate)

@@ -36,7 +36,7 @@ from fixwizard.solver.solve import Solution, solve
 from fixwizard.solver.verdict import PINNED_FRACTION, PINNED_ROTATION_RAD
 from shapes import SHAPES, as_fixture
 
-DEFAULT_RUNS = 12
+DEFAULT_RUNS = 10
 RUNS = int(os.environ.get("FUZZ_RUNS", DEFAULT_RUNS))
 FIRST_SEED = int(os.environ.get("FUZZ_SEED", 0))
 TOLERANCE_M = 1e-9  # rounding of a comparison, not of a bound
