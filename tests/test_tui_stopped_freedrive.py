@@ -19,6 +19,7 @@ from pilot_wait import until
 from test_tui_app import at_start, press_button, rearm, screen_text, wizard
 from test_tui_check import calibrated, wizard_with_a_report  # noqa: F401 (a fixture)
 from test_tui_small_terminal import TMUX_SIZE
+from tui_cell import wizard_context
 from tui_tip_steps import press_when_ready
 
 pytestmark = pytest.mark.slow  # a tip calibration through its screens, and a check with its report, about 15 s
@@ -90,4 +91,30 @@ def test_the_check_opened_while_stopped_leaves_freedrive_off_until_f(tmp_path, c
             await until(pilot, lambda: isinstance(app.screen, CheckScreen) and app.screen.fixture is not None)
             await opened_stopped_then_f(pilot, CheckScreen)
             assert str(app.screen.query_one("#check-note", Static).render()) == ""
+    asyncio.run(run())
+
+
+@pytest.mark.parametrize("where", ["pivot", "sampling"])
+def test_a_stop_on_an_open_screen_that_said_freedrive_is_on_says_it_is_off_until_f(tmp_path, where):
+    """The pivot and sampling say "Freedrive is on" in their text; after a STOP (which ends freedrive) they still said
+    so. Now they say it is off and how to turn it on, and f turns it on and says so again."""
+    async def run():
+        if where == "pivot":
+            app, screen_type = FixwizardApp(wizard(tmp_path)), PivotScreen
+        else:
+            context = wizard_context(tmp_path)
+            app, screen_type = FixwizardApp(context.cell, sampling=context.sampling), SamplingScreen
+        async with app.run_test(size=TMUX_SIZE) as pilot:
+            if where == "pivot":
+                await at_start(pilot)
+                await press_button(pilot, "#continue")
+            await until(pilot, lambda: isinstance(app.screen, screen_type) and not app.screen.busy
+                        and app.cell.robot.status().mode == "freedrive")
+            assert "Freedrive is on" in screen_text(app)
+            await stop(pilot)
+            assert OFF_WHILE_STOPPED in screen_text(app) and "Freedrive is on" not in screen_text(app)
+            await press_when_ready(pilot, "f")
+            await until(pilot, lambda: app.cell.robot.status().mode == "freedrive"
+                        and "Freedrive is on" in screen_text(app))
+            assert OFF_WHILE_STOPPED not in screen_text(app)
     asyncio.run(run())

@@ -24,6 +24,16 @@ def freedrive_unless_stopped(node: DOMNode, turn_on: Callable[[], None], say_off
         turn_on()
 
 
+def say_off_once_stopped(node: DOMNode, say_off: Callable[[str], None]) -> None:
+    """For a screen whose text says freedrive is on: whenever the wizard becomes STOPPED while it is open (STOP or a
+    protective stop, which end freedrive), ``say_off(OFF_WHILE_STOPPED)``; turning freedrive on says it again."""
+    def changed(stopped: bool) -> None:
+        if stopped:
+            say_off(OFF_WHILE_STOPPED)
+
+    node.watch(node.app, "stopped", changed, init=False)
+
+
 def freedrive_on(robot: Robot) -> Callable[[], None]:
     """The call that turns ``robot``'s freedrive on, for a worker thread. Made as the key (or re-arm, or the screen's
     opening) is handled, it reads the robot's STOP count then: a STOP pressed before the worker's call reaches the

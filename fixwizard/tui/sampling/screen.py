@@ -28,7 +28,7 @@ from fixwizard.solver.solve import MIN_TAPS
 from fixwizard.tui import keys
 from fixwizard.tui.cell import Cell, Sampling
 from fixwizard.tui.dismiss import dismiss_when_on_top
-from fixwizard.tui.freedrive import freedrive_on, freedrive_unless_stopped
+from fixwizard.tui.freedrive import freedrive_on, freedrive_unless_stopped, say_off_once_stopped
 from fixwizard.tui.sampling.text import (
     NO_SAFE_HOVER,
     guide_text,
@@ -141,6 +141,7 @@ class SamplingScreen(Screen[bool]):
         self.run_worker(self.solver.start, thread=True, group="solver")  # warm (fixture loaded) by the third tap
         self._start_live_check()
         freedrive_unless_stopped(self, self.action_freedrive, self.query_one("#help", Static).update)
+        say_off_once_stopped(self, self.query_one("#help", Static).update)
 
     def on_unmount(self) -> None:
         self._cancel_live()  # nobody is left to show them; the solver process stays for the solve

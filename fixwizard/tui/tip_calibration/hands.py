@@ -12,7 +12,7 @@ from fixwizard.calibration.pivot import MIN_POSES
 from fixwizard.calibration.table import MIN_EDGE_M
 from fixwizard.errors import sentence
 from fixwizard.tui import keys
-from fixwizard.tui.freedrive import freedrive_on, freedrive_unless_stopped
+from fixwizard.tui.freedrive import freedrive_on, freedrive_unless_stopped, say_off_once_stopped
 from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF, unless_stopped
 from fixwizard.tui.tip_calibration.step import CalibrationStepScreen
 from fixwizard.tui.workers import ShownError
@@ -59,6 +59,7 @@ class PivotScreen(CalibrationStepScreen):
     def on_mount(self) -> None:
         self._show_fit()
         freedrive_unless_stopped(self, self.action_freedrive, self._show_freedrive)
+        say_off_once_stopped(self, self._show_freedrive)
 
     def action_back(self) -> None:
         count = len(self.workflow.poses("pivot"))
