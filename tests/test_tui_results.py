@@ -268,7 +268,7 @@ async def test_an_ambiguous_result_lists_the_modes_and_says_where_to_tap_next(tm
     app = ScreenHost(lambda: context.results_screen())
     async with app.run_test(size=SIZE) as pilot:
         summary = text_of(app.screen, "#summary-text")
-        assert "AMBIGUOUS: 4 distinct poses explain the 12 taps" in text_of(app.screen, "#headline")
+        assert "AMBIGUOUS: the 12 taps leave 4 distinct poses" in text_of(app.screen, "#headline")
         assert "Candidate poses that fit the taps (probability, pose, guaranteed bounds):" in summary
         assert "  1. " in summary and "  2. " in summary
         assert "Next: Tap the " in summary and "mm apart there" in summary

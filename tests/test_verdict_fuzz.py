@@ -275,3 +275,20 @@ def test_the_checker_sees_a_free_set_called_unique_and_a_bound_that_misses():
     shrunk = replace(solution.bounds, max_point_displacement_m=0.5 * solution.bounds.max_point_displacement_m)
     assert any("outside the bounds" in why for why in problems(replace(solution, bounds=shrunk), poses, vertices,
                                                                  radius))
+
+
+@pytest.mark.slow  # one solve of 3e5 cells and the finder's optimisations, a few seconds
+def test_an_ambiguous_set_names_the_pose_no_fit_was_found_for_as_not_ruled_out():
+    """A wedge tapped all over (seed 2089): the solver keeps the pose turned 179 degrees about the wedge's long edge
+    as a second mode, pinned down, under 1 % probable; no pose in it explains the taps (its best fit misses the
+    0.448 mm bound by a quarter, and the independent finder, started from it, finds none there), which only finer
+    cells could prove. The warning said "2 distinct poses explain the taps"; it says that one could not be ruled
+    out."""
+    case = random_case(2089)
+    solution, poses, _ = solved(case, 2089)
+    assert solution.status == "ambiguous" and len(solution.modes) == 2
+    vertices = np.asarray(case.solid.vertices)
+    assert not [pose for pose in poses if not outside(solution.modes[1].bounds, pose, vertices)]
+    said = next(warning.message for warning in solution.warnings if warning.code == "ambiguous")
+    assert said.startswith("2 distinct poses may explain the taps: a pose explaining every tap within the sample "
+                           "bound was found for 1 of them, and the other (under 1 % probable) could not be ruled out")

@@ -244,19 +244,46 @@ def _repeat_warnings(base_p_taps: np.ndarray) -> list[SolveWarning]:
                          "hold). Remove the repeated rows from the points file.")]
 
 
-def _unexplained_warnings(problem: SearchProblem, modes: list[Mode], fix_T_cad: np.ndarray) -> list[SolveWarning]:
-    """A warning when no pose could be found that explains every tap within the sample bound (from each mode's
-    expected pose: itself, its least-squares fit, a feasible pose near that, its Chebyshev fit): the set the cells
-    hold may then be empty, which only finer cells could prove, and its bounds rest on a sample bound the taps do not
-    keep."""
-    for mode in modes:
-        start = [mode.base_T_cad @ invert(fix_T_cad)]
-        if certified_start(problem, start, mode.bounds.max_point_displacement_m) is not None:
-            return []
+def _explained(problem: SearchProblem, mode: Mode, fix_T_cad: np.ndarray) -> bool:
+    """Whether a pose was found that explains every tap within the sample bound, from the mode's expected pose
+    (itself, its least-squares fit, a feasible pose near that, its Chebyshev fit). Not found: the mode's cells may
+    hold no pose at all, which only finer cells could prove."""
+    start = [mode.base_T_cad @ invert(fix_T_cad)]
+    return certified_start(problem, start, mode.bounds.max_point_displacement_m) is not None
+
+
+def _unexplained_warnings(problem: SearchProblem) -> list[SolveWarning]:
+    """The warning when no mode is explained (``_explained``): the set the cells hold may then be empty, and its
+    bounds rest on a sample bound the taps do not keep."""
     return [SolveWarning("unexplained", f"No pose was found that explains every tap within the "
                          f"{problem.sample_bound_m * 1e3:.3g} mm sample bound, so the pose found is not one to use: "
                          "the taps may fit no pose at this bound (a search with a larger cell budget would then say "
                          "inconsistent). Check the sample bound (the tip calibration's) and the ball diameter.")]
+
+
+def _ambiguous_warning(modes: list[Mode], explained: list[bool]) -> SolveWarning:
+    """Several modes, each pinned down; whether a pose was found that explains the taps in each (``explained``, per
+    mode) is said, since a mode with none may be empty, which only finer cells could prove."""
+    distance, angle = _mode_separation(modes)
+    confirmed = sum(explained)
+    if confirmed == len(modes):
+        said = f"{len(modes)} distinct poses explain the taps"
+    else:
+        unconfirmed = sum(mode.probability for mode, found in zip(modes, explained, strict=True) if not found)
+        others = "the other" if len(modes) - confirmed == 1 else f"the other {len(modes) - confirmed}"
+        said = (f"{len(modes)} distinct poses may explain the taps: a pose explaining every tap within the sample "
+                f"bound was found for {confirmed} of them, and {others} ({_percent(unconfirmed)} probable) could not "
+                "be ruled out at this cell budget")
+    return SolveWarning(
+        "ambiguous",
+        f"{said}; they lie up to {distance * 1e3:.1f} mm and {np.degrees(angle):.1f} deg apart (a symmetric "
+        f"fixture, a repeated feature or taps on too few features). The pose shown is the most probable "
+        f"({_percent(modes[0].probability)}); tap features that tell the poses apart.")
+
+
+def _percent(probability: float) -> str:
+    """A probability in whole percent, "under 1 %" or "over 99 %" rather than 0 % or 100 % (it is neither)."""
+    return "under 1 %" if probability < 0.005 else "over 99 %" if probability > 0.995 else f"{probability:.0%}"
 
 
 def _inconsistent_warnings(diagnosis: Diagnosis) -> list[SolveWarning]:
@@ -425,17 +452,13 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
         bounds = bounds_from_figures(centre, cell_bound_figures(mode_cells, centre, fix_p_origin,
                                                                 fixture.oracle.hull_cover).max(1))
     status = status_of([mode.bounds for mode in modes], fixture.radius_m)
-    unexplained = _unexplained_warnings(problem, modes, fix_T_cad) if status != "undetermined" else []
+    explained = [_explained(problem, mode, fix_T_cad) for mode in modes] if status != "undetermined" else []
+    unexplained = _unexplained_warnings(problem) if explained and not any(explained) else []
     if unexplained:  # the set may be empty: its pose is not one a robot may use (see verdict)
         status = "undetermined"
         warnings += unexplained
     if status == "ambiguous":
-        distance, angle = _mode_separation(modes)
-        warnings.append(SolveWarning(
-            "ambiguous",
-            f"{len(modes)} distinct poses explain the taps (a symmetric fixture, a repeated feature or taps on too few "
-            f"features); they lie up to {distance * 1e3:.1f} mm and {np.degrees(angle):.1f} deg apart. The pose "
-            f"shown is the most probable ({top.probability:.0%}); tap features that tell the poses apart."))
+        warnings.append(_ambiguous_warning(modes, explained))
     if status == "undetermined" and not unexplained:
         widest = max(modes, key=lambda mode: mode.bounds.max_point_displacement_m)
         why = openness(fixture, base_p_taps, sample_bound_m, cells, widest.bounds, top.base_T_cad)

@@ -12,7 +12,8 @@ The rule (``status_of``), for a set that is not empty:
   than its width, which may be well under ``r / 4`` (the displacement alone called such a mode unique with its
   turn free). Poses apart in position at one rotation (a repeated feature) are separate modes already (``modes``).
 - ``unique``: one mode, pinned down;
-- ``ambiguous``: several modes, each pinned down (distinct poses that each explain the taps);
+- ``ambiguous``: several modes, each pinned down (distinct poses; ``solve`` says in how many a pose explaining the
+  taps was found: one with none may hold no pose, which only finer cells could prove);
 - ``undetermined``: some mode is not pinned down: more taps (on other faces), or a larger cell budget where
   the search stopped at cells too coarse to tell. Also a set that looks pinned down but holds no pose found to
   explain every tap within the sample bound (``solve``'s ``unexplained`` check): the cells may hold no pose at

@@ -13,7 +13,7 @@ from fixwizard.workflow.advice import TapAdvice
 from fixwizard.workflow.ball_check import ball_mismatch
 
 HEADLINES = {"unique": "UNIQUE: one pose of the fixture explains the {taps} taps.",
-             "ambiguous": "AMBIGUOUS: {modes} distinct poses explain the {taps} taps.",
+             "ambiguous": "AMBIGUOUS: the {taps} taps leave {modes} distinct poses.",
              "undetermined": "UNDETERMINED: the {taps} taps do not pin the pose down.",
              "inconsistent": "INCONSISTENT: no pose of the fixture explains all {taps} taps."}
 
