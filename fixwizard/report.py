@@ -34,7 +34,7 @@ from fixwizard.geometry.so3_grid import chord
 from fixwizard.solver.estimates import Bounds
 from fixwizard.solver.solve import Solution
 from fixwizard.solver.verdict import STATUSES
-from fixwizard.yamlfile import load_document
+from fixwizard.yamlfile import load_document, parse_yaml_start
 
 T = TypeVar("T")
 
@@ -54,6 +54,7 @@ DEGREE_DECIMALS = 5  # 1e-5 deg, about 2e-7 rad
 # A rotation read from the rounded quaternion lies within this angle (rad) of the one of the unrounded quaternion:
 # each of four components moves by at most half a unit of the last decimal, and the angle is at most 2 |dq|.
 QUATERNION_ROUNDING_RAD = 2.0 * 2.0 * 0.5 * 10.0**-QUATERNION_DECIMALS
+CLAIM_BYTES = 8192  # a report names its fixture and time in its first lines (about 1 kB)
 MAX_POSITION_M = 1000.0  # farther from the robot base no fixture is: a report saying so was edited or damaged
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
 
@@ -491,6 +492,33 @@ def load(path: str | Path) -> Report:
     _check_complete(data, path)
     _check_guarantee_covers_the_pose(found)
     return found
+
+
+def claimed_fixture(path: Path) -> tuple[str | None, dt.datetime | None]:
+    """The fixture name and creation time that a file ``load`` refuses (cut short, edited, of a newer version) says
+    it is a report of, read from its first ``CLAIM_BYTES`` as far as they parse; None for what it does not say (a
+    file that is no fixwizard report says neither)."""
+    try:
+        with path.open("rb") as stream:
+            start = stream.read(CLAIM_BYTES)
+    except OSError:
+        return None, None
+    text = start.decode("utf-8-sig", errors="replace")
+    data = parse_yaml_start(text if len(start) < CLAIM_BYTES else text[:text.rfind("\n") + 1])
+    if not (isinstance(data, dict) and isinstance(data.get("schema"), str)
+            and data["schema"].startswith(SCHEMA.rsplit("/", 1)[0] + "/")):
+        return None, None
+    section = data.get("inputs" if data["schema"] == SCHEMA_V1 else "fixture")
+    name = section.get("name") if isinstance(section, dict) and data["schema"] != SCHEMA_V1 else None
+    if isinstance(section, dict) and data["schema"] == SCHEMA_V1 and isinstance(section.get("mesh"), str):
+        name = name_from_stem(Path(section["mesh"]).stem)
+    if not (isinstance(name, str) and NAME_PATTERN.match(name)):
+        name = None
+    try:
+        created: dt.datetime | None = _created(data, path)
+    except InputError:
+        created = None
+    return name, created
 
 
 def _check_guarantee_covers_the_pose(found: Report) -> None:

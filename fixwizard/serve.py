@@ -14,7 +14,9 @@ fixture's name (``fixture.name`` in the report, see ``workflow/cell_reports.py``
 
 ``get_pose`` and ``get_bounds`` refuse, with an XML-RPC fault whose text says why and what to do, a fixture
 without a report, a report that is not ``unique``, one from the simulated cell, one older than ``max_age_s`` or
-dated in the future (a wrong clock): a URScript program stops on a fault, so a bad pose is never used as if good.
+dated in the future (a wrong clock), and one whose newest report cannot be read (``CellReports.damaged``: cut short,
+edited; an older report of it is not served instead): a URScript program stops on a fault, so a bad pose is never
+used as if good.
 Before every call the folder is looked at (names, sizes, times): a new, replaced or removed report is served from
 the next call on; a folder that is gone or cannot be read is a fault saying so. Every call is logged with the
 caller's address, what it asked and what it got; so is a request that is no call of these functions (another
@@ -57,8 +59,8 @@ MAX_REQUEST_BYTES = 1 << 20  # a call takes under 1 kB; a larger request is disc
 _DISCARD_CHUNK_BYTES = 1 << 16
 LOG = logging.getLogger("fixwizard.serve")
 # Fault codes a program can tell apart (the text says the same in words).
-NO_SUCH_FIXTURE, NOT_UNIQUE, SIMULATED, TOO_OLD, FROM_THE_FUTURE, BAD_CALL, NO_REPORTS_FOLDER, INTERNAL = (
-    1, 2, 3, 4, 5, 6, 7, 9)
+NO_SUCH_FIXTURE, NOT_UNIQUE, SIMULATED, TOO_OLD, FROM_THE_FUTURE, BAD_CALL, NO_REPORTS_FOLDER, DAMAGED, INTERNAL = (
+    1, 2, 3, 4, 5, 6, 7, 8, 9)
 # A log line starts with its time (``LogFormatter``): 2026-12-06 05:59:00,123
 _LOG_LINE = re.compile(rb"\d{4}-\d{2}-\d{2} \d{2}:\d{2}:\d{2},\d{3} ")
 _NOT_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")  # characters XML 1.0 cannot carry
@@ -139,6 +141,11 @@ class FixtureService:
             raise Refused(BAD_CALL, f"fixwizard: give the fixture's name as text, e.g. \"bracket\", not "
                           f"{quoted(name)}")
         reports = self.reports()
+        damaged = reports.damaged.get(name)
+        if damaged is not None:
+            raise Refused(DAMAGED, f"fixwizard: the newest report of '{name}' ({damaged.path.name}) cannot be read, "
+                          f"so no older one is served in its place: {damaged.problem}; fix that file, or move it out "
+                          f"of {self.folder} if an older report is to be served")
         loaded = reports.newest.get(name)
         if loaded is None:
             known = ", ".join(reports.names) or "none yet"

@@ -69,6 +69,25 @@ def parse_yaml(text: str) -> Any:
         raise yaml.YAMLError("lists or mappings nested too deeply to read (no fixwizard file nests so)") from None
 
 
+def parse_yaml_start(text: str, tries: int = 8) -> Any:
+    """The document of a start of ``text`` that parses, cut back before the line where each error's part began
+    (``tries`` times at most): what a file cut short or damaged part-way still says before the damage; None when
+    nothing does."""
+    for _ in range(tries):
+        try:
+            return parse_yaml(text)
+        except yaml.MarkedYAMLError as error:
+            lines = text.splitlines(keepends=True)
+            marks = [mark.line for mark in (error.context_mark, error.problem_mark) if mark is not None]
+            cut = min([*marks, len(lines) - 1])  # where the broken part began, or at least one line less
+            if not marks or cut <= 0:
+                return None
+            text = "".join(lines[:cut])
+        except yaml.YAMLError:
+            return None
+    return None
+
+
 def load_document(path: Path, schema: str | tuple[str, ...], what: str, error: type[InputError] = InputError,
                   hint: str = "") -> dict:
     """The YAML mapping in ``path`` if its ``schema`` key matches (one of several, the first the current one);

@@ -358,6 +358,41 @@ def test_the_newest_report_of_each_name_wins_by_its_creation_time(tmp_path):
     assert scan(tmp_path).newest["bracket"].path.name == "a.yaml"
 
 
+@pytest.mark.parametrize("damage", ["cut short mid-line", "cut short at a line", "pose edited", "newer version"])
+def test_a_newest_report_that_cannot_be_read_is_refused_never_replaced_by_an_older_one(running, cell, damage):
+    """A recalibration's report that a copy did not finish, or that was edited after: serve skipped it and served
+    the report from before the fixture moved as usable, and the robot took that old pose."""
+    fw = running.client()
+    old_pose = fw.get_pose("bracket")
+    data = yaml.safe_load((cell / "bracket-1.yaml").read_text())
+    with_pose(data, [0.5, -0.1, 0.02])
+    data["created"] = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
+    text = report.write(cell / "bracket-2.yaml", data).read_text()
+    damaged = {"cut short mid-line": text[:text.index("points_m:") + 20],
+               "cut short at a line": text[:text.index("search:")],
+               "pose edited": text.replace("ur: p[0.5000000", "ur: p[0.6000000", 1),
+               "newer version": text.replace("fixwizard.report/2", "fixwizard.report/3")}[damage]
+    (cell / "bracket-2.yaml").write_text(damaged)
+    for call in (lambda: fw.get_pose("bracket"), lambda: fw.get_bounds("bracket"), lambda: fw.get_status("bracket")):
+        fault = fault_of(call)
+        assert fault.faultCode == 8
+        assert "newest report of 'bracket' (bracket-2.yaml) cannot be read" in fault.faultString
+    assert fw.is_usable("bracket") is False and "bracket-2.yaml" in fw.get_status_text("bracket")
+    assert "bracket" in fw.list_fixtures()
+    (cell / "bracket-2.yaml").rename(cell.parent / "bracket-2.yaml")  # moved out: the older report is served again
+    assert fw.get_pose("bracket") == old_pose
+
+
+def test_a_damaged_report_older_than_the_newest_readable_one_changes_nothing(running, cell):
+    fw = running.client()
+    older = (cell / "bracket-1.yaml").read_text().replace("created: '", "created: '2020", 1)
+    older = re.sub(r"created: '2020\d{4}", "created: '2020", older)
+    (cell / "bracket-0.yaml").write_text(older.replace("status: unique", "status: perfect"))
+    assert fw.is_usable("bracket") and fw.get_status("bracket")["report"].endswith("bracket-1.yaml")
+    (cell / "nameless.yaml").write_text("schema: fixwizard.report/2\nstatus: [\n")  # says no fixture: refuses none
+    assert fw.list_fixtures() == ["bracket", "jig", "lid", "plate", "tray"]
+
+
 def serve_process(cell: Path, *options: str) -> tuple[subprocess.Popen, xmlrpc.client.ServerProxy, str]:
     """``fixwizard serve`` of ``cell`` on a free loopback port, a client of it and the first line it printed."""
     process = subprocess.Popen([sys.executable, "-m", "fixwizard.cli", "serve", "--reports", str(cell), "--host",
@@ -490,8 +525,9 @@ def test_a_report_holding_an_integer_of_thousands_of_digits_is_skipped_and_the_o
                   count=1)
     (cell / "huge.yaml").write_text(text.replace("name: bracket", "name: huge"))
     with caplog.at_level(logging.INFO, logger="fixwizard.serve"):
-        assert fw.is_usable("bracket") and fw.get_pose("bracket")["x"] and "huge" not in fw.list_fixtures()
+        assert fw.is_usable("bracket") and fw.get_pose("bracket")["x"]
     assert any(f"skipped {cell / 'huge.yaml'}" in record.getMessage() for record in caplog.records)
+    assert fault_of(lambda: fw.get_pose("huge")).faultCode == 8  # its report cannot be read
 
 
 def test_the_serve_command_refuses_a_log_that_is_one_of_its_inputs(cell, tmp_path, monkeypatch, capsys,

@@ -3,10 +3,14 @@
 Every report names its fixture (``fixture.name``: the mesh file's stem unless given, see ``report``; for a
 ``fixwizard.report/1`` file the stem of its mesh). The newest report of a name is the one ``created`` last (then
 the file changed last, then the name): a newer report replaces an older one whatever its status, so a
-recalibration that failed is not hidden behind an older good one. Files that cannot be read are listed with why.
+recalibration that failed is not hidden behind an older good one. Files that cannot be read are listed with why; one
+that still says which fixture it is of (a report cut short, edited by hand, of a newer fixwizard) and is dated no
+earlier than that fixture's newest readable report (or not dated) makes that fixture ``damaged``: no older report
+stands in for it.
 ``fixwizard serve`` and the wizard's "Check a calibrated fixture" use it.
 """
 
+import datetime as dt
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -18,24 +22,30 @@ SUFFIXES = (".yaml", ".yml")
 
 @dataclass(frozen=True)
 class Unreadable:
-    """A file in the folder that is no readable report, and why."""
+    """A file in the folder that is no readable report, and why; the fixture ``name`` and ``created`` it still
+    claims, where it does (``report.claimed_fixture``)."""
 
     path: Path
     problem: str
+    name: str | None = None
+    created: dt.datetime | None = None
 
 
 @dataclass(frozen=True)
 class CellReports:
-    """The newest report of each fixture name (sorted by name) and the files that could not be read; ``read``:
-    what every file read gave, by its path, with its ``signature`` then (a later scan reads only what changed)."""
+    """The newest report of each fixture name (sorted by name) and the files that could not be read; ``damaged``:
+    the fixtures whose newest file cannot be read, with that file (none of them in ``newest``); ``read``: what every
+    file read gave, by its path, with its ``signature`` then (a later scan reads only what changed)."""
 
     newest: dict[str, report.Report] = field(default_factory=dict)
     unreadable: tuple[Unreadable, ...] = ()
     read: dict[Path, tuple[tuple, report.Report | Unreadable]] = field(default_factory=dict)
+    damaged: dict[str, Unreadable] = field(default_factory=dict)
 
     @property
     def names(self) -> list[str]:
-        return list(self.newest)
+        """Every fixture named, with a usable file or a damaged one, sorted."""
+        return sorted({*self.newest, *self.damaged})
 
 
 def report_files(folder: Path) -> list[Path]:
@@ -72,7 +82,7 @@ def _read(path: Path, known: CellReports | None) -> tuple[tuple, report.Report |
             return known.read[path]
         return before, report.load(path)
     except (InputError, OSError) as error:
-        return (), Unreadable(path, str(error))
+        return (), Unreadable(path, str(error), *report.claimed_fixture(path))
 
 
 def scan(folder: str | Path, known: CellReports | None = None) -> CellReports:
@@ -87,4 +97,7 @@ def scan(folder: str | Path, known: CellReports | None = None) -> CellReports:
         if loaded.name not in found or key > found[loaded.name][0]:
             found[loaded.name] = (key, loaded)
     unreadable = tuple(loaded for _, loaded in read.values() if isinstance(loaded, Unreadable))
-    return CellReports({name: found[name][1] for name in sorted(found)}, unreadable, read)
+    damaged = {each.name: each for each in unreadable if each.name is not None and (
+        each.name not in found or each.created is None or each.created >= found[each.name][1].created)}
+    return CellReports({name: found[name][1] for name in sorted(found) if name not in damaged}, unreadable, read,
+                       damaged)
