@@ -63,6 +63,7 @@ NO_SUCH_FIXTURE, NOT_UNIQUE, SIMULATED, TOO_OLD, FROM_THE_FUTURE, BAD_CALL, NO_R
     1, 2, 3, 4, 5, 6, 7, 8, 9)
 # A log line starts with its time (``LogFormatter``): 2026-12-06 05:59:00,123
 _LOG_LINE = re.compile(rb"\d{4}-\d{2}-\d{2} \d{2}:\d{2}:\d{2},\d{3} ")
+_CONTENT_LENGTH = re.compile(r"[0-9]{1,18}")  # a request's length in bytes, as HTTP writes it (no sign)
 _NOT_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")  # characters XML 1.0 cannot carry
 _DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*(s|min|h|d)?\s*$")
 _SECONDS = {"s": 1.0, "min": 60.0, "h": 3600.0, "d": 86400.0}
@@ -228,8 +229,14 @@ class _Handler(SimpleXMLRPCRequestHandler):
 
     def do_POST(self) -> None:
         _CALLER.address = self.client_address[0]
-        length = self.headers.get("content-length", "")
-        if length.isdigit() and int(length) > MAX_REQUEST_BYTES:
+        length = self.headers.get("content-length", "").strip()
+        if not _CONTENT_LENGTH.fullmatch(length):  # none, or -1: the base class read until the client stopped
+            self._answer(_refused(BAD_CALL, "fixwizard: the request does not say its length (Content-Length), "
+                                  "which every XML-RPC call does; call the functions as rpc_factory(\"xmlrpc\", "
+                                  "\"http://PC:50000\") does, e.g. get_pose(\"bracket\")",
+                                  f"sent a request of no length ({quoted(length)})"))
+            self.close_connection = True  # its body, unread, has no end to find
+        elif int(length) > MAX_REQUEST_BYTES:
             self._refuse_unread(int(length))
         else:
             super().do_POST()
@@ -238,14 +245,18 @@ class _Handler(SimpleXMLRPCRequestHandler):
         """Answer a request of ``length`` bytes, over ``MAX_REQUEST_BYTES``, with a fault: its body is read and
         dropped piece by piece (memory stays small), so that the client, which sends it all before it reads the
         answer, gets the fault."""
-        while length > 0:
-            piece = self.rfile.read(min(length, _DISCARD_CHUNK_BYTES))
+        left = length
+        while left > 0:
+            piece = self.rfile.read(min(left, _DISCARD_CHUNK_BYTES))
             if not piece:
                 return  # the client left
-            length -= len(piece)
-        response = _refused(BAD_CALL, f"fixwizard: the request holds {self.headers['content-length']} bytes, more "
-                            f"than the {MAX_REQUEST_BYTES} a call of fixwizard takes; send the fixture's name only, "
-                            "e.g. get_pose(\"bracket\")", f"sent {self.headers['content-length']} bytes")
+            left -= len(piece)
+        self._answer(_refused(BAD_CALL, f"fixwizard: the request holds {length} bytes, more than the "
+                              f"{MAX_REQUEST_BYTES} a call of fixwizard takes; send the fixture's name only, e.g. "
+                              "get_pose(\"bracket\")", f"sent {length} bytes"))
+
+    def _answer(self, response: bytes) -> None:
+        """Send the XML-RPC answer ``response``."""
         self.send_response(200)
         self.send_header("Content-type", "text/xml")
         self.send_header("Content-length", str(len(response)))

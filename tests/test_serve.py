@@ -237,6 +237,21 @@ def test_a_request_that_is_no_call_of_a_function_is_a_fault_in_plain_words_and_l
     assert max(len(message) for message in messages) < 1000
 
 
+@pytest.mark.parametrize("length", ["-1", None])
+def test_a_request_that_does_not_say_its_length_is_a_fault_at_once_and_is_never_read(running, caplog, length):
+    """A request of Content-Length -1 was read until the client stopped sending: 300 MB sent grew serve by 550 MB
+    (every byte kept, then parsed), past the 1 MiB that any other request is held to."""
+    header = "" if length is None else f"Content-Length: {length}\r\n"
+    with caplog.at_level(logging.INFO, logger="fixwizard.serve"):
+        with socket.create_connection(("127.0.0.1", running.port), timeout=5) as connection:
+            connection.sendall(f"POST / HTTP/1.1\r\nHost: cell\r\n{header}\r\n".encode() + b"<" * 65536)
+            answer = connection.makefile("rb").read()  # the server answers and closes, while the client still sends
+        fault = fault_of(lambda: xmlrpc.client.loads(answer.split(b"\r\n\r\n", 1)[1]))
+        assert fault.faultCode == 6 and "does not say its length (Content-Length)" in fault.faultString
+        assert running.client().get_pose("bracket")["x"]
+    assert any("sent a request of no length" in record.getMessage() for record in caplog.records)
+
+
 def test_a_reports_folder_that_is_gone_or_cannot_be_read_is_a_fault_saying_so(running, cell, monkeypatch):
     fw = running.client()
     cell.rename(cell.with_name("moved"))
