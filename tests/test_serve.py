@@ -252,6 +252,18 @@ def test_a_request_that_does_not_say_its_length_is_a_fault_at_once_and_is_never_
     assert any("sent a request of no length" in record.getMessage() for record in caplog.records)
 
 
+def test_a_gzipped_request_is_held_to_the_same_size_once_uncompressed(running):
+    """xmlrpc.client gzips a request when asked to: 19 MB of a name sent as 18 kB of gzip were uncompressed whole
+    and parsed (thirty at once took serve to 1.7 GB)."""
+    transport = xmlrpc.client.Transport()
+    transport.encode_threshold = 1  # gzip every request
+    fw = xmlrpc.client.ServerProxy(f"http://127.0.0.1:{running.port}", transport=transport)
+    assert fw.get_pose("bracket")["x"]  # a call gzipped is served
+    fault = fault_of(lambda: fw.get_pose("x" * 19_000_000))
+    assert fault.faultCode == 6 and "more than the 1048576 bytes a call of fixwizard takes once uncompressed" in (
+        fault.faultString)
+
+
 def test_a_reports_folder_that_is_gone_or_cannot_be_read_is_a_fault_saying_so(running, cell, monkeypatch):
     fw = running.client()
     cell.rename(cell.with_name("moved"))
