@@ -42,8 +42,12 @@ def home_expanded(path: str | Path) -> str:
 
 def output_target(path: str | Path, example: str = "report.yaml") -> Path:
     """The file a write to ``path`` replaces: ``path`` with ``~`` expanded (``home_expanded``) and symlinks
-    followed. InputError when it is a folder (also one still to be made: a path ending in '/') or not a regular
+    followed. InputError when it is '-' (standard output, which only ``export`` writes), a folder (also one still to
+    be made: a path ending in '/') or not a regular
     file (a device such as /dev/null, a pipe), suggesting a file named ``example`` (the output's kind and suffix)."""
+    if str(path) == "-":  # standard output to a user, as ``export -o -`` takes it: never a file named '-' here
+        raise InputError(f"'-' (standard output) is no file this command writes; give the path of a file, e.g. "
+                         f"{example}")
     if str(path).endswith(("/", os.sep)):
         raise InputError(f"{path} ends with '/', so it names a folder; give the path of a file in it, e.g. "
                          f"{Path(path) / example}")

@@ -88,6 +88,19 @@ def test_a_folder_still_to_be_made_as_output_is_refused_not_written_as_a_file(de
     assert not (demo / "reports").exists()
 
 
+def test_a_dash_as_output_is_refused_not_made_a_file_named_dash(demo, capsys, monkeypatch):
+    """'-o -' means standard output, as export takes it: import-poses wrote a POINTS file named '-' and said
+    "20 ball centres written to -"."""
+    monkeypatch.chdir(demo)
+    (demo / "poses").mkdir()
+    (demo / "poses" / "tap.pose").write_text("0.4\n0\n0.1\n0\n0\n0\n")
+    (demo / "tip.pose").write_text("0\n0\n0.05\n0\n0\n0\n")
+    for args, example in ((solve(demo, "-o", "-"), "report.yaml"),
+                          (["import-poses", "poses", "--tip", "tip.pose", "-o", "-"], "points.yaml")):
+        refused(capsys, args, "'-' (standard output) is no file this command writes", f"e.g. {example}")
+    assert not (demo / "-").exists()
+
+
 def test_import_poses_given_a_folder_suggests_a_points_file(tmp_path, capsys):
     """It suggested report.yaml, a name for solve's output."""
     (tmp_path / "poses").mkdir()
