@@ -106,8 +106,9 @@ class FixtureService:
         self.max_age_s = max_age_s
         self.clock = clock
         self._lock = threading.Lock()
-        self._state: tuple | None = None
+        self._state: tuple | None = None  # the folder as last read (None: to be read at the next call)
         self._reports = CellReports()
+        self._logged: tuple | None = None  # the folder as last logged
 
     # --- the reports ---
 
@@ -128,12 +129,16 @@ class FixtureService:
                 raise Refused(NO_REPORTS_FOLDER, f"fixwizard: cannot read the reports folder {self.folder}: "
                               f"{file_problem(error, self.folder)}") from None
             if state != self._state:
-                first = self._state is None
-                self._reports, self._state = scan(self.folder, self._reports), state
-                names = ", ".join(self._reports.names) or "none"
-                LOG.info("%s reports in %s: %s", "read" if first else "reloaded", self.folder, names)
-                for unreadable in self._reports.unreadable:
-                    LOG.warning("skipped %s: %s", unreadable.path, unreadable.problem)
+                first, before = self._logged is None, self._reports
+                self._reports = scan(self.folder, before)
+                # a file that could not be read just then is read again at the next call, though nothing changed
+                self._state = None if any(each.passing for each in self._reports.unreadable) else state
+                if state != self._logged or self._reports.unreadable != before.unreadable:  # not each retry alike
+                    names = ", ".join(self._reports.names) or "none"
+                    LOG.info("%s reports in %s: %s", "read" if first else "reloaded", self.folder, names)
+                    for unreadable in self._reports.unreadable:
+                        LOG.warning("skipped %s: %s", unreadable.path, unreadable.problem)
+                self._logged = state
             return self._reports
 
     def judge(self, name: object) -> Judgement:

@@ -316,6 +316,29 @@ def test_a_new_report_is_served_from_the_next_call_on(running, cell):
     assert "gripper-2" in fw.list_fixtures() and fw.is_usable("gripper-2")
 
 
+def test_a_report_that_could_not_be_read_just_then_is_read_again_at_the_next_call(running, cell, monkeypatch):
+    """A network folder's glitch (EIO) on the newest report while serve read it: the older report was served, and
+    went on being served, as nothing in the folder changed after, until a report was written."""
+    fw = running.client()
+    assert fw.is_usable("bracket")
+    data = yaml.safe_load((cell / "bracket-1.yaml").read_text())
+    with_pose(data, [0.5, -0.1, 0.02])
+    data["created"] = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
+    report.write(cell / "bracket-2.yaml", data)
+    load, glitches = report.load, [cell / "bracket-2.yaml"]
+
+    def load_with_a_glitch(path):
+        if Path(path) in glitches:
+            glitches.remove(Path(path))
+            raise InputError(f"cannot read the fixwizard report: {path}: input/output error") from OSError(
+                errno.EIO, "Input/output error", str(path))
+        return load(path)
+
+    monkeypatch.setattr(report, "load", load_with_a_glitch)
+    fw.list_fixtures()  # the glitch
+    assert fw.get_pose("bracket")["x"] == 0.5 and fw.get_status("bracket")["report"].endswith("bracket-2.yaml")
+
+
 def test_a_new_report_is_the_only_one_read_again_and_a_report_replaced_is_read_again(running, cell, monkeypatch):
     """Parsing a report takes about 20 ms: a cell's folder of hundreds of reports was read whole for each new one,
     holding every call up for seconds."""

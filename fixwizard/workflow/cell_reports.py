@@ -23,12 +23,14 @@ SUFFIXES = (".yaml", ".yml")
 @dataclass(frozen=True)
 class Unreadable:
     """A file in the folder that is no readable report, and why; the fixture ``name`` and ``created`` it still
-    claims, where it does (``report.claimed_fixture``)."""
+    claims, where it does (``report.claimed_fixture``); ``passing``: the file could not be read then (an OSError),
+    so reading it again may give another answer though nothing changed."""
 
     path: Path
     problem: str
     name: str | None = None
     created: dt.datetime | None = None
+    passing: bool = False
 
 
 @dataclass(frozen=True)
@@ -82,7 +84,8 @@ def _read(path: Path, known: CellReports | None) -> tuple[tuple, report.Report |
             return known.read[path]
         return before, report.load(path)
     except (InputError, OSError) as error:
-        return (), Unreadable(path, str(error), *report.claimed_fixture(path))
+        passing = isinstance(error, OSError) or isinstance(error.__cause__, OSError)
+        return (), Unreadable(path, str(error), *report.claimed_fixture(path), passing=passing)
 
 
 def scan(folder: str | Path, known: CellReports | None = None) -> CellReports:
