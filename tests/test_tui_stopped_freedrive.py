@@ -118,3 +118,27 @@ def test_a_stop_on_an_open_screen_that_said_freedrive_is_on_says_it_is_off_until
                         and "Freedrive is on" in screen_text(app))
             assert OFF_WHILE_STOPPED not in screen_text(app)
     asyncio.run(run())
+
+
+def test_re_arm_on_the_table_points_turns_freedrive_on_only_while_points_are_left(tmp_path):
+    """Once C is tapped the arm holds still (the screen opened so leaves freedrive off too); a STOP and re-arm there
+    turned freedrive on all the same. Now it stays off, and the re-arm's note says nothing of freedrive."""
+    async def run():
+        app = FixwizardApp(wizard(tmp_path))
+        async with app.run_test(size=TMUX_SIZE) as pilot:
+            await at_start(pilot)
+            await press_button(pilot, "#continue")
+            await until(pilot, lambda: isinstance(app.screen, PivotScreen) and not app.screen.busy)
+            for _ in range(app.cell.hands.pivot_count):
+                await press_when_ready(pilot, "m")
+            await pilot.press("n")
+            await until(pilot, lambda: isinstance(app.screen, TablePointsScreen) and not app.screen.busy)
+            for _ in range(3):
+                await press_when_ready(pilot, "m")
+            await until(pilot, lambda: len(app.screen.workflow.poses("table_coarse")) == 3 and not app.screen.busy)
+            await stop(pilot)
+            await rearm(pilot)
+            await pilot.pause(0.3)  # a freedrive the re-arm turned on would be on by now
+            assert app.cell.robot.status().mode == "idle"
+            assert "Re-armed: the robot keys work again." in [str(note.message) for note in app._notifications]
+    asyncio.run(run())

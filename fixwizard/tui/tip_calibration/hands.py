@@ -154,6 +154,11 @@ class TablePointsScreen(CalibrationStepScreen):
         self._show_points(note)
         freedrive_unless_stopped(self, self.action_freedrive, say_off)
 
+    def guided_by_hand(self) -> bool:
+        """Whether the operator guides the arm by hand here now: while points are left to tap (a re-arm after a STOP
+        turns freedrive on again only then; once C is tapped the arm holds still, as when the screen opens)."""
+        return self._tapped() < len(TABLE_POINTS)
+
     def _tapped(self) -> int:
         return len(self.workflow.poses("table_coarse"))
 
