@@ -6,7 +6,6 @@ frozen or silent link, a crashed or stalled link process) raises its typed error
 crashing or freezing this process and without motion after the error. The loopback listens on the
 controller's fixed ports at a loopback address of this run's own, so parallel runs do not clash."""
 
-import contextlib
 import os
 import random
 import re
@@ -59,7 +58,11 @@ from fixwizard.robot.ur_script import (
 from fixwizard.robot.ur_state import ControllerState
 from ur_loopback import flange_above_surface, private_loopback_host
 from ur_loopback.arm import COLLISION_FORCE_N, SURFACE_STIFFNESS_N_M
-from ur_loopback.link_faults import serve_whose_first_run_id_is_the_last_one_run, serve_with_a_bug_in_the_move
+from ur_loopback.link_faults import (
+    serve_whose_first_run_id_is_the_last_one_run,
+    serve_with_a_bug_in_the_move,
+    stall_link,
+)
 from ur_loopback.programs import unknown_functions
 
 HOST = private_loopback_host()
@@ -131,15 +134,6 @@ def assert_arm_stands(controller, for_s: float = 0.3) -> None:
     assert not controller.program_running()
     time.sleep(for_s)
     np.testing.assert_allclose(controller.flange_pose(), before, atol=1e-9)
-
-
-def stall_link(robot: URRobot, stall_s: float) -> None:
-    """Freeze the link process (SIGSTOP) for ``stall_s``, as a stalled PC does, then let it go on."""
-    pid = robot.link_pid
-    os.kill(pid, signal.SIGSTOP)
-    time.sleep(stall_s)
-    with contextlib.suppress(ProcessLookupError):  # the wizard's process killed the stalled link meanwhile
-        os.kill(pid, signal.SIGCONT)
 
 
 class MotionInThread:
@@ -616,7 +610,7 @@ def test_the_move_force_limit_holds_on_the_controller_when_the_pc_stalls(start_c
     robot = connect()
     move = MotionInThread(lambda: robot.move_linear(flange_above_surface(-0.02), speed_m_s=0.05), controller)
     assert wait_until(lambda: robot.status().mode == "moving")
-    stall_link(robot, stall_s)
+    stall_link(robot.link_pid, stall_s)
     outcome = move.join(10.0)
     assert isinstance(outcome, (MoveBlocked, ConnectionLost)), outcome
     assert controller.peak_contact_force_n() < COLLISION_FORCE_N
@@ -1013,7 +1007,7 @@ def test_a_link_stalled_longer_than_the_watchdog_says_this_computer_stalled(star
     robot = connect()
     move = MotionInThread(lambda: robot.move_linear(flange_above_surface(0.13), speed_m_s=0.05), controller)
     assert wait_until(lambda: robot.status().mode == "moving")
-    stall_link(robot, 0.6)
+    stall_link(robot.link_pid, 0.6)
     error = move.join(5.0)
     assert isinstance(error, ConnectionLost) and "this computer stalled" in str(error), error
     assert_arm_stands(controller)
@@ -1028,7 +1022,7 @@ def test_the_tap_travel_holds_on_the_controller_when_the_pc_stalls(start_control
     tap = TapInThread(robot, controller, max_travel_m=0.02, speed_m_s=0.05)
     assert wait_until(lambda: robot.status().mode == "moving")
     time.sleep(random.uniform(0.0, 0.3))
-    stall_link(robot, stall_s)
+    stall_link(robot.link_pid, stall_s)
     outcome = tap.join(5.0)
     # a stall before the program was sent: the link says it stalled and sends nothing (no tap program at all)
     assert max(controller.tap_travels(), default=0.0) <= 0.02 + TRAVEL_SLACK_M
@@ -1102,7 +1096,7 @@ class FaultMix:
     def inject(self, fault: str) -> None:
         controller = self.controller
         if fault == "stall":
-            stall_link(self.robot, self.rng.uniform(0.1, 1.5))
+            stall_link(self.robot.link_pid, self.rng.uniform(0.1, 1.5))
         elif fault == "kill_link":
             os.kill(self.robot.link_pid, signal.SIGKILL)
         elif fault == "local_control":

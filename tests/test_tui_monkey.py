@@ -310,18 +310,7 @@ class Monkey:
     def actions(self) -> dict[str, tuple[float, Callable[[], Awaitable[None]]]]:
         """What the operator may do next, with weights: the screen's keys, the global ones and the world's events."""
         app, screen = self.app, self.app.screen
-        actions = {
-            "stop": (0.25, self.key("f12")),
-            "stop-x": (0.05, self.key("ctrl+x")),
-            "rearm": (4.0 if app.stopped else 0.1, self.rearm),
-            "help": (0.3, self.key("question_mark")),
-            "ctrl+c": (0.05, self.key("ctrl+c")),
-            "resize": (0.3, self.resize),
-            "wait": (1.0, self.wait),
-            "fault": (0.1, self.fault),
-            "pendant": (1.0 if self.robot.status().protective_stop else 0.0, self.pendant_unlock),
-            "quit": (0.005, self.quit_now),
-        }
+        actions = self.world_actions()
         focused = app.focused
         if isinstance(focused, SelectOverlay):
             presses = {"escape": 2.0, "enter": 1.0, "up": 1.0, "down": 1.0}
@@ -334,6 +323,22 @@ class Monkey:
         for name, weight in presses.items():
             actions[name] = (weight, self.key(name))
         return actions
+
+    def world_actions(self) -> dict[str, tuple[float, Callable[[], Awaitable[None]]]]:
+        """The global keys and the world's events, with weights."""
+        app = self.app
+        return {
+            "stop": (0.25, self.key("f12")),
+            "stop-x": (0.05, self.key("ctrl+x")),
+            "rearm": (4.0 if app.stopped else 0.1, self.rearm),
+            "help": (0.3, self.key("question_mark")),
+            "ctrl+c": (0.05, self.key("ctrl+c")),
+            "resize": (0.3, self.resize),
+            "wait": (1.0, self.wait),
+            "fault": (0.1, self.fault),
+            "pendant": (1.0 if self.robot.status().protective_stop else 0.0, self.pendant_unlock),
+            "quit": (0.005, self.quit_now),
+        }
 
     def screen_keys(self, screen) -> tuple[dict[str, float], dict]:
         """The keys of ``screen`` (weights; those that go on weigh most) and its composite steps."""

@@ -1,7 +1,21 @@
 """Faults inside fixwizard's UR link process: targets that ``fixwizard.robot.ur.URRobot`` starts in place of
-``ur_link.serve`` (the test patches ``fixwizard.robot.ur.serve``), so the link process itself goes wrong."""
+``ur_link.serve`` (the test patches ``fixwizard.robot.ur.serve``), so the link process itself goes wrong; and a
+stalled PC (``stall_link``)."""
+
+import contextlib
+import os
+import signal
+import time
 
 from fixwizard.robot import ur_link
+
+
+def stall_link(pid: int, stall_s: float) -> None:
+    """Freeze the link process ``pid`` (SIGSTOP) for ``stall_s`` seconds, as a stalled PC does, then let it go on."""
+    os.kill(pid, signal.SIGSTOP)
+    time.sleep(stall_s)
+    with contextlib.suppress(ProcessLookupError):  # the wizard's process killed the stalled link meanwhile
+        os.kill(pid, signal.SIGCONT)
 
 
 def serve_with_a_bug_in_the_move(*args) -> None:

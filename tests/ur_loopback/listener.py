@@ -18,6 +18,9 @@ class Listener:
         self._lock = threading.Lock()
 
     def start(self) -> None:
+        """Listen (nothing changes if it listens already)."""
+        if self._server is not None:
+            return
         server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:

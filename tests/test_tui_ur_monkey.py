@@ -1,0 +1,412 @@
+"""A tired operator at the wizard on a UR arm: the real app (Pilot) drives the real ur_rtde client in its link process
+against the loopback controller, opened straight into sampling (as ``--robot HOST --resume`` does). From a seeded RNG:
+the operator's keys (t, f, g and y, u, F12, Ctrl+R, Esc, the dialogs' Reconnect, Unlock and OK), hands that guide the
+arm in freedrive, random waits, and the cell's faults at random moments, now or on the controller's next event
+(protective, emergency and safeguard stops, a dropped, reset or frozen link, remote control off, pause on the
+pendant, the link process stalled or killed), and the operator's fixes on the pendant (unlock, release and power on,
+play, remote control on, the network back). After every step, from the controller's own state:
+
+- the app runs, no exception escaped it, no traceback text is on screen or in a notification, the status bar says
+  STOPPED exactly when the wizard is (``test_tui_monkey``'s checks);
+- once STOPPED for as long as the arm takes to stop at the latest (``STOP_BOUND_S``: the watchdog's periods, the
+  wizard's margin and the loopback's scheduling grace), no tap or move program runs, none starts until re-armed,
+  no freedrive starts unless the operator pressed f, and the flange does not move but by the operator's hands;
+- from the moment an error dialog is shown until it is closed the flange does not move but by the operator's hands
+  and no tap or move program starts;
+- every tap the sampling screen shows is in its session journal, and each is a contact the controller made;
+- at most one link process is alive, none once the wizard quit;
+- F12 puts the wizard in STOPPED within ``F12_BOUND_S``.
+
+CI runs the seeds of ``CASES`` (about half a minute each); ``UR_MONKEY_RUNS=N`` runs N more random seeds (each
+printed), ``UR_MONKEY_SEED=S`` replays one, ``UR_MONKEY_STEPS`` sets the steps of a run. As for ``test_tui_monkey``,
+a replay makes the same choices only while the robot's pace leads the wizard where it did."""
+
+import asyncio
+import os
+import random
+import signal
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from textual.widgets import Button
+
+from fixwizard.geometry.se3 import make_transform
+from fixwizard.robot.ur import WATCHDOG_HZ, WATCHDOG_MARGIN_S, WATCHDOG_PERIODS, URRobot
+from fixwizard.tui.results.screen import ResultsScreen
+from fixwizard.tui.sampling.screen import SamplingScreen
+from fixwizard.tui.solve.screen import SolveScreen
+from fixwizard.tui.start.screen import StartScreen
+from fixwizard.tui.widgets.confirm import Confirm
+from fixwizard.tui.widgets.dialog import Dialog
+from fixwizard.tui.widgets.errors import ErrorModal
+from fixwizard.tui.widgets.help import HelpScreen
+from pilot_wait import until
+from test_tui_monkey import Monkey, WatchedApp, no_frozen_loop, resumed_taps, same_taps
+from tui_cell import sampling_of, wizard_context
+from ur_loopback import TIP_OFFSET_M, private_loopback_host
+from ur_loopback.controller import SCHEDULING_GRACE_S
+from ur_loopback.link_faults import stall_link
+
+pytestmark = pytest.mark.slow
+HOST = private_loopback_host()
+CASES = (11,)
+STEPS = int(os.environ.get("UR_MONKEY_STEPS", "70"))
+EXTRA_RUNS = int(os.environ.get("UR_MONKEY_RUNS", "0"))
+SIZE = (80, 24)
+UNLOCK_DELAY_S = 1.0  # the loopback's "5 s after the stop" rule, shortened
+# The latest a STOP (or a stop of the controller's) has stopped the arm: the watchdog's periods (a frozen link loses the
+# stop request and the dashboard's stop), the margin the wizard waits beyond them, the loopback's scheduling grace.
+STOP_BOUND_S = WATCHDOG_PERIODS / WATCHDOG_HZ + WATCHDOG_MARGIN_S + SCHEDULING_GRACE_S
+F12_BOUND_S = 1.0  # F12 to STOPPED on screen (Pilot's own wait for the screen to settle included)
+MOTIONS = ("tap", "move")  # the programs that move the arm by themselves
+FAULTS = ("protective_stop", "emergency_stop", "system_emergency_stop", "safeguard_stop", "go_offline",
+          "drop_connections", "freeze_link", "remote_control_off", "pause_on_pendant", "stall", "kill_link",
+          "crash_link", "slow_slider")
+EVENT_FAULTS = ("protective_stop", "emergency_stop", "safeguard_stop", "go_offline", "drop_connections",
+                "freeze_link", "pause_on_pendant")
+EVENTS = ("contact", "movel", "settled", "watchdog_check", "back_off")
+HOVER_M = (0.002, 0.026)  # the tip's height above the surface where the hands leave it: some beyond a tap's 20 mm
+
+
+class URWatchedApp(WatchedApp):
+    """The wizard, noting when each STOP came and, for every error dialog it shows, what the controller did then."""
+
+    def __init__(self, *args, controller: Any, **options) -> None:
+        super().__init__(*args, **options)
+        self.controller = controller
+        self.stop_at = 0.0  # time.monotonic() of the latest STOP key
+        self.shown: dict[int, ArmAt] = {}  # by id() of the ErrorModal
+
+    def action_stop_robot(self) -> None:
+        self.stop_at = time.monotonic()
+        super().action_stop_robot()
+
+    def _error_modal(self, error):
+        modal = super()._error_modal(error)
+        if modal is not None:
+            self.shown[id(modal)] = ArmAt.now(self.controller, f"the error {str(error)[:200]!r}")
+        return modal
+
+
+@dataclass
+class ArmAt:
+    """The controller's flange pose and programs at a moment the arm must stand from (an error shown, STOPPED)."""
+
+    what: str
+    pose: np.ndarray
+    programs: int
+
+    @classmethod
+    def now(cls, controller, what: str) -> "ArmAt":
+        return cls(what, controller.flange_pose(), len(controller.programs()))
+
+
+@dataclass
+class URMonkey(Monkey):
+    """One run on the UR arm: ``Monkey``'s checks and steps with the loopback controller's faults and the checks of
+    the controller's own state."""
+
+    controller: Any = None
+    stopped_since: float | None = None  # when the wizard became STOPPED (the STOP key, or seen)
+    stood: ArmAt | None = None  # STOPPED for STOP_BOUND_S: the arm stands from here
+    freedrive_asked_at: float = 0.0  # the latest f
+    link_pids: set[int] = field(default_factory=set)
+    faults: list[str] = field(default_factory=list)
+    stop_keys_s: list[float] = field(default_factory=list)  # F12 to STOPPED shown, each
+    _last_check_at: float = 0.0
+
+    def __post_init__(self) -> None:
+        pass  # no simulated motions to watch: the controller's state is the judge
+
+    @property
+    def ur(self) -> URRobot:
+        return self.robot
+
+    # --- checks ---
+
+    async def check(self) -> None:
+        await super().check()
+        if isinstance(self.app.screen, StartScreen):
+            return
+        self._check_stopped()
+        self._check_errors_shown()
+        self._check_contacts()
+        await self._check_link_processes()
+
+    def _programs_since(self, at: ArmAt) -> list[str]:
+        return [name for name, _, _ in self.controller.programs()[at.programs:]]
+
+    def _moved(self, at: ArmAt) -> bool:
+        return not np.allclose(self.controller.flange_pose(), at.pose, atol=1e-9)
+
+    def _check_stopped(self) -> None:
+        app, controller, now = self.app, self.controller, time.monotonic()
+        if not app.stopped:
+            self.stopped_since = self.stood = None
+            return
+        if self.stopped_since is None:
+            self.stopped_since = app.stop_at if app.stop_at > self._last_check_at else now
+        if now - self.stopped_since < STOP_BOUND_S:
+            return
+        programs = controller.programs()
+        if controller.program_running() and programs[-1][0] in MOTIONS and not controller.program_paused():
+            self.fail(f"the {programs[-1][0]} program runs {now - self.stopped_since:.1f} s after STOPPED")
+        if self.stood is None:
+            self.stood = ArmAt.now(controller, "STOPPED")
+            return
+        started = self._programs_since(self.stood)
+        if any(name in MOTIONS for name in started):
+            self.fail(f"programs {started} started while STOPPED")
+        if "freedrive" in started and self.freedrive_asked_at < self.stopped_since:
+            self.fail(f"freedrive started while STOPPED without f ({started})")
+        if self._moved(self.stood):
+            self.fail("the arm moved while STOPPED")
+
+    def _check_errors_shown(self) -> None:
+        for screen in self.app.screen_stack:
+            if not isinstance(screen, ErrorModal) or id(screen) not in self.app.shown:
+                continue
+            at = self.app.shown[id(screen)]
+            started = [name for name in self._programs_since(at) if name in MOTIONS]
+            if started:
+                self.fail(f"programs {started} started after {at.what} was shown")
+            if self._moved(at):
+                self.fail(f"the arm moved after {at.what} was shown")
+
+    def _check_contacts(self) -> None:
+        """Every tap of the session is a contact the controller made (``Monkey._check_taps`` holds the journal to
+        the screen)."""
+        screen = sampling_of(self.app)
+        if screen is None:
+            return
+        contacts = self.controller.contact_poses()
+        for tap in screen.session.taps:
+            if not any(np.allclose(tap.base_T_tcp, contact, atol=2e-6) for contact in contacts):
+                self.fail(f"tap {tap.id} at {tap.base_T_tcp[:3, 3]} is no contact the controller made")
+
+    async def _check_link_processes(self) -> None:
+        """At most one link process alive (an abandoned one is killed and joined within a moment)."""
+        if self.ur.link_pid is not None:
+            self.link_pids.add(self.ur.link_pid)
+        alive = [pid for pid in self.link_pids if process_alive(pid)]
+        if len(alive) > 1:
+            await self.pilot.pause(3.0)
+            alive = [pid for pid in self.link_pids if process_alive(pid)]
+            if len(alive) > 1:
+                self.fail(f"{len(alive)} link processes alive: {alive}")
+
+    async def run_step(self) -> None:
+        await super().run_step()
+        self._last_check_at = time.monotonic()
+
+    # --- what the operator and the cell may do ---
+
+    def world_actions(self):
+        app, controller = self.app, self.controller
+        return {
+            "stop": (0.4, self.stop),
+            "rearm": (4.0 if app.stopped else 0.1, self.rearm),
+            "help": (0.1, self.key("question_mark")),
+            "resize": (0.05, self.resize),
+            "wait": (1.0, self.wait_a_moment),
+            "fault": (0.35, self.fault),
+            "fault-on-event": (0.25, self.fault_on_event),
+            "pendant": (3.0 if self.faults else 0.1, self.fix_on_pendant),
+            "play": (0.1, self.play),
+            "hands": (3.0 if controller.in_freedrive() else 0.0, self.hands),
+        }
+
+    def screen_keys(self, screen) -> tuple[dict[str, float], dict]:
+        if isinstance(screen, ErrorModal):
+            return {"enter": 1.0, "escape": 0.5, "tab": 0.3}, {"recover": (3.0, self.recover)}
+        if isinstance(screen, Confirm):
+            leave = screen.title_text.startswith(("Leave", "Quit"))  # a run stays on its sampling session
+            return {"y": 0.02 if leave else 3.0, "n": 1.5, "escape": 0.5, "enter": 0.1 if leave else 0.5}, {}
+        if isinstance(screen, HelpScreen):
+            return {"escape": 4.0, "down": 0.3}, {}
+        if isinstance(screen, Dialog):
+            return {"escape": 2.0, "enter": 2.0}, {}
+        if isinstance(screen, SamplingScreen):
+            taps = len(screen.session.taps)
+            return {"t": 5.0, "f": 1.0, "g": 0.3, "u": 0.6, "escape": 0.2, "enter": 0.1, "tab": 0.1, "o": 0.1,
+                    "s": 0.3 if taps >= 3 else 0.05, "k": 0.05}, {}
+        if isinstance(screen, SolveScreen):
+            return {"escape": 1.0}, {"wait": (2.0, self.wait_a_moment)}
+        if isinstance(screen, ResultsScreen):
+            return {"r": 3.0, "escape": 0.5, "v": 0.3}, {}
+        return {"escape": 1.0}, {}
+
+    async def stop(self) -> None:
+        """F12 (or Ctrl+X): STOPPED is on screen within ``F12_BOUND_S``."""
+        started = time.monotonic()
+        await self.press(self.rng.choice(("f12", "f12", "ctrl+x")))
+        while not self.app.stopped:
+            if time.monotonic() - started > F12_BOUND_S:
+                self.fail(f"STOP not handled within {F12_BOUND_S} s")
+            await self.pilot.pause(0.01)
+        self.stop_keys_s.append(time.monotonic() - started)
+
+    async def press(self, *names: str) -> None:
+        if "f" in names:
+            self.freedrive_asked_at = time.monotonic()
+        await super().press(*names)
+
+    async def hands(self) -> None:
+        """The operator guides the ball to a point above the surface (if freedrive is still on)."""
+        hover_m = self.rng.uniform(*HOVER_M)
+        pose = make_transform(np.diag([1.0, -1.0, -1.0]), [0.4 + self.rng.uniform(-0.05, 0.05),
+                                                          -0.1 + self.rng.uniform(-0.05, 0.05), TIP_OFFSET_M + hover_m])
+        try:
+            self.controller.move_by_hand(pose)
+        except RuntimeError:
+            return  # freedrive ended meanwhile
+        self.log.append(f"{self.step}: hands: the tip {hover_m * 1e3:.0f} mm above the surface")
+        for at in (self.stood, *self.app.shown.values()):  # the operator's hands, not the robot
+            if at is not None:
+                at.pose = self.controller.flange_pose()
+
+    async def wait_a_moment(self) -> None:
+        seconds = self.rng.choice((0.05, 0.2, 0.6, 1.5, 3.0))
+        self.log.append(f"{self.step}: wait {seconds} s")
+        await self.pilot.pause(seconds)
+
+    async def fault(self) -> None:
+        fault = self.rng.choice(FAULTS)
+        self.log.append(f"{self.step}: fault now: {fault}")
+        self.faults.append(fault)
+        self.inject(fault)
+
+    async def fault_on_event(self) -> None:
+        fault, event = self.rng.choice(EVENT_FAULTS), self.rng.choice(EVENTS)
+        self.log.append(f"{self.step}: fault on the controller's next {event}: {fault}")
+        self.faults.append(fault)
+        self.controller.when(event, fault)
+
+    def inject(self, fault: str) -> None:
+        controller, pid = self.controller, self.ur.link_pid
+        if fault in ("stall", "kill_link", "crash_link") and pid is None:
+            return
+        if fault == "stall":
+            threading.Thread(target=stall_link, args=(pid, self.rng.uniform(0.1, 1.5)), daemon=True).start()
+        elif fault in ("kill_link", "crash_link"):
+            os.kill(pid, signal.SIGKILL if fault == "kill_link" else signal.SIGSEGV)
+        elif fault == "system_emergency_stop":
+            controller.emergency_stop("system")
+        elif fault == "remote_control_off":
+            controller.set_remote_control(False)
+        elif fault == "slow_slider":
+            controller.set_speed_slider(0.1)
+        else:
+            getattr(controller, fault)()
+
+    async def fix_on_pendant(self) -> None:
+        """The operator fixes one thing of the cell: the network, the link, remote control, the e-stop, the
+        protective stop, the speed slider."""
+        controller = self.controller
+        fix = self.rng.choice(("go_online", "thaw_link", "remote_control", "release", "unlock", "slider", "all"))
+        self.log.append(f"{self.step}: the operator fixes the cell: {fix}")
+        if fix in ("go_online", "all"):
+            controller.go_online()
+        if fix in ("thaw_link", "all"):
+            controller.thaw_link()
+        if fix in ("remote_control", "all"):
+            controller.set_remote_control(True)
+        if fix in ("release", "all"):
+            controller.release_emergency_stop()
+            controller.power_on()
+        if fix in ("unlock", "all"):
+            controller.unlock_on_pendant()
+        if fix in ("slider", "all"):
+            controller.set_speed_slider(1.0)
+        if fix == "all":
+            self.faults.clear()
+
+    async def play(self) -> None:
+        self.log.append(f"{self.step}: play on the teach pendant")
+        self.controller.play_on_pendant()
+
+    async def recover(self) -> None:
+        """A button of the error dialog: Reconnect, Unlock or OK."""
+        buttons = [button for button in self.app.screen.query(Button) if button.id in ("reconnect", "unlock", "ok")]
+        if buttons:
+            await self.press_button(f"#{self.rng.choice(buttons).id}")
+
+
+def process_alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie does not)."""
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+async def ur_monkey_run(seed: int, folder: Path, loopback, steps: int) -> URMonkey:
+    """``steps`` random steps of a tired operator at sampling on a UR arm (a fresh loopback controller and session in
+    ``folder``); the run's record."""
+    rng = random.Random(seed)
+    controller = loopback.start_controller(host=HOST, unlock_delay_s=UNLOCK_DELAY_S,
+                                           base_T_flange=make_transform(np.diag([1.0, -1.0, -1.0]),
+                                                                        [0.4, -0.1, TIP_OFFSET_M + 0.01]))
+    context = wizard_context(folder)
+    robot = URRobot(HOST)
+    context.with_cell(robot=robot, robot_name=f"UR arm at {HOST}", simulated=False, hands=None)
+    try:
+        app = URWatchedApp(context.cell, sampling=context.sampling, controller=controller)
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            monkey = URMonkey(seed, app, pilot, robot, folder, rng, controller=controller)
+            await until(pilot, lambda: (screen := sampling_of(app)) is not None and screen.is_mounted
+                        and not screen.busy and controller.in_freedrive())
+            for _ in range(steps):
+                with no_frozen_loop(300.0):
+                    await monkey.run_step()
+                if isinstance(app.screen, StartScreen):
+                    monkey.log.append(f"{monkey.step}: left sampling: the run ends")
+                    break
+            held = await monkey.finish()
+        for path, taps in held.items():
+            if not same_taps(resumed_taps(path, monkey), taps):
+                monkey.fail(f"the journal {path.name} resumed does not hold the taps the wizard had")
+        robot.close()
+        alive = [pid for pid in monkey.link_pids if process_alive(pid)]
+        if alive:
+            monkey.fail(f"link processes {alive} alive after the wizard quit")
+        return monkey
+    finally:
+        robot.close()
+        controller.close()
+        if not context.session.closed:
+            context.session.release()
+
+
+def run_seed(seed: int, folder: Path, loopback) -> URMonkey:
+    print(f"\nUR monkey seed {seed} (replay: UR_MONKEY_SEED={seed})")
+    started = time.monotonic()
+    monkey = asyncio.run(ur_monkey_run(seed, folder, loopback, STEPS))
+    taps = [len(held.taps) for held in monkey.sessions.values()]
+    print(f"UR monkey seed {seed}: {monkey.step} steps in {time.monotonic() - started:.0f} s, screens "
+          f"{sorted(monkey.screens_seen)}, taps {taps}, programs "
+          f"{[name for name, _, _ in monkey.controller.programs()].count('tap')} taps of "
+          f"{len(monkey.controller.programs())}, faults {monkey.faults}, F12 at most "
+          f"{max(monkey.stop_keys_s, default=0.0):.2f} s")
+    return monkey
+
+
+@pytest.mark.parametrize("seed", CASES)
+def test_a_tired_operator_on_a_ur_arm_moves_nothing_after_stop_or_an_error_and_loses_no_tap(tmp_path, monkeypatch,
+                                                                                             loopback, seed):
+    monkeypatch.chdir(tmp_path)
+    run_seed(int(os.environ.get("UR_MONKEY_SEED", seed)), tmp_path, loopback)
+
+
+@pytest.mark.skipif(EXTRA_RUNS == 0, reason="UR_MONKEY_RUNS=N runs N more random seeds")
+def test_more_tired_operators_on_a_ur_arm(tmp_path, monkeypatch, loopback):
+    monkeypatch.chdir(tmp_path)
+    for run in range(EXTRA_RUNS):
+        seed = random.SystemRandom().randrange(1 << 31)
+        run_seed(seed, tmp_path / str(run), loopback)
