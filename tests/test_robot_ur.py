@@ -887,6 +887,21 @@ def test_a_lost_link_is_shown_only_once_the_watchdog_has_stopped_the_arm_at_its_
     np.testing.assert_allclose(controller.flange_pose(), move.pose_at_outcome, atol=1e-9)
 
 
+def test_a_call_while_another_waits_for_the_watchdog_of_a_lost_link_errs_only_once_the_arm_stands(robot, controller):
+    """The link drops mid-move; the move's call abandons the link and waits for the watchdog to stop the arm. A call
+    from another thread meanwhile (the wizard's status saw the link go and asks for the pose, to show the error) found
+    no link and raised "not connected" at once, while the move's program still ran: the wizard showed the error and
+    the arm moved on after it. It waits for the same watchdog."""
+    move = MotionInThread(lambda: robot.move_linear(flange_above_surface(0.2), speed_m_s=0.05), controller)
+    assert wait_until(lambda: controller.program_running() and controller.programs()[-1][0] == "move")
+    controller.go_offline()
+    assert wait_until(lambda: robot.link_pid is None)  # the move's call abandoned the link and waits
+    with pytest.raises(ConnectionLost, match="not connected"):
+        robot.base_T_tcp()
+    assert_arm_stands(controller)
+    assert isinstance(move.join(5.0), ConnectionLost)
+
+
 @pytest.mark.slow
 def test_a_frozen_link_shows_disconnected_within_a_second_and_stops_the_arm(robot, controller):
     assert robot.status().mode == "ready"

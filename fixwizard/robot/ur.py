@@ -11,7 +11,8 @@ statement arms the RTDE watchdog, and a tap's travel, speed and force limits (a 
 the program's own, so a PC that stalls, crashes or loses the link cannot take a tap past its travel limit or
 press harder than a limit, and the arm stops at most ``WATCHDOG_PERIODS / watchdog_hz`` s after the link's last
 message. An error about a lost link is raised only once that time (plus ``WATCHDOG_MARGIN_S``) has passed since
-the link process's last watchdog kick, so nothing moves after the operator sees it.
+the link process's last watchdog kick, so nothing moves after the operator sees it: by the call that found the link
+lost, and by any call that finds no link while that one waits.
 
 Poses are 4x4 float64 ``base_T_tcp`` transforms of the flange in the robot base frame (m): the programs set
 the controller's TCP offset to zero. Speeds m/s, forces N, times s (``time.monotonic``).
@@ -108,6 +109,9 @@ class URRobot:
         self._lock = threading.RLock()
         self._freedrive_run: int | None = None
         self._moving = threading.Event()
+        # time.monotonic() by which the watchdog has stopped every program of the links abandoned so far: no error
+        # about a lost link is raised before it, from the call that abandoned the link or from any other
+        self._stands_by = 0.0
         # STOP presses, shared with every link process: a motion refuses to start after one pressed since it
         # was asked for (while it waited for the lock or for its program to start)
         self._stop_count: Synchronized = self._context.Value("q", 0, lock=False)
@@ -276,14 +280,12 @@ class URRobot:
     def _abandon(self, link: _LinkProcess, problem: str, tap_result: TapResult | None = None) -> LinkLost:
         """Kill the link process, send the dashboard's stop, wait until the watchdog has stopped the arm; the
         error to raise for ``problem`` (carrying ``tap_result``, if a tap recorded one)."""
-        if self._link is link:
+        last_kick_at = self._note_last_kick(link)
+        if self._link is link:  # after the time is noted: a call that finds no link waits for it too
             self._link = None
-        _, last_kick_at, _ = link.shared.read()
         link.kill()
         threading.Thread(target=_dashboard_stop, args=(self.host,), name="ur-dashboard-stop", daemon=True).start()
-        if last_kick_at:  # a program may have been running on those kicks: wait until its watchdog fired
-            stopped_by = last_kick_at + WATCHDOG_PERIODS / self.watchdog_hz + WATCHDOG_MARGIN_S
-            time.sleep(max(stopped_by - time.monotonic(), 0.0))
+        self._until_the_arm_stands()
         link.process.join(EXIT_WAIT_S)
         if not last_kick_at:  # nothing was ever sent that could move the arm
             error = LinkLost(f"{problem}: check that the robot is powered on and reachable, then reconnect")
@@ -296,11 +298,22 @@ class URRobot:
             error.tap_result = tap_result
         return error
 
+    def _note_last_kick(self, link: _LinkProcess) -> float:
+        """The time of ``link``'s last watchdog kick (0 if none), noted in ``_stands_by``: a program may be running on
+        those kicks, and the arm stands once its watchdog fired."""
+        _, last_kick_at, _ = link.shared.read()
+        if last_kick_at:
+            self._stands_by = max(self._stands_by,
+                                  last_kick_at + WATCHDOG_PERIODS / self.watchdog_hz + WATCHDOG_MARGIN_S)
+        return last_kick_at
+
     def _end_link(self) -> None:
         """Close the current link process: ask it to end its program and exit, kill it if it does not."""
-        link, self._link = self._link, None
+        link = self._link
         if link is None:
             return
+        self._note_last_kick(link)
+        self._link = None
         if link.process.is_alive() and self._fresh(link) is not None:
             try:
                 self._call(link, "close", (), COMMAND_DEADLINE_S, " while closing")
@@ -314,11 +327,16 @@ class URRobot:
         """The link process if it runs and its data is fresh; else it is abandoned and ``LinkLost`` raised."""
         link = self._link
         if link is None:
+            self._until_the_arm_stands()  # another call may have abandoned the link a moment ago
             raise LinkLost(f"fixwizard is not connected to the robot at {self.host}{context}: reconnect")
         if self._fresh(link) is None:
             reason = "the link to the robot dropped" if link.shared.read()[2] else "no data from the robot"
             raise self._abandon(link, f"{reason}{context}")
         return link
+
+    def _until_the_arm_stands(self) -> None:
+        """Wait until the watchdog has stopped every program of the links abandoned so far."""
+        time.sleep(max(self._stands_by - time.monotonic(), 0.0))
 
     def _live_state(self, link: _LinkProcess) -> ControllerState:
         state = self._fresh(link)
