@@ -33,7 +33,7 @@ from fixwizard.robot import (
     RobotError,
 )
 from fixwizard.robot.base import MOVE_FORCE_LIMIT_N
-from fixwizard.robot.ur import URRobot
+from fixwizard.robot.ur import CONNECT_DEADLINE_S, URRobot
 from fixwizard.robot.ur_link import PROGRAM_START_TIMEOUT_S
 from fixwizard.robot.ur_script import (
     BACK_OFF_M,
@@ -699,6 +699,26 @@ def test_stop_before_the_controller_starts_a_sent_program_ends_it_before_it_move
     assert isinstance(moving.join(4.0), MotionStopped)
     assert [name for name, _, _ in controller.programs()] == ["setup", "move"]  # it started, then ended
     np.testing.assert_allclose(controller.flange_pose(), before, atol=1e-9)
+
+
+@pytest.mark.parametrize("when", ["as the link process starts", "as the set-up program waits"])
+def test_a_call_while_another_thread_reconnects_leaves_the_connect_alone(robot, controller, when):
+    """The wizard's status poll asked for the pose while Reconnect was connecting: before the new link process had
+    data, the call abandoned it and killed it, so the Reconnect failed with "link process ended unexpectedly while
+    connecting"; once data flowed but before the set-up program had zeroed the TCP offset, it read a pose that may
+    not be the flange's. Now the call says the link is still connecting, and the connect succeeds."""
+    controller.delay_programs(1.0)  # the set-up program starts late: the connect waits for it
+    old_pid = robot.link_pid
+    connecting = MotionInThread(robot.connect, controller)
+    if when == "as the link process starts":
+        assert wait_until(lambda: robot.link_pid not in (None, old_pid), CONNECT_DEADLINE_S)
+    else:
+        assert wait_until(lambda: len(controller.uploaded_scripts()) == 2, CONNECT_DEADLINE_S)  # both set-ups
+    with pytest.raises(ConnectionLost, match="still connecting"):
+        robot.base_T_tcp()
+    assert connecting.join(CONNECT_DEADLINE_S + 2.0) is None
+    assert robot.status().connected
+    robot.base_T_tcp()
 
 
 def test_stop_does_not_block_on_a_frozen_link(robot, controller):

@@ -85,6 +85,7 @@ class _LinkProcess:
     conn: Connection
     shared: SharedState
     started_at: float = field(default_factory=time.monotonic)
+    connected: bool = False  # its connect came back: until then only ``connect`` asks anything of it
 
     def kill(self) -> None:
         if self.process.is_alive():
@@ -138,6 +139,7 @@ class URRobot:
             child_conn.close()
             link = self._link = _LinkProcess(process, conn, shared)
             self._call(link, "connect", (), CONNECT_DEADLINE_S, " while connecting", watch_state=False)
+            link.connected = True
 
     def close(self) -> None:
         """End fixwizard's program on the robot if one runs, and the link process."""
@@ -192,7 +194,7 @@ class URRobot:
         """Controller state from the link's latest sample; ``connected=False`` once the link is down or its
         latest sample is older than ``LINK_STALE_S``. Never waits."""
         link = self._link
-        state = None if link is None else self._fresh(link)
+        state = None if link is None or not link.connected else self._fresh(link)
         if state is None:
             return RobotStatus(False, False, False, False, "disconnected")
         return RobotStatus(True, state.protective_stop, state.emergency_stop, state.program_running,
@@ -324,8 +326,13 @@ class URRobot:
         link.process.join(EXIT_WAIT_S)
 
     def _live_link(self, context: str) -> _LinkProcess:
-        """The link process if it runs and its data is fresh; else it is abandoned and ``LinkLost`` raised."""
+        """The link process if it runs and its data is fresh; else it is abandoned and ``LinkLost`` raised. A link
+        still connecting (in another thread) is left to its connect: a call meanwhile raises ``LinkLost``."""
         link = self._link
+        if link is not None and not link.connected:
+            self._until_the_arm_stands()  # the link it replaced may have been abandoned a moment ago
+            raise LinkLost(f"fixwizard is still connecting to the robot at {self.host}{context}: wait until the "
+                           "status line says it is connected, then retry")
         if link is None:
             self._until_the_arm_stands()  # another call may have abandoned the link a moment ago
             raise LinkLost(f"fixwizard is not connected to the robot at {self.host}{context}: reconnect")
