@@ -11,7 +11,13 @@ from fixwizard.geometry.se3 import make_transform, transform_points
 from fixwizard.points import write_points
 from fixwizard.solver.estimates import Bounds
 from fixwizard.solver.solve import solve
-from fixwizard.solver.verdict import MIN_INTERVAL_SAMPLES, PINNED_FRACTION, PINNED_ROTATION_RAD, status_of
+from fixwizard.solver.verdict import (
+    MIN_INTERVAL_SAMPLES,
+    PINNED_FRACTION,
+    PINNED_ROTATION_RAD,
+    probability_text,
+    status_of,
+)
 from fixwizard.synthetic import touching_ball_centres
 from shapes import as_fixture
 
@@ -226,3 +232,11 @@ def test_the_modes_of_a_set_not_pinned_down_are_weighed_from_one_start_each(plat
     assert searches == [mode_mass.ROUGH_FIT_EVALUATIONS] * len(solution.modes)
     assert sum(mode.probability for mode in solution.modes) == pytest.approx(1.0)
     assert solution.contains(POSE)
+
+
+@pytest.mark.parametrize("probability, said", [(3e-13, "under 1 %"), (0.005, "under 1 %"), (0.01, "1%"),
+                                               (0.42, "42%"), (0.99, "99%"), (0.995, "over 99 %"),
+                                               (0.9999999, "over 99 %")])
+def test_a_mode_s_probability_is_never_said_as_0_or_100_percent(probability, said):
+    """A second mode of probability 3e-13 read "0 % probable" and the first "100 %": neither is proven."""
+    assert probability_text(probability) == said

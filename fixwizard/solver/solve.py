@@ -54,6 +54,7 @@ from fixwizard.solver.verdict import (
     Status,
     is_pinned,
     openness,
+    probability_text,
     status_of,
     undetermined_message,
 )
@@ -272,18 +273,13 @@ def _ambiguous_warning(modes: list[Mode], explained: list[bool]) -> SolveWarning
         unconfirmed = sum(mode.probability for mode, found in zip(modes, explained, strict=True) if not found)
         others = "the other" if len(modes) - confirmed == 1 else f"the other {len(modes) - confirmed}"
         said = (f"{len(modes)} distinct poses may explain the taps: a pose explaining every tap within the sample "
-                f"bound was found for {confirmed} of them, and {others} ({_percent(unconfirmed)} probable) could not "
-                "be ruled out at this cell budget")
+                f"bound was found for {confirmed} of them, and {others} ({probability_text(unconfirmed)} probable) "
+                "could not be ruled out at this cell budget")
     return SolveWarning(
         "ambiguous",
         f"{said}; they lie up to {distance * 1e3:.1f} mm and {np.degrees(angle):.1f} deg apart (a symmetric "
         f"fixture, a repeated feature or taps on too few features). The pose shown is the most probable "
-        f"({_percent(modes[0].probability)}); tap features that tell the poses apart.")
-
-
-def _percent(probability: float) -> str:
-    """A probability in whole percent, "under 1 %" or "over 99 %" rather than 0 % or 100 % (it is neither)."""
-    return "under 1 %" if probability < 0.005 else "over 99 %" if probability > 0.995 else f"{probability:.0%}"
+        f"({probability_text(modes[0].probability)}); tap features that tell the poses apart.")
 
 
 def _inconsistent_warnings(diagnosis: Diagnosis) -> list[SolveWarning]:

@@ -135,3 +135,8 @@ def undetermined_message(why: Openness, bounds: Bounds, fixture_radius_m: float,
     if not todo:
         todo.append("tap more points on features that tell the remaining poses apart (edges, steps, holes)")
     return lines[0] + " " + "; ".join(item[0].upper() + item[1:] for item in todo) + "."
+
+
+def probability_text(probability: float) -> str:
+    """A mode's probability in whole percent, "under 1 %" or "over 99 %" rather than 0 % or 100 % (it is neither)."""
+    return "under 1 %" if probability < 0.01 else "over 99 %" if probability > 0.99 else f"{probability:.0%}"

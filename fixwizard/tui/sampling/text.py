@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from fixwizard.solver.solve import MIN_TAPS
+from fixwizard.solver.verdict import probability_text
 from fixwizard.tui.start.choices import FixtureChoice
 from fixwizard.workflow.advice import TapAdvice
 from fixwizard.workflow.hover import CLEARANCE_M, HoverPlan
@@ -47,8 +48,9 @@ def live_text(check: LiveView | None, tap_count: int, progress: str | None) -> s
                 f"{bounds_text(check)}.")
     if check.verdict == "ambiguous":
         top = check.modes[0]
-        return (head + f"AMBIGUOUS so far, {len(check.modes)} candidate poses fit (most likely "
-                f"{top.probability:.0%}); tap features that tell them apart. Guaranteed now: {bounds_text(check)}.")
+        return (head + f"AMBIGUOUS so far, the taps leave {len(check.modes)} candidate poses (most likely "
+                f"{probability_text(top.probability)}); tap features that tell them apart. Guaranteed now: "
+                f"{bounds_text(check)}.")
     tightness = "as tight as the full solve's" if check.refined else "tightening them..."
     return head + f"unique so far. Guaranteed now: {bounds_text(check)}; {tightness}"
 
