@@ -98,7 +98,8 @@ def test_sampling_on_a_ur_arm_taps_stops_rearms_and_reconnects(wizard, controlle
             await until(pilot, lambda: not screen.busy)
             if not controller.in_freedrive():  # re-arming turns freedrive on where a screen guides the arm by hand
                 await pilot.press(keys.FREEDRIVE.keys)
-            await until(pilot, lambda: controller.in_freedrive(), 10.0)
+            # the controller is in freedrive a moment before f's call returns; till then the tap key is off
+            await until(pilot, lambda: controller.in_freedrive() and not screen.busy, 10.0)
 
             controller.move_by_hand(flange_above_surface(0.03))
             await pilot.press(TAP_KEY)  # 30 mm to the surface at 10 mm/s: the link dies on the way
