@@ -6,6 +6,7 @@ import contextlib
 import dataclasses
 import datetime
 import shutil
+import threading
 from collections.abc import AsyncIterator
 from pathlib import Path
 
@@ -17,6 +18,7 @@ from textual.widgets import Button, Input, OptionList, Select, Static
 from fixwizard.calibration.store import load_calibration, save_calibration
 from fixwizard.demo import DEMO_MESH, demo_fixture
 from fixwizard.errors import InputError
+from fixwizard.robot.base import ConnectionLost
 from fixwizard.tui import keys
 from fixwizard.tui.app import FixwizardApp
 from fixwizard.tui.cell import Cell, SavedCalibration
@@ -438,6 +440,39 @@ def test_the_note_after_a_reconnect_at_the_automatic_taps_offers_no_freedrive(tm
                                            for note in app._notifications))
             assert "Connected to the robot again." in [str(note.message) for note in app._notifications]
             assert context.robot.status().mode == "idle"
+    asyncio.run(run())
+
+
+def test_a_lost_link_the_status_saw_before_the_operator_reconnected_is_not_reported_again(tmp_path):
+    """The status poll saw the link go and asked for the pose to say why; on a busy machine that answer came after the
+    operator had pressed Reconnect on the failed motion's error, and a second error ('not connected', or a UR link's
+    'still connecting') came up over the robot being connected again."""
+    async def run():
+        async with at_the_automatic_taps(tmp_path) as (context, app, pilot):
+            robot = context.robot
+            asked, answer = threading.Event(), threading.Event()
+            pose_of = robot.base_T_tcp
+
+            def answered_late_when_lost():
+                try:
+                    return pose_of()
+                except ConnectionLost:
+                    asked.set()
+                    answer.wait(30.0)
+                    raise
+            robot.base_T_tcp = answered_late_when_lost
+            robot.inject_fault("connection_loss")
+            await pilot.press("g")
+            await until(pilot, lambda: isinstance(app.screen, ErrorModal) and bool(app.screen.query("#reconnect")))
+            await until(pilot, asked.is_set)  # the status saw the link go: its question is on its way
+            await press_button(pilot, "#reconnect")
+            await until(pilot, lambda: any("Connected to the robot again" in str(note.message)
+                                           for note in app._notifications))
+            answer.set()
+            await until(pilot, lambda: not any(worker.group == "link" and worker.is_running for worker in app.workers))
+            await pilot.pause()
+            assert not isinstance(app.screen, ErrorModal), screen_text(app)
+            assert robot.status().connected
     asyncio.run(run())
 
 

@@ -75,6 +75,7 @@ class FixwizardApp(App[None]):
         self._quitting = False  # once set, errors of the steps being stopped are not shown (the app is closing)
         self._left_session: Path | None = None  # the session the operator left sampling from (resumable)
         self._link_up = False  # the robot's latest status said connected
+        self._reconnects = 0  # Reconnects the operator asked for: a lost link's error from before one is old news
         self._stops = 0  # STOP presses, so that a re-arm question asked before one re-arms nothing
 
     def on_mount(self) -> None:
@@ -139,17 +140,23 @@ class FixwizardApp(App[None]):
             self.stopped = True
         link_was_up, self._link_up = self._link_up, status is not None and status.connected
         if link_was_up and not self._link_up:
-            self._announce_lost_link(robot)
+            self._announce_lost_link(robot, self._reconnects)
 
     @work(thread=True, group="link", exit_on_error=False)
-    def _announce_lost_link(self, robot: Robot) -> None:
+    def _announce_lost_link(self, robot: Robot, reconnects: int) -> None:
         """The link dropped while nothing asked the robot for anything (the operator guiding the arm, say): the
         robot's own error for it, with Reconnect. Asking for the pose gives it once the arm is sure to stand (a UR
-        arm's link waits for its watchdog first); a link that came back meanwhile raises nothing."""
+        arm's link waits for its watchdog first); a link that came back meanwhile raises nothing. ``reconnects``:
+        the count when the link was seen to go; once the operator has pressed Reconnect since (on a failed motion's
+        error that came first), the answer is about the link that went or the one still connecting: not shown."""
         try:
             robot.base_T_tcp()
         except RobotError as error:
-            self.call_from_thread(self.show_error, error)
+            self.call_from_thread(self._lost_link_answered, error, reconnects)
+
+    def _lost_link_answered(self, error: RobotError, reconnects: int) -> None:
+        if reconnects == self._reconnects:
+            self.show_error(error)
 
     def watch_stopped(self) -> None:
         self.refresh_bindings()
@@ -313,6 +320,7 @@ class FixwizardApp(App[None]):
     def _recover(self, recovery: Recovery | None) -> None:
         robot, hands = self.cell.robot, self.cell.hands
         if recovery == "reconnect":
+            self._reconnects += 1
             in_thread(self, robot.connect, lambda _: self._reconnected())
         elif recovery == "unlock" and hands is not None:
             in_thread(self, hands.cell.unlock, lambda _: self.notify("SIMULATED: protective stop unlocked."))
