@@ -60,6 +60,7 @@ from ur_loopback import flange_above_surface, private_loopback_host
 from ur_loopback.arm import COLLISION_FORCE_N, SURFACE_STIFFNESS_N_M
 from ur_loopback.link_faults import (
     serve_whose_first_run_id_is_the_last_one_run,
+    serve_whose_writes_are_lost_once_connected,
     serve_with_a_bug_in_the_move,
     stall_link,
 )
@@ -1007,6 +1008,21 @@ def test_a_new_link_never_takes_the_last_run_s_id_for_its_own_program(controller
     np.testing.assert_allclose(controller.flange_pose(), target, atol=1e-6)
     run_ids = [run_id for _, run_id, _ in controller.programs()]
     assert len(set(run_ids)) == len(run_ids) == 2
+
+
+def test_writes_that_ur_rtde_drops_without_raising_drop_the_link_before_anything_moves(controller, connect,
+                                                                                       monkeypatch):
+    """ur_rtde's write returns False, raising nothing, when a send failed that it could not redo: the link went on
+    as if its kicks and requests had arrived, and a move ended in 'this computer was too busy to answer' after the
+    watchdog fired. The link is lost at the first such write, and nothing is sent that could move the arm."""
+    monkeypatch.setattr("fixwizard.robot.ur.serve", serve_whose_writes_are_lost_once_connected)
+    robot = connect()
+    before = controller.flange_pose()
+    with pytest.raises(ConnectionLost, match="writing to the controller failed .ur_rtde could not send it"):
+        robot.move_linear(flange_above_surface(0.03), speed_m_s=0.05)
+    assert [name for name, _, _ in controller.programs()] == ["setup"]
+    np.testing.assert_allclose(controller.flange_pose(), before, atol=1e-9)
+    assert not robot.status().connected
 
 
 @pytest.mark.parametrize("field", ["actual_TCP_pose", "actual_TCP_force", "output_double_register_17"])

@@ -520,7 +520,7 @@ class Link:
         while self._lost is None:
             try:
                 with self._io_lock:
-                    self._io.setInputIntRegister(KICK_REGISTER, count)
+                    self._write_input(KICK_REGISTER, count)
             except Exception as error:  # noqa: BLE001 - no more kicks: the watchdog stops the arm
                 self._lose(f"writing to the controller failed ({error})")
                 return
@@ -552,9 +552,15 @@ class Link:
         try:
             with self._io_lock:
                 if not (unless_stopped and self._stop_requested()):
-                    self._io.setInputIntRegister(REQUEST_REGISTER, request_value(run_id, request))
+                    self._write_input(REQUEST_REGISTER, request_value(run_id, request))
         except RuntimeError as error:
             raise self._link_lost("", f"writing to the controller failed ({error})") from error
+
+    def _write_input(self, register: int, value: int) -> None:
+        """Write an input integer register; ``RuntimeError`` if it did not go out: ur_rtde raises, or, when a send
+        failed and it could not redo it, says so only on stdout and returns False."""
+        if not self._io.setInputIntRegister(register, value):
+            raise RuntimeError("ur_rtde could not send it")
 
     def _dashboard_command(self, command: str) -> str:
         """One dashboard command and its reply line."""

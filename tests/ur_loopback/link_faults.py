@@ -46,3 +46,26 @@ def serve_whose_first_run_id_is_the_last_one_run(*args) -> None:
 
     ur_link.Link.connect = connect_then_reuse_the_last_run_id
     ur_link.serve(*args)
+
+
+class _InputsGoNowhere:
+    """An RTDE I/O client whose writes go nowhere: ``setInputIntRegister`` returns False."""
+
+    def setInputIntRegister(self, register: int, value: int) -> bool:  # noqa: N802 - ur_rtde's name
+        return False
+
+
+def serve_whose_writes_are_lost_once_connected(*args) -> None:
+    """``ur_link.serve`` whose RTDE input writes (the kicks, a motion's requests) go nowhere once it has connected,
+    as ur_rtde's do after a send failed that it could not redo: it prints 'Lost connection to robot', raises
+    nothing and returns False."""
+
+    connect = ur_link.Link.connect
+
+    def connect_then_lose_the_writes(link) -> None:
+        connect(link)
+        with link._io_lock:
+            link._io = _InputsGoNowhere()
+
+    ur_link.Link.connect = connect_then_lose_the_writes
+    ur_link.serve(*args)
