@@ -49,8 +49,8 @@ from fixwizard.robot.base import (
     check_tap_request,
 )
 from fixwizard.robot.ur_errors import LinkLost, unpack_error
-from fixwizard.robot.ur_link import DASHBOARD_PORT, serve
-from fixwizard.robot.ur_script import RETRACT_SPEED_M_S, SETTLE_TIMEOUT_S
+from fixwizard.robot.ur_link import DASHBOARD_PORT, PROGRAM_END_TIMEOUT_S, PROGRAM_START_TIMEOUT_S, serve
+from fixwizard.robot.ur_script import GO_TIMEOUT_S, RETRACT_SPEED_M_S, SETTLE_TIMEOUT_S
 from fixwizard.robot.ur_state import (
     ROBOT_MODE_RUNNING,
     ROBOT_MODE_TEXT,
@@ -67,7 +67,9 @@ WATCHDOG_PERIODS = 2
 WATCHDOG_MARGIN_S = 0.4  # a controller's cycle and braking, and its scheduling, after the watchdog fired
 CONNECT_DEADLINE_S = 10.0  # the link process's start, every port, every client and the first data
 COMMAND_DEADLINE_S = 5.0  # a command that does not move (freedrive, unlock)
-MOTION_SLACK_S = 5.0  # a motion's deadline: its own duration plus this
+# a motion's deadline: its own duration plus the longest its program may take to start, to get its go and to end
+# when told (each a deadline of the link's own, whose error is the clearer), and a second more
+MOTION_SLACK_S = PROGRAM_START_TIMEOUT_S + GO_TIMEOUT_S + PROGRAM_END_TIMEOUT_S + 1.0
 LINK_STALE_S = 0.75  # no new sample in the shared state for this long: the link process stalled
 LOST_ANSWER_WAIT_S = 0.3  # a link process that saw its connection drop answers with the cause within this
 DASHBOARD_STOP_TIMEOUT_S = 1.0
