@@ -6,6 +6,7 @@ silent ports, protective, emergency and safeguard stops, local control.
 Ports are fixed (ur_rtde has no way to choose them), so one controller runs at a time.
 """
 
+import math
 import socket
 import threading
 import time
@@ -24,6 +25,7 @@ from ur_loopback.script_server import SCRIPT_PORT, serve_scripts
 CONTROLLER_VERSION = (5, 15, 0, 0)
 POLYSCOPE_VERSION = "URSoftware 5.15.0.1234 (Nov 11 2023)"
 CYCLE_S = 0.002
+MAX_CATCH_UP_S = 0.02  # the most time one pass of the simulation catches up on
 # A controller checks an RTDE watchdog once a period (1 / its minimum frequency) for an input update within that
 # period, so it fires between one and two periods after the last update: measured on a CB3 URSim, 0.5 s on a bare
 # connection and 1.0 s with RTDE I/O and dashboard clients attached, at 2 Hz. The loopback checks on a grid of
@@ -348,8 +350,13 @@ class LoopbackController:
         while self._running.is_set():
             time.sleep(CYCLE_S)
             now = time.monotonic()
+            # the time a loaded machine let pass, in cycles of CYCLE_S: a contact stops the arm within one cycle's
+            # travel however late this thread ran (a longer wait, past MAX_CATCH_UP_S, is lost time to the arm)
+            elapsed_s = min(now - last, MAX_CATCH_UP_S)
+            cycles = max(1, math.ceil(elapsed_s / CYCLE_S))
             with self._lock:
-                self._cycle(min(now - last, 0.02), now)
+                for _ in range(cycles):
+                    self._cycle(elapsed_s / cycles, now)
             last = now
 
     def _cycle(self, dt: float, now: float) -> None:
