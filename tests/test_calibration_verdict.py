@@ -54,9 +54,23 @@ def test_tips_that_disagree_beyond_their_own_errors_ask_for_a_check_of_the_ball(
     usable = tip_verdict(calibration(pivot_offset_mm=1.5))
     assert usable.level == "usable" and "the ball may have slipped in the pivot" in usable.reasons[0]
     redo = tip_verdict(calibration(pivot_offset_mm=2.0))
-    assert redo.level == "redo" and redo.reasons[0] == ("the pivot and the table taps put the ball 2.0 mm apart (up to "
-                                                        "0.9 mm is normal): check that the ball is tight")
+    assert redo.level == "redo" and redo.reasons[0] == ("the pivot and the table taps put the ball 2.00 mm apart (up "
+                                                        "to 0.93 mm is normal): check that the ball is tight")
     assert redo.headline() == "REDO: calibrate again (Redo from the pivot)."
+
+
+@pytest.mark.parametrize(("pivot_offset_mm", "level"), [(0.05, "good"), (0.09, "good"), (0.15, "usable"),
+                                                        (0.19, "usable"), (0.25, "redo")])
+def test_an_exact_arm_tells_its_tips_apart_no_finer_than_a_robots_repeatability(pivot_offset_mm, level):
+    # residuals and scatter near zero (the loopback controller, an arm without kinematic error) would make any
+    # difference a loose ball; below 0.1 mm two tips of one robot agree, up to 0.2 mm usable, beyond that redo
+    exact = calibration(standard_error_mm=(0.001, 0.001, 0.002), pivot_offset_mm=pivot_offset_mm, pivot_max_mm=0.001,
+                        tip_max_mm=0.001)
+    verdict = tip_verdict(exact)
+    assert verdict.level == level, verdict.reasons
+    if level != "good":
+        assert verdict.reasons[0].startswith(f"the pivot and the table taps put the ball {pivot_offset_mm:.2f} mm "
+                                             "apart (up to 0.10 mm is normal)")
 
 
 def test_many_taps_left_out_mean_something_moved_and_a_large_bound_means_loose_bounds():

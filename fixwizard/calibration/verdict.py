@@ -11,7 +11,9 @@ tap's error the residuals do not show must fit in what ``b`` leaves:
   eats into what covers the scatter: the bounds may be optimistic); redo when ``s > b``.
 - **The two tips agree**: the pivot gives a coarse tip, the tilted taps the fine one (used), each measured
   independently. The pivot tip errs by about its residual over the sine of its tilt (20-30 degrees: up to 3x its
-  largest residual ``p``), the fine tip by about ``2 s``; so they should differ by at most ``a = 3 p + 2 s``.
+  largest residual ``p``), the fine tip by about ``2 s``; so they should differ by at most ``a = 3 p + 2 s``, and
+  never less than ``MIN_AGREEMENT_M``: two tips measured on one robot differ by its repeatability (UR e-series
+  +-0.03-0.1 mm) and a contact's detection even when every residual is near zero (an exact arm).
   Up to ``a``: they agree; up to ``2 a``: usable (the ball may have slipped in the pivot; the fine tip is used);
   beyond: redo (the ball may be loose).
 - **Taps left out**: the fits leave out taps that do not belong. More than ``MAX_EXCLUDED_SHARE`` of a step left
@@ -31,6 +33,7 @@ Level = Literal["good", "usable", "redo"]
 LEVELS: tuple[Level, ...] = ("good", "usable", "redo")
 PIVOT_TILT_FACTOR = 3.0  # 1 / sin(20 deg), rounded: the pivot tip's error per unit of its largest residual
 FINE_TIP_FACTOR = 2.0  # standard errors of the fine tip allowed in the agreement of the two tips
+MIN_AGREEMENT_M = 0.1e-3  # tips this close agree, however small the residuals: a robot's repeatability
 MAX_EXCLUDED_SHARE = 0.2
 LOOSE_BOUND_M = 1.0e-3
 
@@ -62,14 +65,15 @@ def tip_verdict(calibration: TipCalibration) -> TipVerdict:
         found.append(("usable", f"the ball centre is known to about {spread_m * 1e3:.2f} mm, which uses up part of "
                                 f"the {bound_mm:.1f} mm each tap is trusted to: the fixture's bounds may be a little "
                                 "optimistic"))
-    agreement_m = PIVOT_TILT_FACTOR * calibration.pivot_residuals.max_m + FINE_TIP_FACTOR * spread_m
+    agreement_m = max(PIVOT_TILT_FACTOR * calibration.pivot_residuals.max_m + FINE_TIP_FACTOR * spread_m,
+                      MIN_AGREEMENT_M)
     apart_m = float(np.linalg.norm(calibration.tcp_p_tip_m - calibration.pivot_tcp_p_tip_m))
     if apart_m > 2.0 * agreement_m:
-        found.append(("redo", f"the pivot and the table taps put the ball {apart_m * 1e3:.1f} mm apart (up to "
-                              f"{agreement_m * 1e3:.1f} mm is normal): check that the ball is tight"))
+        found.append(("redo", f"the pivot and the table taps put the ball {apart_m * 1e3:.2f} mm apart (up to "
+                              f"{agreement_m * 1e3:.2f} mm is normal): check that the ball is tight"))
     elif apart_m > agreement_m:
-        found.append(("usable", f"the pivot and the table taps put the ball {apart_m * 1e3:.1f} mm apart (up to "
-                                f"{agreement_m * 1e3:.1f} mm is normal): the ball may have slipped in the pivot; the "
+        found.append(("usable", f"the pivot and the table taps put the ball {apart_m * 1e3:.2f} mm apart (up to "
+                                f"{agreement_m * 1e3:.2f} mm is normal): the ball may have slipped in the pivot; the "
                                 "table taps' value is used"))
     for step, series in calibration.steps.items():
         if len(series.base_T_tcp) and len(series.excluded) > MAX_EXCLUDED_SHARE * len(series.base_T_tcp):
