@@ -266,7 +266,7 @@ def test_a_pose_file_too_large_for_a_pose_is_refused_without_reading_it_all(tmp_
     started = time.monotonic()
     assert main(["import-poses", str(tmp_path / "poses"), "--tip", str(tmp_path / "tip.pose"), "-o",
                  str(tmp_path / "p.yaml")]) == 1
-    assert time.monotonic() - started < 0.5
+    assert time.monotonic() - started < 1.5  # reading it all took 5 s
     assert "base_t_tcp_1.pose holds more than 64 kB, so it is no pose" in capsys.readouterr().err
 
 

@@ -445,7 +445,7 @@ def test_move_linear_refuses_a_target_beyond_one_move_s_travel(robot, controller
         with pytest.raises(RobotError, match=f"^the move's target is {shown} mm from the flange, farther than the "
                                              "500 mm one move may go, so the robot did not move: bring the arm"):
             robot.move_linear(target)
-        assert time.monotonic() - started < 0.1
+        assert time.monotonic() - started < 0.5  # no program's start (seconds); room for a loaded machine
     assert [name for name, _, _ in controller.programs()] == ["setup"]
     assert_arm_stands(controller, 0.05)
 
@@ -628,7 +628,7 @@ def test_move_linear_refuses_a_target_that_is_not_a_finite_rigid_pose(robot, con
     started = time.monotonic()
     with pytest.raises(RobotError, match="target is not a (finite 4x4|rigid) pose"):
         robot.move_linear(target)
-    assert time.monotonic() - started < 0.1
+    assert time.monotonic() - started < 0.5  # no program's start (seconds); room for a loaded machine
     assert [name for name, _, _ in controller.programs()] == ["setup"]
 
 
@@ -640,7 +640,7 @@ def test_stop_from_another_thread_ends_a_tap_at_once(start_controller, connect):
     time.sleep(0.2)
     started = time.monotonic()
     robot.stop()
-    assert time.monotonic() - started < 0.05  # never blocks the caller
+    assert time.monotonic() - started < 0.5  # never blocks the caller (the link's answer would take seconds)
     assert isinstance(tap.join(2.0), MotionStopped)
     assert time.monotonic() - started < 1.0
     assert_arm_stands(controller)
@@ -726,7 +726,7 @@ def test_stop_does_not_block_on_a_frozen_link(robot, controller):
     controller.freeze_link()
     started = time.monotonic()
     robot.stop()
-    assert time.monotonic() - started < 0.05
+    assert time.monotonic() - started < 0.5  # a frozen link's answer would never come; room for a loaded machine
 
 
 def test_status_and_pose_are_safe_from_another_thread_during_taps(robot):
