@@ -5,11 +5,27 @@ import sys
 import time
 from pathlib import Path
 
-# runs the CLI and reports its own peak memory on the last line of stderr: the high-water mark of its own memory
+# runs the CLI as its installed command does (``cli.entry``, or ``main`` then ``sys.exit`` in versions before it)
+# and reports its own peak memory on the last line of stderr as it leaves: the high-water mark of its own memory
 # since it started (VmHWM; ru_maxrss would count the memory of the process that started it, carried over the fork)
-WRAPPER = ("import sys\nfrom fixwizard.cli import main\ncode = main(sys.argv[1:])\n"
-           "hwm = open('/proc/self/status').read().split('VmHWM:')[1].split()[0]\n"
-           "print('MAXRSS_KB', hwm, file=sys.stderr)\nsys.exit(code)")
+WRAPPER = """\
+import os, sys
+from fixwizard import cli
+def peak_kb():
+    return open('/proc/self/status').read().split('VmHWM:')[1].split()[0]
+def leave(code, exit_now=os._exit):
+    sys.stdout.flush()
+    print('MAXRSS_KB', peak_kb(), file=sys.stderr, flush=True)
+    exit_now(code)
+os._exit = leave
+if hasattr(cli, 'entry'):
+    try:
+        cli.entry()
+    except SystemExit as leaving:
+        leave(leaving.code or 0)
+else:
+    leave(cli.main(sys.argv[1:]), sys.exit)
+"""
 SOLVED = (0, 3, 4)  # unique, ambiguous, undetermined: a solve that ran to its end
 
 

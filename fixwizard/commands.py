@@ -76,8 +76,8 @@ def solve_command(args: argparse.Namespace) -> int:
     stage = None if args.quiet else _stage_printer()
     outcome = run_interruptibly(lambda cancel: run_solve(request, None if args.quiet else _print_progress, cancel,
                                                          stage))
+    report.write(output, outcome.report)  # first: a reader of the summary that leaves early (`| head`) costs no report
     print("\n".join(summary_lines(outcome)))
-    report.write(output, outcome.report)
     print(f"report written to {output}")
     return EXIT_CODES[outcome.solution.status]
 

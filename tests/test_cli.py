@@ -415,6 +415,43 @@ def test_help_and_argument_errors_answer_without_loading_the_heavy_libraries():
 
 
 @pytest.mark.slow
+def test_a_solve_in_its_own_process_tells_everything_before_it_leaves(bracket, tmp_path):
+    """A batch command leaves without the interpreter's teardown (``cli.entry``): what it printed into a pipe's
+    buffer reaches the reader all the same, and the report is whole."""
+    import os
+    import subprocess
+    import sys
+
+    folder, _, _ = bracket
+    environment = {name: value for name, value in os.environ.items() if name != "PYTHONUNBUFFERED"}
+    result = subprocess.run([sys.executable, "-m", "fixwizard.cli", *solve_args(folder)[:-2], "-o",
+                             str(tmp_path / "r.yaml")], capture_output=True, text=True, timeout=120, env=environment)
+    assert result.returncode == 0 and result.stderr == ""
+    lines = result.stdout.splitlines()
+    assert lines[0].startswith("status: unique (20 taps") and lines[-1] == f"report written to {tmp_path / 'r.yaml'}"
+    assert report.load(tmp_path / "r.yaml").status == "unique"
+
+
+@pytest.mark.slow
+def test_a_solve_whose_reader_left_still_writes_its_report_and_says_nothing_untrue(bracket, tmp_path):
+    """`fixwizard solve ... | head -1` with unbuffered output: the summary came before the report, so the report was
+    never written, and the broken pipe was told as 'cannot read or write the file ...; check the path and the
+    disk' (exit 1). The report comes first; a reader that left gets nothing more, with a shell's 141."""
+    import os
+    import subprocess
+    import sys
+
+    folder, _, _ = bracket
+    process = subprocess.Popen([sys.executable, "-m", "fixwizard.cli", *solve_args(folder)[:-2], "-o",
+                                str(tmp_path / "r.yaml")], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    process.stdout.close()  # the reader leaves before the first line
+    err = process.stderr.read()
+    assert process.wait(timeout=120) == 141 and err == ""
+    assert report.load(tmp_path / "r.yaml").status == "unique"
+
+
+@pytest.mark.slow
 def test_ctrl_c_during_a_solve_exits_130_promptly_without_a_traceback(bracket, tmp_path):
     import signal
     import subprocess
