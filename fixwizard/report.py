@@ -460,6 +460,7 @@ def load(path: str | Path) -> Report:
     wrong with a damaged or foreign file."""
     path = Path(path)
     data = load_document(path, SCHEMAS, "fixwizard report")
+    _check_complete(data, path)  # first: a copy cut short lacks later sections, which is what to say about it
     status = data.get("status")
     if status not in STATUSES:
         raise InputError(f"{path}: status must be one of {', '.join(STATUSES)}, not {quoted(status)}")
@@ -480,7 +481,6 @@ def load(path: str | Path) -> Report:
                       ball_diameter_m=ball_diameter_m, sample_bound_m=sample_bound_m, pose_guarantee=guarantee)
 
     if status == "inconsistent":
-        _check_complete(data, path)
         return loaded(None, None, [None, None, None], None)
     pose, bounds = data.get("pose"), data.get("bounds")
     if not isinstance(pose, dict) or not isinstance(bounds, dict):
@@ -489,7 +489,6 @@ def load(path: str | Path) -> Report:
                  if data["schema"] == SCHEMA else None)
     found = loaded(_pose_from(pose, path, "pose"), _pose_from(bounds.get("center"), path, "bounds.center"),
                    _figures_from(bounds, path, "bounds"), guarantee)
-    _check_complete(data, path)
     _check_guarantee_covers_the_pose(found)
     return found
 
