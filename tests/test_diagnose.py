@@ -6,6 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+import trimesh
 
 from conftest import real_taps
 from fixwizard.fixture import load_fixture
@@ -62,6 +63,19 @@ def test_taps_three_times_the_fixture_point_at_the_mesh_or_its_units(expert):
     solution = solve(fixture, 3.0 * (taps - taps.mean(axis=0)) + taps.mean(axis=0), BALL_M, BOUND_M)
     assert _codes(solution) == ["mesh_or_units"] and solution.diagnosis.smallest_bound_m is None
     assert "the fixture is 255 mm across" in solution.diagnosis.causes[0].message
+
+
+def test_a_mesh_in_centimetres_read_as_millimetres_is_named_with_the_true_ratio(real_data, tmp_path):
+    """The expert's taps on the logo exported in centimetres and read as mm (a fixture 26 mm across): the taps
+    spread 10 times as far, and the message said 'That is about 25.4 times: likely a mesh in inches read as mm'."""
+    mesh = trimesh.load(real_data / "meshes" / "matlab_logo.ply")
+    mesh.apply_scale(100.0)
+    mesh.export(tmp_path / "logo_cm.stl")
+    solution = solve(load_fixture(tmp_path / "logo_cm.stl", "mm"), real_taps(real_data, "expert"), BALL_M, BOUND_M)
+    assert _codes(solution) == ["mesh_or_units"]
+    message = solution.diagnosis.causes[0].message
+    assert "That is 10 times: a mesh in inches or centimetres read as millimetres would explain it." in message
+    assert "25.4 times" not in message and "--mesh-units m or mm" in message
 
 
 def test_without_a_diagnosis_an_inconsistent_solve_says_only_that(expert):

@@ -37,6 +37,9 @@ SUSPECTS_TRIED = 3  # the taps with the largest residuals at the best fit, left 
 FIT_CELLS = 20_000  # cell centres whose residuals pick the starts of the best fit
 FIT_STARTS = 3
 BALL_FIT_ROUNDS = 4
+# Units a mesh may be in, with how many times its size read as millimetres makes the taps spread (up to that many
+# times the fixture's size, from 0.3 of it on: taps over part of the fixture). Centimetres and inches overlap.
+UNIT_MIXUPS = ((1000.0, "metres"), (25.4, "inches"), (10.0, "centimetres"))
 
 
 @dataclass(frozen=True)
@@ -114,14 +117,14 @@ def _mesh_or_units(problem: SearchProblem) -> Cause:
     spread_m = _tap_spread_m(problem.base_p_taps)
     size_m = 2.0 * problem.fixture_radius_m
     ratio = spread_m / size_m
-    hint = ""
-    for factor, units in ((1000.0, "a mesh in metres read as millimetres"), (25.4, "a mesh in inches read as mm")):
-        if 0.3 * factor <= ratio <= 1.2 * factor:
-            hint = f" That is about {factor:g} times: likely {units}."
+    units = [name for factor, name in UNIT_MIXUPS if 0.3 * factor <= ratio <= 1.2 * factor]
+    hint = (f" That is {ratio:.3g} times: a mesh in {' or '.join(units)} read as millimetres would explain it."
+            if units else "")
     return Cause("mesh_or_units",
                  f"No pose explains the taps even with a {MAX_RELAXED_BOUND_M * 1e3:.0f} mm sample bound: the taps "
                  f"spread over {spread_m * 1e3:.0f} mm and the fixture is {size_m * 1e3:.0f} mm across.{hint} Check "
-                 "that the mesh is this fixture, its units (--mesh-units) and the tool-tip calibration.")
+                 "that the mesh is this fixture, its units (--mesh-units m or mm; export a mesh in other units in "
+                 "one of those) and the tool-tip calibration.")
 
 
 def _smallest_bound(problem: SearchProblem, max_cells: float,
