@@ -105,11 +105,12 @@ def _ros_frame_id(text: str) -> str:
 
 class _Parser(argparse.ArgumentParser):
     """argparse with bad usage exiting 1 (bad input), since exit code 2 means inconsistent taps, and with
-    negative lengths such as ``-1mm`` taken as values (so that their check can say what is wrong)."""
+    negative lengths and ages such as ``-1mm`` or ``-1d`` taken as values (so that their check can say what is
+    wrong)."""
 
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
-        self._negative_number_matcher = re.compile(r"^-(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?\s*(?:mm|m)?$")
+        self._negative_number_matcher = re.compile(r"^-(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?\s*(?:mm|m|s|min|h|d)?$")
         self._words: list[str] = []
 
     def parse_known_args(self, args: Sequence[str] | None = None,  # type: ignore[override]  # typeshed: overloads

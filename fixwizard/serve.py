@@ -65,7 +65,7 @@ NO_SUCH_FIXTURE, NOT_UNIQUE, SIMULATED, TOO_OLD, FROM_THE_FUTURE, BAD_CALL, NO_R
 _LOG_LINE = re.compile(rb"\d{4}-\d{2}-\d{2} \d{2}:\d{2}:\d{2},\d{3} ")
 _CONTENT_LENGTH = re.compile(r"[0-9]{1,18}")  # a request's length in bytes, as HTTP writes it (no sign)
 _NOT_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")  # characters XML 1.0 cannot carry
-_DURATION = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*(s|min|h|d)?\s*$")
+_DURATION = re.compile(r"^\s*([-+]?\d+(?:\.\d+)?)\s*(s|min|h|d)?\s*$")  # a sign: refused as not positive
 _SECONDS = {"s": 1.0, "min": 60.0, "h": 3600.0, "d": 86400.0}
 
 

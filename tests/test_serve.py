@@ -494,6 +494,10 @@ def test_the_serve_command_refuses_what_cannot_work(cell, tmp_path, capsys):
     assert main(["serve", "--reports", str(cell), "--max-age", "forever"]) == 1
     err = capsys.readouterr().err
     assert "cannot read the age" in err and "Traceback" not in err
+    for age in ("-1d", "-8h", "-30min"):  # said as not positive; argparse said 'expected one argument' of '-1d'
+        assert main(["serve", "--reports", str(cell), "--max-age", age]) == 1
+        err = capsys.readouterr().err
+        assert f"the largest report age must be positive, not '{age}'" in err and "expected one argument" not in err
     assert main(["serve", "--reports", str(cell), "--host", "192.0.2.1", "--port", "0"]) == 1
     err = capsys.readouterr().err
     assert "give --host an address of this PC" in err and "another fixwizard serve" not in err
