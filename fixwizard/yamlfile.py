@@ -18,7 +18,10 @@ def yaml_problem(error: yaml.YAMLError) -> str:
                 "fixwizard file is one: keep the one meant and delete the others")
     if isinstance(error, yaml.MarkedYAMLError) and error.problem_mark is not None:
         mark = error.problem_mark
-        return f"{error.problem} at line {mark.line + 1}, column {mark.column + 1}"
+        where = f"{error.problem} at line {mark.line + 1}, column {mark.column + 1}"
+        if error.problem is not None and "'\\t'" in error.problem:  # an editor that indents with tabs
+            return f"{where}: YAML takes spaces there, not tabs; replace the tabs with spaces"
+        return where
     return str(error).splitlines()[0]
 
 

@@ -192,6 +192,17 @@ def test_a_yaml_points_file_of_several_documents_says_so(tmp_path):
         load_points(path)
 
 
+def test_a_yaml_points_file_indented_with_tabs_says_to_use_spaces(tmp_path):
+    """An editor set to indent with tabs: PyYAML's words were only "found character '\\t' that cannot start any
+    token"."""
+    path = tmp_path / "taps.yaml"
+    path.write_text("frame: base\npoints_m:\n\t- [0.1, 0.2, 0.3]\n\t- [0.2, 0.3, 0.4]\n\t- [0.3, 0.1, 0.2]\n")
+    with pytest.raises(InputError, match=re.escape(f"{path} is not valid YAML: found character '\\t' that cannot start "
+                                                   "any token at line 3, column 1: YAML takes spaces there, not tabs; "
+                                                   "replace the tabs with spaces")):
+        load_points(path)
+
+
 @pytest.mark.parametrize("name", ["taps.yaml", "report.yaml"])
 def test_lists_nested_too_deeply_to_read_are_refused_in_a_short_message(tmp_path, name):
     path = tmp_path / name
