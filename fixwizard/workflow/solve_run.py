@@ -50,6 +50,13 @@ def run_solve(request: SolveRequest, progress: Callable[[SearchProgress], None] 
     return SolveOutcome(fixture, base_p_taps, solution, data)
 
 
+def _figures_text(position_m: float, rotation_deg: float, max_point_displacement_m: float) -> str:
+    """Guaranteed figures in mm and deg, rounded up (never below what is guaranteed)."""
+    return (f"CAD origin within {report.round_up(position_m * 1e3, 2):.2f} mm, rotation within "
+            f"{report.round_up(rotation_deg, 2):.2f} deg, any fixture point within "
+            f"{report.round_up(max_point_displacement_m * 1e3, 2):.2f} mm")
+
+
 def summary_lines(outcome: SolveOutcome) -> list[str]:
     """A short human summary in mm and degrees."""
     solution = outcome.solution
@@ -58,13 +65,14 @@ def summary_lines(outcome: SolveOutcome) -> list[str]:
     if solution.base_T_cad is not None and solution.bounds is not None:
         pose = report.pose_dict(solution.base_T_cad)
         x, y, z = (1e3 * value for value in pose["position_m"])
-        bounds = solution.bounds
+        bounds, about_pose = solution.bounds, outcome.report["pose"]["guaranteed"]  # as the report and export say
         lines += [f"pose of the CAD frame: x {x:.2f} mm, y {y:.2f} mm, z {z:.2f} mm, "
                   f"rotation {np.degrees(np.linalg.norm(pose['rotvec_rad'])):.2f} deg",
                   f"UR pose: {report.robot_pose_text(solution.status, pose['ur'])}",
-                  f"guaranteed: CAD origin within {bounds.position_m * 1e3:.2f} mm, rotation within "
-                  f"{np.degrees(bounds.rotation_rad):.2f} deg, any fixture point within "
-                  f"{bounds.max_point_displacement_m * 1e3:.2f} mm"]
+                  "guaranteed about this pose: " + _figures_text(*(about_pose[key] for key in (
+                      "position_m", "rotation_deg", "max_point_displacement_m"))),
+                  "guaranteed about the centre of the set (bounds.center): " + _figures_text(
+                      bounds.position_m, np.degrees(bounds.rotation_rad), bounds.max_point_displacement_m)]
         lines += [f"{interval.level:.0%} interval: {interval.position_m * 1e3:.2f} mm, "
                   f"{np.degrees(interval.rotation_rad):.2f} deg" for interval in solution.intervals]
     lines += [f"warning: {warning.message}" for warning in solution.warnings]
