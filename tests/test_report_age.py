@@ -24,3 +24,12 @@ def test_a_report_a_little_ahead_of_this_clock_is_no_age_below_zero():
 def test_an_old_report_is_said_old():
     (line,) = report_lines(report.load(EXAMPLE), 2.5 * 3600.0)
     assert ", 2.5 h old," in line
+
+
+def test_the_bounds_are_said_to_be_about_their_centre_not_the_pose():
+    """verify's 'guaranteed within 4.82 mm and 4.29 deg' read as the guarantee of the pose to use, which is 5.35 mm
+    and 5.36 deg (pose.guaranteed)."""
+    loaded = report.load(EXAMPLE)
+    (line,) = report_lines(loaded, 60.0)
+    assert (f"guaranteed set within {loaded.position_bound_m * 1e3:.2f} mm and {loaded.rotation_bound_deg:.2f} deg of "
+            "its centre (bounds.center)") in line
