@@ -43,8 +43,9 @@ def home_expanded(path: str | Path) -> str:
 def output_target(path: str | Path, example: str = "report.yaml") -> Path:
     """The file a write to ``path`` replaces: ``path`` with ``~`` expanded (``home_expanded``) and symlinks
     followed. InputError when it is '-' (standard output, which only ``export`` writes), a folder (also one still to
-    be made: a path ending in '/') or not a regular
-    file (a device such as /dev/null, a pipe), suggesting a file named ``example`` (the output's kind and suffix)."""
+    be made: a path ending in '/'), not a regular
+    file (a device such as /dev/null, a pipe) or a read-only file (no write permission for anyone: the atomic
+    rename would replace it, also for root), suggesting a file named ``example`` (the output's kind and suffix)."""
     if str(path) == "-":  # standard output to a user, as ``export -o -`` takes it: never a file named '-' here
         raise InputError(f"'-' (standard output) is no file this command writes; give the path of a file, e.g. "
                          f"{example}")
@@ -64,6 +65,9 @@ def output_target(path: str | Path, example: str = "report.yaml") -> Path:
     if not stat.S_ISREG(mode):
         raise InputError(f"{path} is a device or special file, not a regular file, so fixwizard will not "
                          f"replace it; give the path of a file, e.g. {example}")
+    if not mode & (stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH):  # made read-only on purpose (a rename replaces it)
+        raise InputError(f"{path} is read-only, so fixwizard will not replace it: give another path, e.g. {example}, "
+                         f"or make it writable first (chmod u+w)")
     return target
 
 

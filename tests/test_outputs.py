@@ -76,6 +76,15 @@ def test_a_device_is_never_replaced(demo, capsys, device):
     assert stat.S_ISCHR(os.stat(device).st_mode)
 
 
+def test_a_read_only_output_is_refused_before_the_solve_and_kept(demo, capsys):
+    """A report made read-only so that nothing replaces it (the one the robot uses) was replaced by the atomic
+    write's rename, which the file's permissions do not stop (and kept read-only)."""
+    (demo / "report.yaml").write_text("the report in use\n")
+    (demo / "report.yaml").chmod(0o444)
+    refused(capsys, solve(demo, "-o", str(demo / "report.yaml")), "is read-only, so fixwizard will not replace it")
+    assert (demo / "report.yaml").read_text() == "the report in use\n"
+
+
 def test_a_folder_as_output_is_refused_with_a_file_name_to_use(demo, capsys):
     (demo / "reports").mkdir()
     refused(capsys, solve(demo, "-o", str(demo / "reports")), "is a folder", str(demo / "reports" / "report.yaml"))
