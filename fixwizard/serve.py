@@ -500,7 +500,10 @@ def _close_log(handlers: list[logging.Handler]) -> None:
 
 
 def serve_command(args: argparse.Namespace) -> int:
-    folder = Path(args.reports)
+    folder = Path(home_expanded(args.reports))  # --reports=~/reports, which the shell leaves as typed, as --log
+    if folder.is_file():
+        raise InputError(f"{folder} is a file, not the reports folder: give the folder that holds the reports with "
+                         f"--reports DIR, e.g. --reports {folder.parent}")
     if not folder.is_dir():
         raise InputError(f"there is no reports folder {folder}: give the folder the wizard writes reports to with "
                          "--reports DIR")

@@ -474,6 +474,19 @@ def test_the_serve_command_serves_until_interrupted(cell):
     assert "get_status('bracket') -> {'status': 'unique'" in err and "Traceback" not in err
 
 
+def test_the_reports_folder_given_as_a_report_is_called_a_file_and_may_start_with_a_tilde(cell, capsys, monkeypatch):
+    """'--reports reports/bracket.yaml' was told 'there is no reports folder'; '--reports=~/cell' (the shell leaves a
+    ~ after '=' as typed; --log took it as the home folder) too."""
+    report_file = sorted(cell.glob("*.yaml"))[0]
+    assert main(["serve", "--reports", str(report_file)]) == 1
+    err = capsys.readouterr().err
+    assert f"{report_file} is a file, not the reports folder" in err and f"e.g. --reports {cell}" in err
+    monkeypatch.setenv("HOME", str(cell.parent))
+    assert main(["serve", f"--reports=~/{cell.name}", "--max-age", "forever"]) == 1  # the folder taken: the age next
+    err = capsys.readouterr().err
+    assert "cannot read the age" in err and "no reports folder" not in err
+
+
 def test_the_serve_command_refuses_what_cannot_work(cell, tmp_path, capsys):
     assert main(["serve", "--reports", str(tmp_path / "nowhere")]) == 1
     assert "no reports folder" in capsys.readouterr().err
