@@ -91,13 +91,22 @@ def _csv_row_problem(row: list[str]) -> str | None:
             "between x, y and z, one tap per line, and '.' as the decimal point; save the file so")
 
 
+def _looks_like_csv(text: str) -> bool:
+    """Whether the first line that holds anything is three cells apart by commas (CSV in a file not named .csv)."""
+    first = next((line for line in text.splitlines() if line.strip()), "")
+    return len(next(csv.reader([first]), [])) == 3
+
+
 def _read_yaml(text: str, path: Path) -> np.ndarray:
     try:
         data = parse_yaml(text)
     except yaml.YAMLError as error:
         raise InputError(f"{path} is not valid YAML: {yaml_problem(error)}") from error
     if not isinstance(data, dict) or "points_m" not in data:
-        raise InputError(f"{path} must be YAML with 'frame: base' and 'points_m: [[x, y, z], ...]' in metres")
+        csv_hint = (": it looks like CSV, which fixwizard reads from a file named .csv (any other name, standard input "
+                    "too, is read as YAML)" if _looks_like_csv(text) else "")
+        raise InputError(f"{path} must be YAML with 'frame: base' and 'points_m: [[x, y, z], ...]' in metres"
+                         f"{csv_hint}")
     if data.get("frame", POINTS_FRAME) != POINTS_FRAME:
         raise InputError(f"{path} gives points in frame {quoted(data.get('frame'))}; fixwizard needs them in the "
                          "robot base frame ('frame: base')")

@@ -192,6 +192,15 @@ def test_a_yaml_points_file_of_several_documents_says_so(tmp_path):
         load_points(path)
 
 
+@pytest.mark.parametrize("header", ["x_m,y_m,z_m\n", ""])
+def test_csv_in_a_file_not_named_csv_is_said_to_need_the_name(tmp_path, header):
+    """CSV saved as taps.txt (or piped in as /dev/stdin) is read as YAML: the message only asked for YAML."""
+    path = tmp_path / "taps.txt"
+    path.write_text(header + "0.1,0.2,0.3\n0.2,0.3,0.4\n0.3,0.1,0.2\n")
+    with pytest.raises(InputError, match="it looks like CSV, which fixwizard reads from a file named .csv"):
+        load_points(path)
+
+
 def test_a_yaml_points_file_indented_with_tabs_says_to_use_spaces(tmp_path):
     """An editor set to indent with tabs: PyYAML's words were only "found character '\\t' that cannot start any
     token"."""
