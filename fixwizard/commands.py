@@ -9,7 +9,7 @@ from pathlib import Path
 from fixwizard import report
 from fixwizard.atomic import check_not_read_later, check_output
 from fixwizard.errors import InputError
-from fixwizard.exit_codes import EXIT_CODES, EXIT_OK
+from fixwizard.exit_codes import EXIT_CANCELLED, EXIT_CODES, EXIT_OK
 from fixwizard.geometry.se3 import pose_files
 from fixwizard.interrupt import run_interruptibly
 from fixwizard.points import write_points
@@ -76,9 +76,18 @@ def solve_command(args: argparse.Namespace) -> int:
     stage = None if args.quiet else _stage_printer()
     outcome = run_interruptibly(lambda cancel: run_solve(request, None if args.quiet else _print_progress, cancel,
                                                          stage))
-    report.write(output, outcome.report)  # first: a reader of the summary that leaves early (`| head`) costs no report
-    print("\n".join(summary_lines(outcome)))
-    print(f"report written to {output}")
+    try:
+        report.write(output, outcome.report)  # first: a reader that leaves early (`| head`) costs no report
+    except KeyboardInterrupt:
+        print(f"fixwizard: cancelled while the report was written: {output} holds the whole new report or what it held "
+              "before", file=sys.stderr)
+        return EXIT_CANCELLED
+    try:
+        print("\n".join(summary_lines(outcome)))
+        print(f"report written to {output}")
+    except KeyboardInterrupt:
+        print(f"fixwizard: cancelled; the report was written to {output}", file=sys.stderr)
+        return EXIT_CANCELLED
     return EXIT_CODES[outcome.solution.status]
 
 

@@ -452,6 +452,31 @@ def test_a_solve_whose_reader_left_still_writes_its_report_and_says_nothing_untr
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("stage", ["writing", "summary"])
+def test_ctrl_c_once_the_solve_is_done_says_what_became_of_the_report(bracket, tmp_path, capsys, monkeypatch, stage):
+    """Ctrl+C after the work, as the report is written or the summary printed, was told 'cancelled; nothing was
+    written' while the report stood written."""
+    from fixwizard import commands
+
+    def interrupted(*_args):
+        raise KeyboardInterrupt
+
+    written = tmp_path / "r.yaml"
+    if stage == "writing":
+        real_write = report.write
+        monkeypatch.setattr(commands.report, "write", lambda *args: (real_write(*args), interrupted()))
+    else:
+        monkeypatch.setattr(commands, "summary_lines", interrupted)
+    assert main([*solve_args(bracket[0])[:-2], "-o", str(written)]) == 130
+    err = capsys.readouterr().err
+    assert "nothing was written" not in err and "Traceback" not in err
+    assert err == (f"fixwizard: cancelled while the report was written: {written} holds the whole new report or what "
+                   "it held before\n" if stage == "writing" else f"fixwizard: cancelled; the report was written to "
+                   f"{written}\n")
+    assert report.load(written).status == "unique"
+
+
+@pytest.mark.slow
 def test_ctrl_c_during_a_solve_exits_130_promptly_without_a_traceback(bracket, tmp_path):
     import signal
     import subprocess
