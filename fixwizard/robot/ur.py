@@ -115,6 +115,7 @@ class URRobot:
         # time.monotonic() by which the watchdog has stopped every program of the links abandoned so far: no error
         # about a lost link is raised before it, from the call that abandoned the link or from any other
         self._stands_by = 0.0
+        self._stands_by_lock = threading.Lock()  # two links abandoned at once each raise it, neither lowers it
         # STOP presses, shared with every link process: a motion refuses to start after one pressed since it
         # was asked for (while it waited for the lock or for its program to start)
         self._stop_count: Synchronized = self._context.Value("q", 0, lock=False)
@@ -307,8 +308,9 @@ class URRobot:
         those kicks, and the arm stands once its watchdog fired."""
         _, last_kick_at, _ = link.shared.read()
         if last_kick_at:
-            self._stands_by = max(self._stands_by,
-                                  last_kick_at + WATCHDOG_PERIODS / self.watchdog_hz + WATCHDOG_MARGIN_S)
+            with self._stands_by_lock:
+                self._stands_by = max(self._stands_by,
+                                      last_kick_at + WATCHDOG_PERIODS / self.watchdog_hz + WATCHDOG_MARGIN_S)
         return last_kick_at
 
     def _end_link(self) -> None:
