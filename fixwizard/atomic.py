@@ -59,7 +59,7 @@ def output_target(path: str | Path, example: str = "report.yaml") -> Path:
     except (FileNotFoundError, NotADirectoryError):  # a new file (its folder is checked apart)
         return target
     except OSError as error:
-        raise InputError(f"cannot write {path}: {file_problem(error)}") from error
+        raise InputError(f"cannot write {path}: {file_problem(error, access='write')}") from error
     if stat.S_ISDIR(mode):
         raise InputError(f"{path} is a folder; give the path of a file in it, e.g. {Path(path) / example}")
     if not stat.S_ISREG(mode):
@@ -118,11 +118,11 @@ def _check_folder(folder: Path, fix: str) -> None:
     try:
         handle, probe = tempfile.mkstemp(prefix=f".fixwizard-probe.{os.getpid()}.", suffix=".tmp", dir=existing)
     except OSError as error:
-        raise InputError(f"cannot {what}: {file_problem(error, existing)}") from error
+        raise InputError(f"cannot {what}: {file_problem(error, existing, 'write')}") from error
     try:
         os.write(handle, b"\0" * PROBE_BYTES)
     except OSError as error:
-        raise InputError(f"cannot {what}: {file_problem(error, existing)}") from error
+        raise InputError(f"cannot {what}: {file_problem(error, existing, 'write')}") from error
     finally:
         os.close(handle)
         os.unlink(probe)

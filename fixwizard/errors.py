@@ -3,6 +3,7 @@
 import errno
 import re
 import reprlib
+from typing import Literal
 
 QUOTE_LIMIT = 200  # characters of a person's input quoted in a message, at most
 _NOT_ONE_LINE = re.compile("[\x00-\x1f\x7f\ud800-\udfff]")  # control characters, and bytes that are not UTF-8
@@ -67,24 +68,34 @@ def other_version(path: object, what: str, found: object, reads: tuple[str, ...]
             "wrote it")
 
 
-def file_problem(error: OSError, path: object = None) -> str:
+Access = Literal["read", "write", "read and write"]
+_PERMISSION_ADVICE: dict[Access | None, str] = {
+    "read": "check that you may read it (its permissions, and its folders')",
+    "write": "check its permissions, or choose a folder you can write to",
+    "read and write": "check that you may read and write it (its permissions, and its folders')",
+    None: "check its permissions, or choose a folder you can write to",
+}
+
+
+def file_problem(error: OSError, path: object = None, access: Access | None = None) -> str:
     """What a file system error (on ``path`` when the error does not name a file) means for a person and
-    what to do about it, in one clause."""
+    what to do about it, in one clause; ``access`` is what failed (None when the caller cannot tell), so that the
+    advice fits: a file that cannot be read needs its permissions looked at, not another folder to write to."""
     name = error.filename or path
     code = error.errno
+    doing = access or "read or write"
     if code in (errno.ENOSPC, errno.EDQUOT):
         return f"the disk{f' holding {name}' if name else ''} is full; free some space on it"
     if code == errno.EROFS:
         return f"{name or 'the file'} is on a read-only disk; choose a folder on a disk you can write to"
     if code in (errno.EACCES, errno.EPERM):
-        return (f"no permission to read or write {name or 'there'}; check its permissions, or choose a folder you "
-                "can write to")
+        return f"no permission to {doing} {name or 'there'}; {_PERMISSION_ADVICE[access]}"
     if code == errno.EFBIG:
         return (f"{name or 'the file'} has reached the largest file size allowed here (ulimit -f, or the disk's own "
                 "limit); raise that limit or choose a folder on another disk")
     if code == errno.ENOENT:
         return f"{name or 'the file'} does not exist; check the path"
-    return f"cannot read or write {name or 'the file'}: {error.strerror or error}; check the path and the disk"
+    return f"cannot {doing} {name or 'the file'}: {error.strerror or error}; check the path and the disk"
 
 
 def sentence(error: BaseException, text: str | None = None) -> str:

@@ -556,7 +556,7 @@ def load_fixture(path: str | Path, units: str = "m") -> Fixture:
         raw = _mesh_bytes(path)
         mesh, warp = _load_trimesh(path, raw)
     except OSError as error:  # no permission, a name too long, a disk error: a mesh that cannot be read
-        raise MeshError(file_problem(error, path)) from error
+        raise MeshError(file_problem(error, path, "read")) from error
     spacing_m = _float32_spacing_m(path, raw, mesh, units)
     mesh = mesh.copy()
     mesh.apply_scale(METRES_PER_UNIT[units])

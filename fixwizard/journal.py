@@ -99,7 +99,7 @@ class Journal:
                             "away or work in another folder") from None
             raise error(f"a {noun} {path} exists already; resume it or choose another name") from None
         except OSError as problem:
-            raise error(f"cannot start the {noun} {path}: {file_problem(problem)}") from problem
+            raise error(f"cannot start the {noun} {path}: {file_problem(problem, access='write')}") from problem
         _lock(kind, handle, path)
         journal = cls(kind, path, handle, _decode_own(line), [])
         try:
@@ -122,7 +122,7 @@ class Journal:
         try:
             handle = os.open(path, os.O_RDWR | os.O_APPEND)
         except OSError as problem:
-            raise error(f"cannot open the {noun}: {file_problem(problem)}") from problem
+            raise error(f"cannot open the {noun}: {file_problem(problem, access='read and write')}") from problem
         if not stat.S_ISREG(os.fstat(handle).st_mode):  # reading a pipe would wait for a writer forever
             os.close(handle)
             raise error(f"{path} is not a regular file (a pipe or a device), so it is no {noun} journal; give a "
@@ -138,7 +138,7 @@ class Journal:
                     recovered.append(_move_aside(noun, path, handle, number, len(data) - len(piece), piece))
                 except OSError as problem:
                     raise error(f"cannot set aside the unfinished last record of the {noun} {path}: "
-                                f"{file_problem(problem)}; then resume again") from problem
+                                f"{file_problem(problem, access='write')}; then resume again") from problem
             return cls(kind, path, handle, read.header, read.records, tuple(recovered))
         except BaseException:
             os.close(handle)
@@ -172,7 +172,7 @@ class Journal:
             _write_all(self.handle, line)
             os.fsync(self.handle)
         except OSError as failure:
-            problem = error(f"could not save to the {noun} {self.path}: {file_problem(failure)}. "
+            problem = error(f"could not save to the {noun} {self.path}: {file_problem(failure, access='write')}. "
                             f"{what[:1].upper()}{what[1:]} was not saved; everything saved before is kept, so try "
                             "again once that is fixed")
             try:

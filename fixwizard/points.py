@@ -135,7 +135,7 @@ def load_points(path: str | Path) -> np.ndarray:
             raise InputError(f"{path} holds more than {MAX_POINTS_FILE_BYTES / 1e6:g} MB: {too_large}")
         text = data.decode("utf-8-sig")
     except OSError as error:
-        raise InputError(f"cannot read the points file: {file_problem(error, path)}") from error
+        raise InputError(f"cannot read the points file: {file_problem(error, path, 'read')}") from error
     except UnicodeDecodeError as error:
         raise InputError(f"cannot read the points file {path}: it is not UTF-8 text ({error.reason}); save it as "
                          "UTF-8 (or plain ASCII) CSV or YAML") from error

@@ -127,7 +127,7 @@ class FixtureService:
                               "deleted?): put it back, or restart serve with --reports DIR of the reports") from None
             except OSError as error:
                 raise Refused(NO_REPORTS_FOLDER, f"fixwizard: cannot read the reports folder {self.folder}: "
-                              f"{file_problem(error, self.folder)}") from None
+                              f"{file_problem(error, self.folder, 'read')}") from None
             if state != self._state:
                 first, before = self._logged is None, self._reports
                 self._reports = scan(self.folder, before)
@@ -444,9 +444,9 @@ class LogFile(logging.FileHandler):
             if stream is not None:
                 stream.close()
         with contextlib.suppress(OSError):  # stderr cannot be written either
-            print(f"fixwizard serve: cannot write the log {self.baseFilename}: {file_problem(error, self.baseFilename)}"
-                  "; serving goes on, logging to stderr only (restart serve to log to the file again)",
-                  file=sys.stderr, flush=True)
+            problem = file_problem(error, self.baseFilename, "write")
+            print(f"fixwizard serve: cannot write the log {self.baseFilename}: {problem}; serving goes on, "
+                  "logging to stderr only (restart serve to log to the file again)", file=sys.stderr, flush=True)
 
 
 class LogFormatter(logging.Formatter):
@@ -472,7 +472,7 @@ def open_log(log: str) -> LogFile:
         elif error.errno == errno.ENOENT:
             problem = f"is in a folder that does not exist ({Path(log).parent}): make the folder, or give another path"
         else:
-            problem = f"cannot be opened: {file_problem(error, log)}"
+            problem = f"cannot be opened: {file_problem(error, log, 'write')}"
         raise InputError(f"the log {log} {problem}") from None
 
 

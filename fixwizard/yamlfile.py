@@ -105,7 +105,7 @@ def load_document(path: Path, schema: str | tuple[str, ...], what: str, error: t
                         f"no {what}; give the file fixwizard wrote")
         data = parse_yaml(text.decode("utf-8-sig"))
     except OSError as problem:
-        raise error(f"cannot read the {what}: {file_problem(problem, path)}") from problem
+        raise error(f"cannot read the {what}: {file_problem(problem, path, 'read')}") from problem
     except UnicodeDecodeError as problem:
         raise error(f"cannot read the {what} {path}: it is not UTF-8 text ({problem.reason})") from problem
     except yaml.YAMLError as problem:

@@ -1,5 +1,6 @@
 """The headless command line, as an operator would use it: good runs, and every kind of bad input."""
 
+import errno
 import time
 from pathlib import Path
 
@@ -392,6 +393,64 @@ def test_an_unwritable_report_path_is_a_message_not_a_traceback(bracket, capsys)
     assert main(replaced(solve_args(folder), str(folder / "report.yaml"), str(blocker / "report.yaml"))) == 1
     err = capsys.readouterr().err
     assert "is a file, not a folder" in err and "Traceback" not in err
+
+
+@pytest.fixture
+def unreadable(monkeypatch) -> set[Path]:
+    """Paths opened as files of mode 000 are for a user other than root (root reads them all the same): ``open``
+    refuses them with the PermissionError naming the file. Add a path to the set to make it so."""
+    blocked: set[Path] = set()
+    opened = Path.open
+
+    def open_unless_blocked(path, *args, **kwargs):
+        if path in blocked:
+            raise PermissionError(errno.EACCES, "Permission denied", str(path))
+        return opened(path, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "open", open_unless_blocked)
+    return blocked
+
+
+@pytest.mark.parametrize("command, unreadable_input", [
+    ("solve", "plate.stl"), ("solve", "taps.yaml"), ("verify", "report.yaml"), ("import-poses", "poses/tap.pose"),
+    ("import-poses", "tip.pose")])
+def test_an_input_that_cannot_be_read_is_said_to_need_read_permission_not_another_folder(
+        bracket, tmp_path, capsys, unreadable, command, unreadable_input):
+    """Every input is only read: a file of mode 000 was told 'no permission to read or write it; check its
+    permissions, or choose a folder you can write to', as if it were an output."""
+    folder, _, _ = bracket
+    inputs = {"plate.stl": folder / "plate.stl", "taps.yaml": folder / "taps.yaml",
+              "report.yaml": tmp_path / "report.yaml", "poses/tap.pose": tmp_path / "poses" / "tap.pose",
+              "tip.pose": tmp_path / "tip.pose"}
+    inputs["report.yaml"].write_text("schema: fixwizard.report/3\n")  # never read: it cannot be
+    inputs["poses/tap.pose"].parent.mkdir()
+    inputs["poses/tap.pose"].write_text("0.5 0.1 0.2 0 3.14 0\n")
+    inputs["tip.pose"].write_text("0 0 0.05 0 0 0\n")
+    args = {"solve": replaced(solve_args(folder), str(folder / "report.yaml"), str(tmp_path / "out.yaml")),
+            "verify": ["verify", str(inputs["report.yaml"]), str(inputs["taps.yaml"])],
+            "import-poses": ["import-poses", str(tmp_path / "poses"), "--tip", str(inputs["tip.pose"]), "-o",
+                             str(tmp_path / "out.yaml")]}
+    path = inputs[unreadable_input]
+    unreadable.add(path)
+    assert main(args[command]) == 1
+    err = capsys.readouterr().err
+    assert f"no permission to read {path}; check that you may read it (its permissions, and its folders')" in err
+    assert "write" not in err and "Traceback" not in err
+
+
+def test_an_output_folder_that_cannot_be_written_is_said_to_need_write_permission(bracket, tmp_path, capsys,
+                                                                                   monkeypatch):
+    folder, _, _ = bracket
+    (tmp_path / "locked").mkdir()
+
+    def refused(*args, dir, **kwargs):  # a folder of mode 555 for a user: no file can be made in it
+        raise PermissionError(errno.EACCES, "Permission denied", str(Path(dir) / ".fixwizard-probe.tmp"))
+
+    monkeypatch.setattr("fixwizard.atomic.tempfile.mkstemp", refused)
+    assert main(replaced(solve_args(folder), str(folder / "report.yaml"), str(tmp_path / "locked" / "r.yaml"))) == 1
+    err = capsys.readouterr().err
+    assert f"cannot write in the folder {tmp_path / 'locked'}: no permission to write" in err
+    assert "check its permissions, or choose a folder you can write to" in err and "read" not in err
 
 
 def test_help_and_argument_errors_answer_without_loading_the_heavy_libraries():

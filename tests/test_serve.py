@@ -283,6 +283,24 @@ def test_a_reports_folder_that_is_gone_or_cannot_be_read_is_a_fault_saying_so(ru
     assert main(["serve", "--reports", str(cell), "--host", "127.0.0.1", "--port", "0"]) == 1  # nor at the start
 
 
+def test_a_reports_folder_that_cannot_be_listed_is_said_to_need_reading_not_another_folder_to_write(cell, capsys,
+                                                                                                      monkeypatch):
+    """serve only reads the reports folder: one of mode 000 (for a user other than root) was told 'no permission to
+    read or write it; ... or choose a folder you can write to'."""
+    listed = Path.iterdir
+
+    def iterdir(folder):  # a folder of mode 000 for a user: it stats as a folder, listing it is refused
+        if folder == cell:
+            raise PermissionError(errno.EACCES, "Permission denied", str(folder))
+        return listed(folder)
+
+    monkeypatch.setattr(Path, "iterdir", iterdir)
+    assert main(["serve", "--reports", str(cell), "--host", "127.0.0.1", "--port", "0"]) == 1
+    err = capsys.readouterr().err
+    assert err == (f"fixwizard: cannot read the reports folder {cell}: no permission to read {cell}; check that you "
+                   "may read it (its permissions, and its folders')\n")
+
+
 def test_a_reports_folder_replaced_by_a_file_is_a_fault_saying_so(running, cell):
     """A file where the folder was (a copy gone wrong) is no empty folder: 'no report of bracket' hid why."""
     fw = running.client()

@@ -104,7 +104,7 @@ def read_pose_file(path: str | Path) -> np.ndarray:
             data = stream.read(MAX_POSE_FILE_BYTES + 1)
         words = data.decode("utf-8-sig").split()  # a byte-order mark: Notepad
     except OSError as error:
-        raise InputError(f"cannot read the pose file: {file_problem(error, path)}") from error
+        raise InputError(f"cannot read the pose file: {file_problem(error, path, 'read')}") from error
     except UnicodeDecodeError as error:
         raise InputError(f"cannot read the pose file {path}: it is not text ({error.reason}). {POSE_FILE_HOLDS}.") \
             from error

@@ -68,7 +68,7 @@ def fixture_of(loaded: report.Report, mesh: str | Path | None = None) -> Fixture
     try:
         sha256 = hashlib.sha256(path.read_bytes()).hexdigest()
     except OSError as error:
-        raise InputError(f"cannot read the report's mesh: {file_problem(error, path)}") from error
+        raise InputError(f"cannot read the report's mesh: {file_problem(error, path, 'read')}") from error
     _check_same_mesh(sha256, path, loaded)  # before loading: a changed mesh is said to be one, not what it lacks
     try:
         fixture = load_fixture(path, loaded.mesh_units)
