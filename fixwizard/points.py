@@ -144,6 +144,25 @@ def load_points(path: str | Path) -> np.ndarray:
     return _read_yaml(text, path)
 
 
+def holds_taps(path: str | Path) -> bool:
+    """Whether ``path`` is a regular file of taps: one ``load_points`` reads, or YAML with 'points_m' (some taps
+    damaged); to tell an argument given in another's place. A pipe is never read (it would wait for a writer)."""
+    path = Path(path)
+    if not path.is_file():
+        return False
+    try:
+        load_points(path)
+        return True
+    except InputError:
+        pass
+    try:
+        with path.open("rb") as stream:
+            data = parse_yaml(stream.read(MAX_POINTS_FILE_BYTES).decode("utf-8-sig"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        return False
+    return isinstance(data, dict) and "points_m" in data
+
+
 def write_points(path: str | Path, base_p_taps: np.ndarray, **extra) -> Path:
     """Write taps (N, 3, metres, base frame) as a POINTS file, atomically: CSV where ``path`` ends in ``.csv`` (a
     header row and one ``x,y,z`` row per tap, every digit kept; ``extra`` is left out), YAML otherwise, ``extra``

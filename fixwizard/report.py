@@ -493,19 +493,35 @@ def load(path: str | Path) -> Report:
     return found
 
 
-def claimed_fixture(path: Path) -> tuple[str | None, dt.datetime | None]:
-    """The fixture name and creation time that a file ``load`` refuses (cut short, edited, of a newer version) says
-    it is a report of, read from its first ``CLAIM_BYTES`` as far as they parse; None for what it does not say (a
-    file that is no fixwizard report says neither)."""
+def _claim(path: Path) -> dict | None:
+    """The start of the file at ``path`` (its first ``CLAIM_BYTES``, as far as they parse) when it says it is a
+    fixwizard report of any version, damaged or not; None otherwise (also for a file that cannot be read)."""
     try:
         with path.open("rb") as stream:
             start = stream.read(CLAIM_BYTES)
     except OSError:
-        return None, None
+        return None
     text = start.decode("utf-8-sig", errors="replace")
     data = parse_yaml_start(text if len(start) < CLAIM_BYTES else text[:text.rfind("\n") + 1])
     if not (isinstance(data, dict) and isinstance(data.get("schema"), str)
             and data["schema"].startswith(SCHEMA.rsplit("/", 1)[0] + "/")):
+        return None
+    return data
+
+
+def is_report_file(path: str | Path) -> bool:
+    """Whether ``path`` is a regular file that says it is a fixwizard report (of any version, damaged or not): to
+    tell an argument given in another's place. A pipe is never read (it would wait for a writer)."""
+    path = Path(path)
+    return path.is_file() and _claim(path) is not None
+
+
+def claimed_fixture(path: Path) -> tuple[str | None, dt.datetime | None]:
+    """The fixture name and creation time that a file ``load`` refuses (cut short, edited, of a newer version) says
+    it is a report of, read from its first ``CLAIM_BYTES`` as far as they parse; None for what it does not say (a
+    file that is no fixwizard report says neither)."""
+    data = _claim(path)
+    if data is None:
         return None, None
     section = data.get("inputs" if data["schema"] == SCHEMA_V1 else "fixture")
     name = section.get("name") if isinstance(section, dict) and data["schema"] != SCHEMA_V1 else None

@@ -18,6 +18,7 @@ from fixwizard.synthetic import bounded_noise, touching_ball_centres
 from shapes import l_prism
 
 REPO = Path(__file__).resolve().parents[1]
+REPORT_EXAMPLE = REPO / "examples" / "report.yaml"
 
 
 @pytest.fixture(scope="module")
@@ -113,6 +114,36 @@ def test_points_and_mesh_swapped_say_so(bracket, capsys):
     args[1:3] = args[2:0:-1]
     assert main(args) == 1
     assert "taps.yaml is a points file (YAML or CSV of the taps), not a mesh" in capsys.readouterr().err
+
+
+SWAPPED = "the arguments seem swapped; give the report first: fixwizard verify REPORT POINTS"
+
+
+@pytest.mark.parametrize("points_text, points_name", [
+    (None, "taps.yaml"), (None, "taps.csv"), ("frame: base\npoints_m: [[0.1, .nan, 0.2]]\n", "damaged.yaml")])
+def test_verify_with_the_points_given_for_the_report_says_the_arguments_seem_swapped(tmp_path, capsys, points_text,
+                                                                                      points_name):
+    """'verify POINTS REPORT' said '... is not a fixwizard report: expected 'schema: ...', found None' and not a word
+    of the order; a points file with a damaged tap is one all the same."""
+    points = tmp_path / points_name
+    if points_text is None:
+        write_points(points, np.array(yaml.safe_load(DEMO_TAPS.read_text())["points_m"]))
+    else:
+        points.write_text(points_text)
+    assert main(["verify", str(points), str(REPORT_EXAMPLE)]) == 1
+    assert capsys.readouterr().err == (f"fixwizard: {points} is a points file (the taps), not a fixwizard report: "
+                                       f"{SWAPPED}\n")
+
+
+def test_verify_with_a_report_given_for_the_points_says_the_arguments_seem_swapped(bracket, capsys):
+    folder, _, _ = bracket
+    assert main(["verify", str(folder / "plate.stl"), str(REPORT_EXAMPLE)]) == 1
+    assert capsys.readouterr().err == (f"fixwizard: {folder / 'plate.stl'} is not a fixwizard report, and "
+                                       f"{REPORT_EXAMPLE}, given as POINTS, is one: {SWAPPED}\n")
+    (folder / "notes.yaml").write_text("schema: something else\n")  # no report, no taps: nothing seems swapped
+    assert main(["verify", str(folder / "notes.yaml"), str(folder / "taps.yaml")]) == 1
+    err = capsys.readouterr().err
+    assert "is not a fixwizard report: expected 'schema: fixwizard.report/2'" in err and "swapped" not in err
 
 
 def test_a_non_mesh_file_is_refused(bracket, tmp_path, capsys):

@@ -33,7 +33,7 @@ from fixwizard import report
 from fixwizard.errors import InputError, MeshError, file_problem
 from fixwizard.fixture import Fixture, load_fixture
 from fixwizard.geometry.se3 import transform_points
-from fixwizard.points import load_points
+from fixwizard.points import holds_taps, load_points
 from fixwizard.solver.solve import MAX_BALL_DIAMETER_M, check_reach, check_sample_bound
 from fixwizard.solver.verify_search import (
     AllowedRegion,
@@ -285,9 +285,25 @@ def suggest_check_points(fixture: Fixture, base_T_cad: np.ndarray, ball_diameter
                        f"z {base_p[index, 2] * 1e3:.0f} mm") for index in chosen]
 
 
+def _report_argument(args: argparse.Namespace) -> report.Report:
+    """The report given as REPORT; InputError saying the arguments seem swapped when it is none and REPORT holds taps
+    or POINTS is a report."""
+    try:
+        return report.load(args.report)
+    except InputError as error:
+        if holds_taps(args.report):
+            raise InputError(f"{args.report} is a points file (the taps), not a fixwizard report: the arguments seem "
+                             f"swapped; give the report first: fixwizard verify REPORT POINTS") from error
+        if report.is_report_file(args.points):
+            raise InputError(f"{args.report} is not a fixwizard report, and {args.points}, given as POINTS, is one: "
+                             "the arguments seem swapped; give the report first: fixwizard verify REPORT POINTS") \
+                from error
+        raise
+
+
 def verify_command(args: argparse.Namespace) -> int:
     """``fixwizard verify``: exit 0 when the taps are consistent with the report, 2 when the fixture has moved."""
-    loaded = report.load(args.report)
+    loaded = _report_argument(args)
     region_of(loaded)  # refuse an inconsistent report before loading the mesh
     taps = _checked_taps(load_points(args.points))
     fixture = fixture_of(loaded, args.mesh)
