@@ -230,14 +230,28 @@ def _add_export(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("report", metavar="REPORT", help="a fixwizard report")
     parser.add_argument("--format", required=True, choices=EXPORT_FORMATS, help="urscript, ros2 or json")
     parser.add_argument("-o", "--output", help="file to write (default, or '-': standard output)")
-    parser.add_argument("--frame-id", default=ROS_BASE_FRAME_ID, type=_ros_frame_id,
-                        help=f"ros2: the parent frame (default {ROS_BASE_FRAME_ID})")
-    parser.add_argument("--child-frame-id", type=_ros_frame_id, help="ros2: the fixture's frame (default: its name "
-                        "with every character but letters, digits and '_' made '_', and fixture_ before a leading "
-                        "digit: 1-a.b gives fixture_1_a_b)")
+    parser.add_argument("--frame-id", type=_ros_frame_id,
+                        help=f"ros2 only: the parent frame (default {ROS_BASE_FRAME_ID})")
+    parser.add_argument("--child-frame-id", type=_ros_frame_id, help="ros2 only: the fixture's frame (default: its "
+                        "name with every character but letters, digits and '_' made '_', and fixture_ before a "
+                        "leading digit: 1-a.b gives fixture_1_a_b)")
     parser.add_argument("--allow-simulated", action="store_true",
                         help="export a report of the simulated cell to urscript or ros2 (for tests; marked SIMULATED)")
     parser.set_defaults(handler="fixwizard.export:export_command")
+
+
+def _refuse_frame_ids_without_ros2(args: argparse.Namespace) -> None:
+    """export's frame ids name the frames of a ROS 2 transform; with another --format, which has none, they were
+    ignored without a word: a usage error instead."""
+    if args.command != "export" or args.format == "ros2":
+        return
+    given = [option for option, value in (("--frame-id", args.frame_id), ("--child-frame-id", args.child_frame_id))
+             if value is not None]
+    if given:
+        one = len(given) == 1
+        args.command_parser.error(f"{' and '.join(given)} {'is' if one else 'are'} for --format ros2 only; --format "
+                                  f"{args.format} names no frames: leave {'it' if one else 'them'} out, or export "
+                                  "--format ros2")
 
 
 def _add_serve(commands: argparse._SubParsersAction) -> None:
@@ -305,6 +319,7 @@ def _run(argv: list[str] | None) -> tuple[int, bool]:
         args, extras = build_parser().parse_known_args(argv)
         if extras:
             args.command_parser.refuse_unrecognized(extras)
+        _refuse_frame_ids_without_ros2(args)
     except SystemExit as leaving:  # argparse leaves after --help (0) or a usage error (1, said on stderr)
         return int(leaving.code or 0), False
     batch = args.command in BATCH_COMMANDS

@@ -147,7 +147,8 @@ def export_command(args: argparse.Namespace) -> int:
     if output:  # the mesh as ``verify.fixture_of`` finds it
         check_output(output, [("report", args.report), ("report's mesh", loaded.mesh)],
                      "give another output path with -o", f"{loaded.name}{SUFFIXES[args.format]}")
-    text = export_text(loaded, args.format, args.frame_id, args.child_frame_id, args.allow_simulated)
+    frame_id = BASE_FRAME_ID if args.frame_id is None else args.frame_id
+    text = export_text(loaded, args.format, frame_id, args.child_frame_id, args.allow_simulated)
     ahead_s = loaded.created.timestamp() - time.time()
     if ahead_s > report.FUTURE_TOLERANCE_S:
         print(f"fixwizard: note: the report {args.report} is dated {ahead_s / 3600:.1f} h in the future: check the "

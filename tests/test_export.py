@@ -253,6 +253,25 @@ def test_a_fixture_name_starting_with_a_digit_gives_a_ros_frame_name_with_fixtur
     assert list(parse_urscript(exported(capsys, real_report, "--format", "urscript"))) == ["fixture_1_a_b"]
 
 
+@pytest.mark.parametrize("format_name", ["urscript", "json"])
+@pytest.mark.parametrize("options, said", [
+    (["--frame-id", "ur/base"], "--frame-id is for --format ros2 only; --format {} names no frames: leave it out"),
+    (["--child-frame-id", "jig"], "--child-frame-id is for --format ros2 only; --format {} names no frames: leave it "
+                                  "out"),
+    (["--frame-id", "base", "--child-frame-id", "jig"], "--frame-id and --child-frame-id are for --format ros2 only; "
+                                                        "--format {} names no frames: leave them out")])
+def test_frame_ids_with_a_format_that_names_no_frames_are_bad_usage(real_report, tmp_path, capsys, format_name,
+                                                                    options, said):
+    """They were ignored without a word: a URScript pose exported 'in ur/base' was in the UR base frame all the
+    same. Refused before anything is written; with ros2 they are taken as before."""
+    output = tmp_path / "out.txt"
+    assert main(["export", str(real_report), "--format", format_name, *options, "-o", str(output)]) == 1
+    out, err = capsys.readouterr()
+    assert out == "" and err.startswith("usage: fixwizard export ") and not output.exists()
+    assert err.endswith(f"fixwizard: {said.format(format_name)}, or export --format ros2\n")
+    assert "transform_stamped" in exported(capsys, real_report, "--format", "ros2", *options)  # where they belong
+
+
 FRAME_RULES = {  # what is said of a frame id given, and frame ids that break that rule
     "tf2 refuses a frame id that starts with '/' (as ROS 1 wrote them); leave the '/' out": ["/", "/base"],
     "it is empty": [""],
