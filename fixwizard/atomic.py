@@ -103,6 +103,12 @@ def same_file(path: Path, other: Path) -> bool:
         return os.path.realpath(path) == os.path.realpath(other)
 
 
+def _probe_problem(error: OSError, folder: Path) -> str:
+    """``file_problem`` of a write of the probe file in ``folder``, naming the folder: the probe's own name (a hidden
+    temporary file, gone by then) means nothing to the operator."""
+    return file_problem(OSError(error.errno, error.strerror), folder, "write")
+
+
 def _check_folder(folder: Path, fix: str) -> None:
     """The folder, or for a missing one (made at write time) the nearest existing folder, takes a small probe
     file: it can be written and its disk is not full."""
@@ -118,11 +124,11 @@ def _check_folder(folder: Path, fix: str) -> None:
     try:
         handle, probe = tempfile.mkstemp(prefix=f".fixwizard-probe.{os.getpid()}.", suffix=".tmp", dir=existing)
     except OSError as error:
-        raise InputError(f"cannot {what}: {file_problem(error, existing, 'write')}") from error
+        raise InputError(f"cannot {what}: {_probe_problem(error, existing)}") from error
     try:
         os.write(handle, b"\0" * PROBE_BYTES)
     except OSError as error:
-        raise InputError(f"cannot {what}: {file_problem(error, existing, 'write')}") from error
+        raise InputError(f"cannot {what}: {_probe_problem(error, existing)}") from error
     finally:
         os.close(handle)
         os.unlink(probe)
