@@ -430,6 +430,24 @@ def test_a_session_that_cannot_start_for_a_full_disk_leaves_no_half_journal(tmp_
     assert opened and not (tmp_path / "a.jsonl").exists()
 
 
+def test_a_session_that_may_not_be_read_and_written_is_said_to_need_both_not_another_folder(tmp_path, monkeypatch):
+    """Resuming reads the journal and appends to it: one of mode 444 (for a user other than root) was told 'check its
+    permissions, or choose a folder you can write to', but a resumed session cannot move to another folder."""
+    path = recorded(tmp_path, 2)
+    real_open = os.open
+
+    def refusing_open(name, flags, *args):  # as open(2) refuses a user a file of mode 444 opened to write
+        if Path(name) == path and flags & os.O_RDWR:
+            raise PermissionError(errno.EACCES, "Permission denied", str(name))
+        return real_open(name, flags, *args)
+
+    monkeypatch.setattr(os, "open", refusing_open)
+    with pytest.raises(SessionError) as refused:
+        SamplingSession.open(path)
+    assert str(refused.value) == (f"cannot open the session: no permission to read and write {path}; check that you "
+                                  "may read and write it (its permissions, and its folders')")
+
+
 def test_a_real_full_disk_strands_nothing(small_disk):
     session = new_session(small_disk)
     filler = fill_disk(small_disk)
