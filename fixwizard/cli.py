@@ -12,6 +12,7 @@ Only 0 means a pose a robot program can use.
 """
 
 import argparse
+import contextlib
 import difflib
 import importlib
 import os
@@ -306,10 +307,8 @@ def entry() -> NoReturn:
     if not batch:
         sys.exit(code)
     for stream in (sys.stdout, sys.stderr):
-        try:
+        with contextlib.suppress(OSError, ValueError):  # a reader that went away (``| head``): nothing left to tell
             stream.flush()
-        except (OSError, ValueError):  # a reader that went away (``| head``): nothing left to tell it
-            pass
     os._exit(code)
 
 
@@ -329,7 +328,7 @@ def _run(argv: list[str] | None) -> tuple[int, bool]:
     except FixwizardError as error:
         print(f"fixwizard: {command_line_text(str(error), likely_units(error))}", file=sys.stderr)
         return EXIT_BAD_INPUT, batch
-    except BrokenPipeError:  # nothing to tell a reader that left; files were written before the summary
+    except BrokenPipeError:  # the standard output's reader left (``| head``): nothing to tell it
         return EXIT_READER_GONE, batch
     except OSError as error:
         print(f"fixwizard: {file_problem(error)}", file=sys.stderr)

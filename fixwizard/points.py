@@ -4,6 +4,7 @@ YAML ``{frame: base, points_m: [[x, y, z], ...]}`` or CSV with one ``x,y,z`` row
 (an optional header row, none of whose cells is a number, is skipped; any other first row is a tap).
 """
 
+import contextlib
 import csv
 import io
 import re
@@ -150,11 +151,11 @@ def holds_taps(path: str | Path) -> bool:
     path = Path(path)
     if not path.is_file():
         return False
-    try:
-        load_points(path)
-        return True
-    except InputError:
-        pass
+    if path.suffix.lower() == ".csv":
+        with contextlib.suppress(InputError):
+            load_points(path)
+            return True
+        return False
     try:
         with path.open("rb") as stream:
             data = parse_yaml(stream.read(MAX_POINTS_FILE_BYTES).decode("utf-8-sig"))
