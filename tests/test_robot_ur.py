@@ -18,9 +18,10 @@ import time
 
 import numpy as np
 import pytest
+import trimesh
 from scipy.spatial.transform import Rotation
 
-from fixwizard.geometry.se3 import make_transform
+from fixwizard.geometry.se3 import make_transform, transform_points
 from fixwizard.robot import (
     ConnectionLost,
     EmergencyStop,
@@ -56,8 +57,8 @@ from fixwizard.robot.ur_script import (
     tap_program,
 )
 from fixwizard.robot.ur_state import ControllerState
-from ur_loopback import flange_above_surface, private_loopback_host
-from ur_loopback.arm import COLLISION_FORCE_N, SURFACE_STIFFNESS_N_M
+from ur_loopback import TIP_OFFSET_M, flange_above_surface, private_loopback_host
+from ur_loopback.arm import COLLISION_FORCE_N, FIXTURE_STIFFNESS_N_M, SURFACE_STIFFNESS_N_M
 from ur_loopback.link_faults import (
     serve_whose_first_run_id_is_the_last_one_run,
     serve_whose_writes_are_lost_once_connected,
@@ -397,6 +398,29 @@ def test_a_tap_records_the_contact_pose_the_controller_produced(robot, controlle
     np.testing.assert_allclose(controller.flange_pose(), base_T_start, atol=1e-6)  # retracted
     assert not controller.zeroed_in_contact()
     assert_arm_stands(controller, 0.05)
+
+
+def test_a_tap_on_a_fixture_the_controller_holds_stops_with_the_ball_on_its_face(start_controller, connect):
+    """The loopback's fixture (as the UR monkey taps it): a block turned 30 degrees about x on the table, tapped
+    along a face's normal tilted by 10 degrees; the contact leaves the ball on that face, pressed in by the force
+    limit over the fixture's stiffness (plus a cycle's travel)."""
+    block = trimesh.creation.box((0.1, 0.1, 0.1))
+    base_T_cad = make_transform(Rotation.from_euler("x", 30, degrees=True), [0.4, -0.1, 0.1])
+    ball_radius_m, hover_m = 0.0015, 0.006
+    base_n_face = base_T_cad[:3, :3] @ [0.0, 0.0, 1.0]  # the top face, turned
+    base_p_ball = transform_points(base_T_cad, [[0.01, 0.02, 0.05]])[0] + (ball_radius_m + hover_m) * base_n_face
+    base_R_tool = Rotation.from_euler("y", 10, degrees=True) * \
+        Rotation.align_vectors([-base_n_face], [[0.0, 0.0, 1.0]])[0]
+    base_T_flange = make_transform(base_R_tool, base_p_ball - base_R_tool.apply([0.0, 0.0, TIP_OFFSET_M]))
+    controller = start_controller(base_T_flange=base_T_flange, ball_radius_m=ball_radius_m,
+                                  fixture=(np.asarray(block.vertices), np.asarray(block.faces), base_T_cad))
+    result = connect().tap(max_travel_m=0.02, speed_m_s=0.01, force_limit_n=10.0)
+    base_p_contact = transform_points(result.base_T_tcp_contact, [[0.0, 0.0, TIP_OFFSET_M]])[0]
+    gap_m = float((base_p_contact - transform_points(base_T_cad, [[0.0, 0.0, 0.05]])[0]) @ base_n_face)
+    pressed_m = 10.0 / FIXTURE_STIFFNESS_N_M  # the loopback's distances are float32's: 0.1 micrometre of slack
+    assert ball_radius_m - pressed_m - 2e-4 <= gap_m <= ball_radius_m - pressed_m + 1e-7
+    assert result.travel_m == pytest.approx(hover_m / np.cos(np.radians(10.0)), abs=3e-4)
+    np.testing.assert_allclose(controller.flange_pose(), base_T_flange, atol=1e-6)  # retracted
 
 
 def test_a_tap_refuses_to_zero_the_sensor_while_the_tool_touches(start_controller, connect):

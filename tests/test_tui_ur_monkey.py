@@ -1,10 +1,14 @@
 """A tired operator at the wizard on a UR arm: the real app (Pilot) drives the real ur_rtde client in its link process
-against the loopback controller, opened straight into sampling (as ``--robot HOST --resume`` does). From a seeded RNG:
-the operator's keys (t, f, g and y, u, F12, Ctrl+R, Esc, the dialogs' Reconnect, Unlock and OK), hands that guide the
-arm in freedrive, random waits, and the cell's faults at random moments, now or on the controller's next event
-(protective, emergency and safeguard stops, a dropped, reset or frozen link, remote control off, pause on the
-pendant, the link process stalled or killed), and the operator's fixes on the pendant (unlock, release and power on,
-play, remote control on, the network back). After every step, from the controller's own state:
+against the loopback controller, opened straight into sampling (as ``--robot HOST --resume`` does). The controller's
+arm holds the demo cell's tip and ball, and the demo bracket stands on its table where the demo cell has it; the
+session resumed holds taps the controller made before (``EARLIER_TAPS``), so the pose is pinned down from the start
+and ``g`` takes the arm above the suggested point by itself. From a seeded RNG: the operator's keys (t, f, g, often
+once the suggestion is shown, and y, u, F12, Ctrl+R, Esc, the dialogs' Reconnect, Unlock and OK), hands that guide
+the ball above the fixture (now and then above the table beside it) in freedrive, random waits, and the cell's faults
+at random moments, now or on the controller's next event (protective, emergency and safeguard stops, a dropped,
+reset or frozen link, remote control off, pause on the pendant, the link process stalled or killed), and the
+operator's fixes on the pendant (unlock, release and power on, play, remote control on, the network back). After
+every step, from the controller's own state:
 
 - the app runs, no exception escaped it, no traceback text is on screen or in a notification, the status bar says
   STOPPED exactly when the wizard is (``test_tui_monkey``'s checks);
@@ -14,6 +18,7 @@ play, remote control on, the network back). After every step, from the controlle
 - from the moment an error dialog is shown until it is closed the flange does not move but by the operator's hands
   and no tap or move program starts;
 - every tap the sampling screen shows is in its session journal, and each is a contact the controller made;
+- no move the wizard planned (above a suggested point) meets the fixture or the table on its way;
 - at most one link process is alive, none once the wizard quit;
 - F12 puts the wizard in STOPPED within ``F12_BOUND_S``.
 
@@ -33,9 +38,11 @@ from typing import Any
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 from textual.widgets import Button
 
-from fixwizard.geometry.se3 import make_transform
+from fixwizard.geometry.se3 import make_transform, transform_points
+from fixwizard.robot.sim import SimulatedCell
 from fixwizard.robot.ur import WATCHDOG_HZ, WATCHDOG_MARGIN_S, WATCHDOG_PERIODS, URRobot
 from fixwizard.tui.results.screen import ResultsScreen
 from fixwizard.tui.sampling.screen import SamplingScreen
@@ -47,8 +54,9 @@ from fixwizard.tui.widgets.errors import ErrorModal
 from fixwizard.tui.widgets.help import HelpScreen
 from pilot_wait import until
 from test_tui_monkey import Monkey, WatchedApp, no_frozen_loop, resumed_taps, same_taps
-from tui_cell import sampling_of, wizard_context
-from ur_loopback import TIP_OFFSET_M, private_loopback_host
+from tui_cell import cell_of, sampling_of, wizard_context
+from ur_loopback import private_loopback_host
+from ur_loopback.arm import FixtureBody
 from ur_loopback.controller import SCHEDULING_GRACE_S
 from ur_loopback.link_faults import stall_link
 
@@ -71,6 +79,85 @@ EVENT_FAULTS = ("protective_stop", "emergency_stop", "safeguard_stop", "go_offli
                 "freeze_link", "pause_on_pendant")
 EVENTS = ("contact", "movel", "settled", "watchdog_check", "back_off")
 HOVER_M = (0.002, 0.026)  # the tip's height above the surface where the hands leave it: some beyond a tap's 20 mm
+EARLIER_TAPS = 12  # the session resumed holds these taps, made on this arm before: spread enough to pin the pose down
+SUGGESTION_WAIT_S = 30.0
+ON_FIXTURE = 0.97  # how often the hands bring the ball above the fixture (else above the table beside it)
+MAX_TILT_RAD = np.radians(15.0)  # the tool's tilt away from the face's normal where the hands leave it
+CLEAR_M = 0.001  # the ball clears everything by this where the hands leave it
+
+
+@dataclass
+class LoopbackCell:
+    """The demo cell's truth as the loopback controller holds it (the bracket where the demo cell has it on the table,
+    the demo tip and ball), and where the operator's hands can leave the ball in it."""
+
+    base_T_cad: np.ndarray
+    cad_p_vertices: np.ndarray  # m
+    faces: np.ndarray
+    flange_p_tip_m: np.ndarray
+    ball_radius_m: float
+
+    @classmethod
+    def of(cls, cell: SimulatedCell) -> "LoopbackCell":
+        mesh = cell.fixture.mesh
+        return cls(cell.truth.base_T_cad, np.asarray(mesh.vertices, float), np.asarray(mesh.faces),
+                   np.asarray(cell.truth.tcp_p_tip_m, float), cell.truth.ball_diameter_m / 2.0)
+
+    def __post_init__(self) -> None:
+        self._body = FixtureBody(self.cad_p_vertices, self.faces, self.base_T_cad)
+        triangles = self.cad_p_vertices[self.faces]
+        self._cad_n_faces = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+        self._areas = np.linalg.norm(self._cad_n_faces, axis=1)
+        self._cad_n_faces /= np.where(self._areas > 0.0, self._areas, 1.0)[:, None]
+
+    def controller_options(self) -> dict:
+        """What ``start_controller`` takes to hold this cell; the flange starts above the table beside the fixture."""
+        return {"ball_radius_m": self.ball_radius_m, "flange_p_tip_m": self.flange_p_tip_m.tolist(),
+                "fixture": (self.cad_p_vertices, self.faces, self.base_T_cad),
+                "base_T_flange": self.above_table(random.Random(0), 0.01)}
+
+    def _flange_at(self, base_p_ball: np.ndarray, base_d_tool: np.ndarray, spin_rad: float) -> np.ndarray:
+        """The flange pose that holds the ball at ``base_p_ball`` with the tool's z axis along ``base_d_tool``."""
+        base_R_down = Rotation.align_vectors([base_d_tool], [[0.0, 0.0, 1.0]])[0] * Rotation.from_euler("z", spin_rad)
+        return make_transform(base_R_down, base_p_ball - base_R_down.apply(self.flange_p_tip_m))
+
+    def above_table(self, rng: random.Random, hover_m: float) -> np.ndarray:
+        """The ball ``hover_m`` above the table beside the fixture, the tool pointing down."""
+        base_p_ball = [0.4 + rng.uniform(-0.05, 0.05), -0.1 + rng.uniform(-0.05, 0.05), self.ball_radius_m + hover_m]
+        return self._flange_at(np.array(base_p_ball), np.array([0.0, 0.0, -1.0]), rng.uniform(-np.pi, np.pi))
+
+    def above_fixture(self, rng: random.Random, hover_m: float) -> np.ndarray | None:
+        """The ball ``hover_m`` off a random point of a fixture face the tool reaches (its normal not pointing down),
+        the tool along the face's normal tilted up to ``MAX_TILT_RAD``; None where no such point leaves the ball
+        clear of the fixture and the table after a few tries."""
+        base_R_cad = self.base_T_cad[:3, :3]
+        reachable = (self._cad_n_faces @ base_R_cad.T)[:, 2] >= -0.2
+        weights = np.where(reachable, self._areas, 0.0)
+        for _ in range(10):
+            face = rng.choices(range(len(self.faces)), weights=weights.tolist())[0]
+            u, v = rng.random(), rng.random()
+            u, v = (1.0 - u, 1.0 - v) if u + v > 1.0 else (u, v)
+            corner, *others = self.cad_p_vertices[self.faces[face]]
+            cad_p_point = corner + u * (others[0] - corner) + v * (others[1] - corner)
+            base_n = base_R_cad @ self._cad_n_faces[face]
+            base_p_ball = transform_points(self.base_T_cad, cad_p_point[None])[0] + \
+                (self.ball_radius_m + hover_m) * base_n
+            tilt = Rotation.from_rotvec(rng.uniform(0.0, MAX_TILT_RAD) * _unit_across(base_n, rng))
+            clear = self._body.penetration(base_p_ball, self.ball_radius_m + CLEAR_M)[0] == 0.0
+            if clear and base_p_ball[2] > self.ball_radius_m + CLEAR_M:
+                return self._flange_at(base_p_ball, tilt.apply(-base_n), rng.uniform(-np.pi, np.pi))
+        return None
+
+    def on_fixture(self, base_T_flange: np.ndarray) -> bool:
+        """Whether the ball at flange pose ``base_T_flange`` touches the fixture (within 0.1 mm)."""
+        base_p_ball = base_T_flange[:3, :3] @ self.flange_p_tip_m + base_T_flange[:3, 3]
+        return self._body.penetration(base_p_ball, self.ball_radius_m + 1e-4)[0] > 0.0
+
+
+def _unit_across(base_n: np.ndarray, rng: random.Random) -> np.ndarray:
+    """A random unit vector at right angles to the unit vector ``base_n``."""
+    across = np.cross(base_n, [rng.gauss(0.0, 1.0) for _ in range(3)])
+    return across / np.linalg.norm(across)
 
 
 class URWatchedApp(WatchedApp):
@@ -112,6 +199,7 @@ class URMonkey(Monkey):
     the controller's own state."""
 
     controller: Any = None
+    cell: "LoopbackCell | None" = None
     stopped_since: float | None = None  # when the wizard became STOPPED (the STOP key, or seen)
     stood: ArmAt | None = None  # STOPPED for STOP_BOUND_S: the arm stands from here
     freedrive_asked_at: float = 0.0  # the latest f
@@ -136,6 +224,7 @@ class URMonkey(Monkey):
         self._check_stopped()
         self._check_errors_shown()
         self._check_contacts()
+        self._check_moves()
         await self._check_link_processes()
 
     def _programs_since(self, at: ArmAt) -> list[str]:
@@ -189,6 +278,12 @@ class URMonkey(Monkey):
             if not any(np.allclose(tap.base_T_tcp, contact, atol=2e-6) for contact in contacts):
                 self.fail(f"tap {tap.id} at {tap.base_T_tcp[:3, 3]} is no contact the controller made")
 
+    def _check_moves(self) -> None:
+        """No move program met anything: the monkey puts nothing in the arm's way, so a blocked move is one the wizard
+        planned into the fixture or the table."""
+        if blocked := self.controller.blocked_moves():
+            self.fail(f"a move met something with the flange at {blocked[0][:3, 3]}: its way was planned into it")
+
     async def _check_link_processes(self) -> None:
         """At most one link process alive (an abandoned one is killed and joined within a moment)."""
         if self.ur.link_pid is not None:
@@ -235,7 +330,7 @@ class URMonkey(Monkey):
         if isinstance(screen, SamplingScreen):
             taps = len(screen.session.taps)
             return {"t": 5.0, "f": 1.0, "g": 0.3, "u": 0.6, "escape": 0.2, "enter": 0.1, "tab": 0.1, "o": 0.1,
-                    "s": 0.3 if taps >= 3 else 0.05, "k": 0.05}, {}
+                    "s": 0.3 if taps >= 3 else 0.05, "k": 0.05}, {"follow": (2.0, self.follow_suggestion)}
         if isinstance(screen, SolveScreen):
             return {"escape": 1.0}, {"wait": (2.0, self.wait_a_moment)}
         if isinstance(screen, ResultsScreen):
@@ -260,18 +355,31 @@ class URMonkey(Monkey):
         await super().press(*names)
 
     async def hands(self) -> None:
-        """The operator guides the ball to a point above the surface (if freedrive is still on)."""
+        """The operator guides the ball above a point of the fixture, or of the table beside it (if freedrive is
+        still on)."""
         hover_m = self.rng.uniform(*HOVER_M)
-        pose = make_transform(np.diag([1.0, -1.0, -1.0]), [0.4 + self.rng.uniform(-0.05, 0.05),
-                                                          -0.1 + self.rng.uniform(-0.05, 0.05), TIP_OFFSET_M + hover_m])
+        where = "fixture" if self.rng.random() < ON_FIXTURE else "table"
+        pose = self.cell.above_fixture(self.rng, hover_m) if where == "fixture" else None
+        if pose is None:
+            where, pose = "table", self.cell.above_table(self.rng, hover_m)
         try:
             self.controller.move_by_hand(pose)
         except RuntimeError:
             return  # freedrive ended meanwhile
-        self.log.append(f"{self.step}: hands: the tip {hover_m * 1e3:.0f} mm above the surface")
+        self.log.append(f"{self.step}: hands: the ball {hover_m * 1e3:.0f} mm above the {where}")
         for at in (self.stood, *self.app.shown.values()):  # the operator's hands, not the robot
             if at is not None:
                 at.pose = self.controller.flange_pose()
+
+    async def follow_suggestion(self) -> None:
+        """The operator waits for the live check to suggest the next tap, or to end without a suggestion (at most
+        ``SUGGESTION_WAIT_S``), and presses g."""
+        started = time.monotonic()
+        while (screen := sampling_of(self.app)) is not None and screen.hover_plan is None and screen.live_running \
+                and time.monotonic() - started < SUGGESTION_WAIT_S and self.app.screen is screen:
+            await self.pilot.pause(0.1)
+        self.log.append(f"{self.step}: waited {time.monotonic() - started:.1f} s for a suggestion")
+        await self.press("g")
 
     async def wait_a_moment(self) -> None:
         seconds = self.rng.choice((0.05, 0.2, 0.6, 1.5, 3.0))
@@ -362,16 +470,16 @@ async def ur_monkey_run(seed: int, folder: Path, loopback, steps: int) -> URMonk
     """``steps`` random steps of a tired operator at sampling on a UR arm (a fresh loopback controller and session in
     ``folder``); the run's record."""
     rng = random.Random(seed)
-    controller = loopback.start_controller(host=HOST, unlock_delay_s=UNLOCK_DELAY_S,
-                                           base_T_flange=make_transform(np.diag([1.0, -1.0, -1.0]),
-                                                                        [0.4, -0.1, TIP_OFFSET_M + 0.01]))
     context = wizard_context(folder)
+    cell = LoopbackCell.of(cell_of(context))
+    controller = loopback.start_controller(host=HOST, unlock_delay_s=UNLOCK_DELAY_S, **cell.controller_options())
+    tap_earlier(cell, controller, context.session, EARLIER_TAPS, rng)
     robot = URRobot(HOST)
     context.with_cell(robot=robot, robot_name=f"UR arm at {HOST}", simulated=False, hands=None)
     try:
         app = URWatchedApp(context.cell, sampling=context.sampling, controller=controller)
         async with app.run_test(size=SIZE, notifications=True) as pilot:
-            monkey = URMonkey(seed, app, pilot, robot, folder, rng, controller=controller)
+            monkey = URMonkey(seed, app, pilot, robot, folder, rng, controller=controller, cell=cell)
             await until(pilot, lambda: (screen := sampling_of(app)) is not None and screen.is_mounted
                         and not screen.busy and controller.in_freedrive())
             for _ in range(steps):
@@ -396,6 +504,29 @@ async def ur_monkey_run(seed: int, folder: Path, loopback, steps: int) -> URMonk
             context.session.release()
 
 
+def tap_earlier(cell: LoopbackCell, controller, session, count: int, rng: random.Random) -> None:
+    """``count`` taps of the fixture on the controller, each above a random point of it, journaled in ``session``
+    (a session taken earlier on this arm, resumed)."""
+    robot = URRobot(HOST)
+    robot.connect()
+    try:
+        while len(session.taps) < count:
+            robot.freedrive(True)
+            pose = cell.above_fixture(rng, 0.005)
+            pose = cell.above_table(rng, 0.005) if pose is None else pose
+            controller.move_by_hand(pose)
+            deadline = time.monotonic() + 5.0  # the hands take a moment; the RTDE data shows where they left it
+            while not np.allclose(robot.base_T_tcp(), pose, atol=1e-6) and time.monotonic() < deadline:
+                time.sleep(0.01)
+            robot.freedrive(False)
+            contact = robot.tap()
+            if cell.on_fixture(contact.base_T_tcp_contact):
+                session.record_tap(contact.base_T_tcp_contact)
+        robot.freedrive(True)
+    finally:
+        robot.close()
+
+
 def run_seed(seed: int, folder: Path, loopback) -> URMonkey:
     print(f"\nUR monkey seed {seed} (replay: UR_MONKEY_SEED={seed})")
     started = time.monotonic()
@@ -403,7 +534,8 @@ def run_seed(seed: int, folder: Path, loopback) -> URMonkey:
     taps = [len(held.taps) for held in monkey.sessions.values()]
     print(f"UR monkey seed {seed}: {monkey.step} steps in {time.monotonic() - started:.0f} s, screens "
           f"{sorted(monkey.screens_seen)}, taps {taps}, programs "
-          f"{[name for name, _, _ in monkey.controller.programs()].count('tap')} taps of "
+          f"{[name for name, _, _ in monkey.controller.programs()].count('tap')} taps and "
+          f"{[name for name, _, _ in monkey.controller.programs()].count('move')} moves of "
           f"{len(monkey.controller.programs())}, faults {monkey.faults}, F12 at most "
           f"{max(monkey.stop_keys_s, default=0.0):.2f} s")
     return monkey

@@ -1,7 +1,7 @@
 """A Universal Robots e-Series controller on a loopback address that the real ur_rtde client talks to: RTDE (30004),
 dashboard (29999) and script (30003) ports, fixwizard's programs emulated cycle by cycle (``programs``), a
-simulated arm with a contact surface, and the faults a cell can throw at fixwizard: a dropped or frozen link,
-silent ports, protective, emergency and safeguard stops, local control.
+simulated arm with a contact surface (and a fixture on it, if given), and the faults a cell can throw at fixwizard:
+a dropped or frozen link, silent ports, protective, emergency and safeguard stops, local control.
 
 Ports are fixed (ur_rtde has no way to choose them), so one controller runs at a time.
 """
@@ -14,7 +14,7 @@ import time
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ur_loopback.arm import COLLISION_FORCE_N, SimulatedArm, transform
+from ur_loopback.arm import COLLISION_FORCE_N, FixtureBody, SimulatedArm, transform
 from ur_loopback.dashboard_server import DASHBOARD_PORT, serve_dashboard
 from ur_loopback.listener import Listener
 from ur_loopback.programs import FixwizardProgram, Registers, parse, unknown_functions
@@ -62,7 +62,10 @@ class LoopbackController:
 
     def __init__(self, base_T_flange: np.ndarray | None = None, surface_z_m: float = 0.0,
                  tcp_offset: list[float] | None = None, unlock_delay_s: float = 5.0, host: str = "127.0.0.1",
-                 ball_radius_m: float = 0.0) -> None:
+                 ball_radius_m: float = 0.0, flange_p_tip_m: list[float] | None = None,
+                 fixture: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> None:
+        """``fixture``: a fixture on the table the tool tip meets too, as its mesh's vertices (CAD frame, m), faces
+        and ``base_T_cad``; ``flange_p_tip_m``: the ball's centre on the flange (m; default 0.1 m along z)."""
         if base_T_flange is None:  # tool pointing straight down, tip 8 mm above the surface
             base_T_flange = np.eye(4)
             base_T_flange[:3, :3] = Rotation.from_euler("x", np.pi).as_matrix()
@@ -71,6 +74,10 @@ class LoopbackController:
         self._arm = SimulatedArm(np.array(base_T_flange, float), surface_z_m=surface_z_m, ball_radius_m=ball_radius_m)
         if tcp_offset is not None:
             self._arm.flange_T_tcp = transform(tcp_offset)
+        if flange_p_tip_m is not None:
+            self._arm.flange_p_tip_m = np.array(flange_p_tip_m, float)
+        if fixture is not None:
+            self._arm.fixture = FixtureBody(*fixture)
         self._registers = Registers()
         self._program: FixwizardProgram | None = None
         self._pause_requested = False
@@ -82,6 +89,7 @@ class LoopbackController:
         self._uploaded_scripts: list[str] = []
         self._dashboard_commands: list[str] = []
         self._contact_poses: list[np.ndarray] = []
+        self._blocked_at: list[np.ndarray] = []
         self._watchdog_trips = 0
         self._zeroed_in_contact = False
         self._remote_control = True
@@ -311,6 +319,11 @@ class LoopbackController:
         with self._lock:
             return [pose.copy() for pose in self._contact_poses]
 
+    def blocked_moves(self) -> list[np.ndarray]:
+        """Flange poses (base frame, m) where a move program found its way blocked (the force grew by its limit)."""
+        with self._lock:
+            return [pose.copy() for pose in self._blocked_at]
+
     def contact_force_n(self) -> float:
         """The force (N) the surface or something over the arm pushes on the tool with now."""
         with self._lock:
@@ -341,6 +354,8 @@ class LoopbackController:
     def _on_program_event(self, event: str) -> None:
         if event == "settled":
             self._contact_poses.append(self._arm.base_T_flange.copy())
+        elif event == "blocked":
+            self._blocked_at.append(self._arm.base_T_flange.copy())
         elif event == "zero_ftsensor" and self._arm.in_contact():
             self._zeroed_in_contact = True
         self._fire(event)
