@@ -275,6 +275,17 @@ def test_connect_refuses_a_robot_in_local_control(start_controller):
     assert controller.uploaded_scripts() == []
 
 
+def test_a_cb3_whose_dashboard_cannot_tell_remote_control_connects_and_taps(start_controller, connect):
+    """A CB3 (PolyScope 3) has no local or remote control, and its dashboard no "is in remote control" (PolyScope
+    5.6 on): ur_rtde then says False without asking, and fixwizard refused every CB3 with "switch it to remote
+    control", a switch the pendant does not have. Its programs run as an e-Series' do."""
+    controller = start_controller(cb3=True)
+    robot = connect()
+    assert robot.tap(**FAST_TAP).travel_m > 0.008
+    assert [name for name, _, _ in controller.programs()] == ["setup", "tap"]
+    assert "is in remote control" not in controller.dashboard_commands()
+
+
 def test_connect_to_nothing_names_the_port():
     started = time.monotonic()
     with pytest.raises(ConnectionLost, match=f"^cannot connect to the robot at {HOST}: port 29999 does not "

@@ -17,6 +17,7 @@ for the wizard's timeout message) and ``("contact", TapResult)`` (a tap's contac
 import math
 import os
 import random
+import re
 import socket
 import threading
 import time
@@ -91,6 +92,9 @@ PROGRAM_END_TIMEOUT_S = 1.0  # a program asked to stop must have ended by then
 MOVE_TOLERANCE_M = 0.001  # a finished move (and a tap's retract) must end this close to its target
 TOUCHING_FORCE_FRACTION = 0.5  # refuse a tap above this fraction of its force limit (cannot zero the sensor)
 UNLOCK_ACCEPTED = "Protective stop releasing"
+# The dashboard's "is in remote control" exists from PolyScope 5.6 on; before (a CB3, which has no local mode, or an
+# e-Series before 5.6) ur_rtde's isInRemoteControl says False without asking.
+REMOTE_CONTROL_QUERY_SINCE = (5, 6)
 DASHBOARD = f"the dashboard server (port {DASHBOARD_PORT})"
 RECEIVE_FIELDS = ["timestamp", "actual_TCP_pose", "actual_TCP_speed", "actual_TCP_force", "robot_mode",
                   "safety_mode", "safety_status_bits", "runtime_state", "output_int_register_18",
@@ -138,6 +142,7 @@ class Link:
         self._io: Any = None
         self._script: socket.socket | None = None
         self._io_lock = threading.Lock()
+        self._asks_remote_control = True  # whether the dashboard can tell remote from local control (``connect``)
         self._lost: str | None = None  # why the link is down
         self._next_run = random.randrange(1, 1 << 24)
         self._current_run: int | None = None
@@ -158,7 +163,8 @@ class Link:
         self._step(DASHBOARD)
         self._dashboard = self._open(DASHBOARD, lambda: dashboard_client.DashboardClient(self.host))
         self._open(DASHBOARD, lambda: self._dashboard.connect(int(CONNECT_TIMEOUT_S * 1000)))
-        if not self._open(DASHBOARD, self._dashboard.isInRemoteControl):
+        self._asks_remote_control = _tells_remote_control(self._open(DASHBOARD, self._dashboard.polyscopeVersion))
+        if not self._remote_control():
             raise NotInRemoteControl()
         self._step(f"the RTDE data stream (port {RTDE_PORT})")
         self._receive = self._open(f"the RTDE data stream (port {RTDE_PORT})",
@@ -287,7 +293,7 @@ class Link:
         (only this run gets it: one the controller starts after this gave up on it never moves); ``MotionStopped``
         (``what`` was stopped) if STOP was pressed since ``_stop_mark``. A STOP pressed later reaches the run
         through ``_stop_loop``, which the program heeds before it moves."""
-        if not self._open(DASHBOARD, self._dashboard.isInRemoteControl):
+        if not self._remote_control():
             raise NotInRemoteControl()
         run_id = self._new_run_id(self._fresh_state(context).run_id)
         program = program_for(run_id)  # refuses limits beyond the safe ranges before anything is asked of the robot
@@ -448,9 +454,15 @@ class Link:
                           "stop on the teach pendant, or the controller ended it): check the teach pendant for a "
                           "message, then retry")
 
+    def _remote_control(self) -> bool:
+        """Whether the controller takes programs from outside, as far as its dashboard can tell: one that cannot
+        (before PolyScope 5.6) is taken to (a CB3 always does; an e-Series in local control then runs no program,
+        and the error says it did not start it)."""
+        return not self._asks_remote_control or bool(self._open(DASHBOARD, self._dashboard.isInRemoteControl))
+
     def _in_remote_control(self) -> bool:
         try:
-            return bool(self._dashboard.isInRemoteControl())
+            return not self._asks_remote_control or bool(self._dashboard.isInRemoteControl())
         except RuntimeError:
             return True  # unknown: the caller reports the other causes
 
@@ -585,6 +597,13 @@ class Link:
 
     def _step(self, what: str) -> None:
         self._conn.send(("step", what))
+
+
+def _tells_remote_control(polyscope_version: str) -> bool:
+    """Whether a dashboard that answers ``PolyscopeVersion`` with ``polyscope_version`` ("URSoftware 5.15.0.1234
+    (Nov 11 2023)") has "is in remote control"."""
+    found = re.search(r"(\d+)\.(\d+)", polyscope_version)
+    return found is not None and (int(found[1]), int(found[2])) >= REMOTE_CONTROL_QUERY_SINCE
 
 
 def _way_back_blocked(state: ControllerState, stopped: bool) -> bool:
