@@ -92,6 +92,7 @@ PROGRAM_END_TIMEOUT_S = 1.0  # a program asked to stop must have ended by then
 MOVE_TOLERANCE_M = 0.001  # a finished move (and a tap's retract) must end this close to its target
 TOUCHING_FORCE_FRACTION = 0.5  # refuse a tap above this fraction of its force limit (cannot zero the sensor)
 UNLOCK_ACCEPTED = "Protective stop releasing"
+IN_USE_REPLY = "already in use"  # ur_rtde's error when the controller gives the RTDE inputs to another client
 # The dashboard's "is in remote control" exists from PolyScope 5.6 on; before (a CB3, which has no local mode, or an
 # e-Series before 5.6) ur_rtde's isInRemoteControl says False without asking.
 REMOTE_CONTROL_QUERY_SINCE = (5, 6)
@@ -170,7 +171,7 @@ class Link:
         self._receive = self._open(f"the RTDE data stream (port {RTDE_PORT})",
                                    lambda: rtde_receive.RTDEReceiveInterface(self.host, -1.0, RECEIVE_FIELDS))
         self._step(f"the RTDE inputs (port {RTDE_PORT})")
-        self._io = self._open(f"the RTDE inputs (port {RTDE_PORT})", lambda: rtde_io.RTDEIOInterface(self.host))
+        self._io = self._open_inputs(rtde_io.RTDEIOInterface)
         self._step(f"the script port (port {SCRIPT_PORT})")
         self._script = self._open(f"the script port ({SCRIPT_PORT})", lambda: socket.create_connection(
             (self.host, SCRIPT_PORT), timeout=CONNECT_TIMEOUT_S))
@@ -586,6 +587,22 @@ class Link:
         try:
             return call()
         except RuntimeError as error:
+            raise self._link_lost("", f"{what} of {self.host} did not answer ({error})") from error
+
+    def _open_inputs(self, interface: Callable[[str], Any]) -> Any:
+        """ur_rtde's RTDE I/O ``interface`` to this controller; a ``RobotError`` that moves nothing if another client
+        holds the input registers (the controller refuses them to a second one): the link has sent nothing, so
+        the other client's motion is left alone (the dashboard's stop of a lost link would end it)."""
+        what = f"the RTDE inputs (port {RTDE_PORT})"
+        try:
+            return interface(self.host)
+        except RuntimeError as error:
+            if IN_USE_REPLY in str(error):
+                raise RobotError(
+                    f"another client holds {what} of {self.host} that fixwizard's programs listen on (input registers "
+                    f"{KICK_REGISTER} to 23): another fixwizard or program connected to this robot, a connection "
+                    "the robot has not closed yet, or a fieldbus adapter (EtherNet/IP, PROFINET, MODBUS) configured "
+                    "on it: close that fixwizard or program, or wait a few seconds, then reconnect") from error
             raise self._link_lost("", f"{what} of {self.host} did not answer ({error})") from error
 
     def _check_port(self, port: int) -> None:
