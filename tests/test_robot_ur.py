@@ -275,6 +275,27 @@ def test_connect_refuses_a_robot_in_local_control(start_controller):
     assert controller.uploaded_scripts() == []
 
 
+def test_a_refused_connect_leaves_no_half_made_link(start_controller):
+    """A connect the controller refuses (local control) left its link process as the robot's link, never connected:
+    every call after it said "fixwizard is still connecting to the robot ...: wait until the status line says it is
+    connected", which it never would. It says fixwizard is not connected (reconnect), and no link process is left."""
+    controller = start_controller()
+    controller.set_remote_control(False)
+    robot = URRobot(HOST)
+    try:
+        with pytest.raises(NotInRemoteControl):
+            robot.connect()
+        assert robot.link_pid is None
+        controller.set_remote_control(True)
+        with pytest.raises(ConnectionLost, match="fixwizard is not connected to the robot at .* before the tap: "
+                                                 "reconnect$"):
+            robot.tap(**FAST_TAP)
+        robot.connect()
+        assert robot.tap(**FAST_TAP).travel_m > 0.008
+    finally:
+        robot.close()
+
+
 def test_a_cb3_whose_dashboard_cannot_tell_remote_control_connects_and_taps(start_controller, connect):
     """A CB3 (PolyScope 3) has no local or remote control, and its dashboard no "is in remote control" (PolyScope
     5.6 on): ur_rtde then says False without asking, and fixwizard refused every CB3 with "switch it to remote

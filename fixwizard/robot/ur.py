@@ -141,7 +141,12 @@ class URRobot:
                 process.start()
             child_conn.close()
             link = self._link = _LinkProcess(process, conn, shared)
-            self._call(link, "connect", (), CONNECT_DEADLINE_S, " while connecting", watch_state=False)
+            try:
+                self._call(link, "connect", (), CONNECT_DEADLINE_S, " while connecting", watch_state=False)
+            except RobotError:
+                if self._link is link:  # refused (local control, say): no half-made link that says it still connects
+                    self._end_link()
+                raise
             link.connected = True
 
     def close(self) -> None:
