@@ -65,7 +65,7 @@ from ur_loopback.link_faults import (
     serve_with_a_bug_in_the_move,
     stall_link,
 )
-from ur_loopback.programs import unknown_functions
+from ur_loopback.programs import unknown_functions, variables_named_like_functions
 
 HOST = private_loopback_host()
 # drop/reconnect cycles of the acceptance test: the issue's 100 in CI (about 3 min), 20 on a developer's run
@@ -196,8 +196,11 @@ def test_every_program_arms_its_watchdog_before_anything_else(program):
     tap_program(7, 2.0, 0.02, 0.01, 10.0), move_program(7, 2.0, [0.4, -0.1, 0.2, 3.14, 0.0, 0.0], 0.05),
     freedrive_program(7, 2.0), setup_program(7, 2.0)])
 def test_every_program_calls_only_functions_urscript_has(program):
-    """A UR controller refuses to compile a program calling a function it lacks (the tap called max())."""
+    """A UR controller refuses to compile a program calling a function it lacks (the tap called max()); no variable
+    bears a URScript function's name (the way back's force = ... beside URScript's force()), which the manual
+    leaves undefined."""
     assert unknown_functions(program) == set()
+    assert variables_named_like_functions(program) == set()
 
 
 @pytest.mark.parametrize("write", [lambda: tap_program(7, 2.0, 1.0, 0.01, 10.0),

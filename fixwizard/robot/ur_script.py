@@ -135,14 +135,14 @@ _RETURN_TO_START = """\
         stopl(STOP_DECELERATION_M_S2)
         finish(PHASE_STOPPED)
       end
-      force = return_force_n()
-      if force < least_n:
-        least_n = force
+      force_now_n = return_force_n()
+      if force_now_n < least_n:
+        least_n = force_now_n
       end
-      if force - least_n >= return_force_limit_n:
+      if force_now_n - least_n >= return_force_limit_n:
         kill retracting
         stopl(STOP_DECELERATION_M_S2)
-        write_output_float_register(PEAK_FORCE_REGISTER, force - least_n)
+        write_output_float_register(PEAK_FORCE_REGISTER, force_now_n - least_n)
         back_off_and_finish(return_began)
       end
       sync()
@@ -180,10 +180,10 @@ def tap_program(run_id: int, watchdog_hz: float, max_travel_m: float, speed_m_s:
   global at_limit = False
   global peak_n = 0.0
   def record_peak():
-    # URScript has no max()
-    force = force_n()
-    if force > peak_n:
-      peak_n = force
+    # URScript has no max(); no variable is named like its force()
+    force_now_n = force_n()
+    if force_now_n > peak_n:
+      peak_n = force_now_n
     end
   end
   thread approach():

@@ -21,7 +21,7 @@ MOTION_STATEMENTS = ("movel(", "teach_mode(")
 # modules, CB3 3.x and e-Series 5.x). The controller compiles a program before it runs it and refuses one that
 # calls any other function it does not define itself: the program never starts (a compile error on the pendant).
 URSCRIPT_FUNCTIONS = frozenset({
-    "movej", "movel", "movep", "stopj", "stopl", "speedl", "teach_mode", "end_teach_mode", "freedrive_mode",
+    "movej", "movel", "movep", "stopj", "stopl", "speedl", "teach_mode", "end_teach_mode", "freedrive_mode", "force",
     "end_freedrive_mode", "force_mode", "end_force_mode", "get_actual_tcp_pose", "get_actual_tcp_speed",
     "get_tcp_force", "get_steptime", "set_tcp", "sync", "sleep", "textmsg", "popup", "acos", "asin", "atan",
     "atan2", "ceil", "cos", "d2r", "floor", "interpolate_pose", "inv", "length", "log", "norm", "normalize",
@@ -29,6 +29,7 @@ URSCRIPT_FUNCTIONS = frozenset({
     "size", "sqrt", "tan", "read_input_integer_register", "read_input_float_register",
     "write_output_integer_register", "write_output_float_register", "rtde_set_watchdog", "zero_ftsensor"})
 CALL = re.compile(r"\b([A-Za-z_]\w*)\(")
+ASSIGNMENT = re.compile(r"^\s*(?:global |local )?(\w+)\s*=(?!=)", re.MULTILINE)
 DEFINITION = re.compile(r"^\s*(?:def|thread)\s+(\w+)\(", re.MULTILINE)
 COMMENT = re.compile(r"#.*$", re.MULTILINE)
 
@@ -75,6 +76,12 @@ def unknown_functions(text: str) -> set[str]:
     """Functions a program calls that neither URScript nor the program defines (a compile error on a UR)."""
     code = COMMENT.sub("", text)
     return set(CALL.findall(code)) - set(DEFINITION.findall(code)) - URSCRIPT_FUNCTIONS
+
+
+def variables_named_like_functions(text: str) -> set[str]:
+    """Variables a program assigns that bear the name of a URScript function (``force = ...`` beside ``force()``):
+    the manual says nothing of which one such a name then means, nor whether a controller compiles it."""
+    return set(ASSIGNMENT.findall(COMMENT.sub("", text))) & URSCRIPT_FUNCTIONS
 
 
 class FixwizardProgram:
