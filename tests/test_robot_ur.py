@@ -75,6 +75,7 @@ FAULT_CYCLES = int(os.environ.get("UR_FAULT_CYCLES", "30" if os.environ.get("CI"
 UNLOCK_DELAY_S = 1.0  # the loopback's "5 s after the stop" rule, shortened
 FAST_TAP = {"speed_m_s": 0.02}
 TRAVEL_SLACK_M = 0.001  # the issue's bound on travel past the limit when the PC stalls
+REBOOT_S = 1.0  # how long a rebooting loopback controller answers nothing (a real one: about a minute)
 
 
 @pytest.fixture
@@ -958,6 +959,49 @@ def test_a_link_dropped_mid_tap_stops_the_arm_before_the_error_and_reconnect_wor
     np.testing.assert_allclose(result.base_T_tcp_contact, controller.contact_poses()[-1], atol=2e-6)
 
 
+@pytest.mark.parametrize("when", ["tap", "retract"])
+def test_a_controller_reboot_mid_tap_stops_it_keeps_a_recorded_contact_and_reconnects_once_it_is_back(
+        robot, controller, when):
+    """The controller restarts as the tap approaches, or once its contact is recorded and it retracts: every
+    connection drops, nothing answers for a while, and it comes back with no program and fresh registers. The
+    tap's error says whether its contact was kept (the controller's own), nothing moves after it, and once the
+    controller is back a reconnect and a tap work."""
+    if when == "tap":
+        controller.when("tap", "reboot", REBOOT_S)
+    else:  # the retract's movel, the first after the contact settled
+        controller.when("settled", "when", "movel", "reboot", REBOOT_S)
+    tap = TapInThread(robot, controller, **FAST_TAP)
+    outcome = tap.join(5.0)
+    assert isinstance(outcome, ConnectionLost), outcome
+    assert hasattr(outcome, "tap_result") == (when == "retract")
+    assert ("contact was recorded" if when == "retract" else "tap was not recorded") in str(outcome)
+    if when == "retract":
+        np.testing.assert_allclose(outcome.tap_result.base_T_tcp_contact, controller.contact_poses()[-1], atol=2e-6)
+    assert_arm_stands(controller)
+    np.testing.assert_allclose(controller.flange_pose(), tap.pose_at_outcome, atol=1e-9)
+    assert wait_until(lambda: socket_accepts(29999), timeout_s=REBOOT_S + 1.0)
+    robot.connect()
+    robot.move_linear(flange_above_surface(0.008))
+    np.testing.assert_allclose(robot.tap(**FAST_TAP).base_T_tcp_contact, controller.contact_poses()[-1], atol=2e-6)
+
+
+def test_rtde_data_in_bursts_still_gives_the_controller_s_contact(robot, controller):
+    """A congested network delivers the RTDE data in bursts 0.3 s apart (samples of the controller's rate, late):
+    the tap's contact is still the one the controller made, and a move still gets there."""
+    controller.burst_rtde(0.3)
+    np.testing.assert_allclose(robot.tap(**FAST_TAP).base_T_tcp_contact, controller.contact_poses()[-1], atol=2e-6)
+    robot.move_linear(flange_above_surface(0.02))
+    np.testing.assert_allclose(controller.flange_pose(), flange_above_surface(0.02), atol=1e-3)
+
+
+def socket_accepts(port: int) -> bool:
+    try:
+        socket.create_connection((HOST, port), timeout=0.2).close()
+    except OSError:
+        return False
+    return True
+
+
 def test_a_lost_link_is_shown_only_once_the_watchdog_has_stopped_the_arm_at_its_latest(robot, controller):
     """A controller checks its watchdog once a period, so it may fire two periods (1 s) after the last kick: the
     network drops mid-move just after a check, the latest case, with no dashboard to stop the arm. The error comes
@@ -1191,8 +1235,9 @@ def test_drop_and_reconnect_cycles_never_crash_move_after_the_error_or_lose_a_ta
 class FaultMix:
     """Random faults a cell has, each at a random moment of a random tap or move, and the way back to a ready arm."""
 
-    FAULTS = ("go_offline", "drop_connections", "freeze_link", "stall", "kill_link", "protective_stop",
-              "emergency_stop", "safeguard_stop", "pause_on_pendant", "local_control", "stop_button")
+    FAULTS = ("go_offline", "drop_connections", "reboot", "freeze_link", "burst_rtde", "stall", "kill_link",
+              "protective_stop", "emergency_stop", "safeguard_stop", "pause_on_pendant", "local_control",
+              "stop_button")
 
     def __init__(self, controller, robot: URRobot, rng: random.Random) -> None:
         self.controller, self.robot, self.rng = controller, robot, rng
@@ -1211,6 +1256,10 @@ class FaultMix:
         controller = self.controller
         if fault == "stall":
             stall_link(self.robot.link_pid, self.rng.uniform(0.1, 1.5))
+        elif fault == "reboot":
+            controller.reboot(self.rng.uniform(0.05, REBOOT_S))
+        elif fault == "burst_rtde":  # some longer than the link lets its data go quiet
+            controller.burst_rtde(self.rng.uniform(0.1, 0.7))
         elif fault == "kill_link":
             os.kill(self.robot.link_pid, signal.SIGKILL)
         elif fault == "local_control":
@@ -1225,6 +1274,8 @@ class FaultMix:
         controller = self.controller
         if fault == "go_offline":
             controller.go_online()
+        assert wait_until(lambda: socket_accepts(29999), timeout_s=REBOOT_S + 1.0)  # a reboot is over
+        controller.burst_rtde(0.0)
         controller.thaw_link()
         controller.play_on_pendant()  # must move nothing: fixwizard stopped its paused program
         controller.set_remote_control(True)
@@ -1240,10 +1291,10 @@ class FaultMix:
 @pytest.mark.slow
 def test_random_faults_mid_motion_never_leave_the_arm_moving_or_lose_a_contact(start_controller):
     """Taps and moves of random length and speed, each hit at a random moment by a random fault (a dropped, frozen
-    or reset link, a stalled or killed link process, a protective, emergency or safeguard stop, pause on the
-    pendant, local control, STOP): every call comes back within its deadline, the arm stands from the moment it
-    does (nothing moves after an error, nor after the operator undoes the fault), and every contact it reports
-    is the one the controller made."""
+    or reset link, a controller reboot, RTDE data in bursts, a stalled or killed link process, a protective,
+    emergency or safeguard stop, pause on the pendant, local control, STOP): every call comes back within its
+    deadline, the arm stands from the moment it does (nothing moves after an error, nor after the operator undoes
+    the fault), and every contact it reports is the one the controller made."""
     controller = start_controller()
     robot = URRobot(HOST)
     seed = random.randrange(1 << 30)

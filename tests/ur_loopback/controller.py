@@ -59,8 +59,9 @@ class LoopbackController:
     ``set_remote_control``, ``move_by_hand``, ``reach_over_the_arm``, ``pause_on_pendant``, ``play_on_pendant``,
     ``set_speed_slider``;
     ``cb3``: a CB3's versions and dashboard (no remote control to ask about);
-    for the network: ``go_offline``, ``go_online``, ``drop_connections``, ``freeze_link``, ``thaw_link``,
-    ``silence``, ``delay_programs``, ``garble``. Queries return copies of what the controller saw and did.
+    for the network: ``go_offline``, ``go_online``, ``drop_connections``, ``reboot``, ``burst_rtde``,
+    ``freeze_link``, ``thaw_link``, ``silence``, ``delay_programs``, ``garble``. Queries return copies of what the
+    controller saw and did.
     """
 
     def __init__(self, base_T_flange: np.ndarray | None = None, surface_z_m: float = 0.0,
@@ -108,6 +109,7 @@ class LoopbackController:
         self._silent: set[str] = set()
         self._garbled: set[str] = set()
         self._program_delay_s = 0.0
+        self._rtde_burst_s = 0.0
         self._frozen = threading.Event()
         self._was_in_contact = False
         self._peak_contact_force_n = 0.0
@@ -150,6 +152,29 @@ class LoopbackController:
 
     def thaw_link(self) -> None:
         self._frozen.clear()
+
+    def reboot(self, down_s: float) -> None:
+        """The controller restarts: every connection drops, nothing answers for ``down_s``, then it comes back with
+        no program, fresh registers and its clock from zero."""
+        with self._lock:
+            self.go_offline()
+            self._end_program()
+            self._registers.inputs.clear()
+            self._registers.outputs.clear()
+            self._time_s = 0.0
+        threading.Timer(down_s, self._back_online).start()
+
+    def _back_online(self) -> None:
+        """The end of a reboot, unless the controller was closed meanwhile (its ports stay free)."""
+        with self._lock:
+            if self._running.is_set():
+                self.go_online()
+
+    def burst_rtde(self, every_s: float) -> None:
+        """From now on the RTDE data, sampled at its rate, reaches the clients in bursts ``every_s`` apart (a
+        congested network); the inputs still arrive at once."""
+        with self._lock:
+            self._rtde_burst_s = every_s
 
     def silence(self, port: str) -> None:
         """From now on a new connection to ``port`` (``rtde``, ``dashboard`` or ``script``) is accepted and read,
@@ -529,7 +554,7 @@ class LoopbackController:
         if self._answers("rtde", client):
             version = CB3_CONTROLLER_VERSION if self._cb3 else CONTROLLER_VERSION
             RtdeSession(client, version, self._read_outputs, self._write_inputs, self._claim_inputs,
-                        self._release_inputs, self._frozen.is_set).serve()
+                        self._release_inputs, self._frozen.is_set, lambda: self._rtde_burst_s).serve()
 
     def _serve_dashboard(self, client: socket.socket) -> None:
         if self._answers("dashboard", client):

@@ -20,7 +20,7 @@ class RtdeSession:
     def __init__(self, client: socket.socket, version: tuple[int, int, int, int],
                  read_outputs: Callable[[list[str]], list], write_inputs: Callable[[dict], None],
                  claim_inputs: Callable[[object, list[str]], bool], release_inputs: Callable[[object], None],
-                 paused: Callable[[], bool] = lambda: False) -> None:
+                 paused: Callable[[], bool] = lambda: False, burst_s: Callable[[], float] = lambda: 0.0) -> None:
         self._client = client
         self._version = version
         self._read_outputs = read_outputs
@@ -28,6 +28,7 @@ class RtdeSession:
         self._claim_inputs = claim_inputs
         self._release_inputs = release_inputs
         self._paused = paused  # while true no data goes out (a frozen link)
+        self._burst_s = burst_s  # data sampled at the stream's rate goes out in bursts this far apart (s; 0: each)
         self._send_lock = threading.Lock()
         self._outputs: tuple[int, list[str], struct.Struct, float] | None = None
         self._inputs: dict[int, tuple[list[str], list[str], struct.Struct]] = {}
@@ -84,6 +85,8 @@ class RtdeSession:
             self._write_inputs(dict(zip(names, values, strict=True)))
 
     def _stream(self) -> None:
+        held: list[bytes] = []  # data packages sampled but not sent yet (a burst)
+        held_since = time.monotonic()
         while not self._closed.is_set():
             if not self._streaming.wait(0.05) or self._paused():
                 time.sleep(0.01)
@@ -91,10 +94,14 @@ class RtdeSession:
             recipe_id, names, layout, frequency = self._outputs
             started = time.monotonic()
             body = layout.pack(*wire.flatten(self._read_outputs(names)))
-            try:
-                self._send(wire.DATA_PACKAGE, bytes([recipe_id]) + body)
-            except OSError:
-                return
+            held.append(wire.pack(wire.DATA_PACKAGE, bytes([recipe_id]) + body))
+            if started - held_since >= self._burst_s():
+                try:
+                    with self._send_lock:
+                        self._client.sendall(b"".join(held))
+                except OSError:
+                    return
+                held, held_since = [], started
             time.sleep(max(1.0 / frequency - (time.monotonic() - started), 0.0))
 
     def _send(self, package_type: int, payload: bytes) -> None:
