@@ -35,7 +35,7 @@ from fixwizard.robot import (
 )
 from fixwizard.robot.base import MOVE_FORCE_LIMIT_N
 from fixwizard.robot.ur import CONNECT_DEADLINE_S, URRobot
-from fixwizard.robot.ur_link import PROGRAM_START_TIMEOUT_S
+from fixwizard.robot.ur_link import PROGRAM_START_TIMEOUT_S, _tells_remote_control
 from fixwizard.robot.ur_script import (
     BACK_OFF_M,
     GO_TIMEOUT_S,
@@ -309,6 +309,17 @@ def test_a_cb3_whose_dashboard_cannot_tell_remote_control_connects_and_taps(star
     assert robot.tap(**FAST_TAP).travel_m > 0.008
     assert [name for name, _, _ in controller.programs()] == ["setup", "tap"]
     assert "is in remote control" not in controller.dashboard_commands()
+
+
+@pytest.mark.parametrize("version, asked", [("URSoftware 5.15.0.1234 (Nov 11 2023)", True),
+                                            ("URSoftware 5.6.0.90886 (Dec 11 2019)", True),
+                                            ("URSoftware 5.5.1.82256 (Oct 28 2019)", False),
+                                            ("URSoftware 3.15.7.106331 (Mar 28 2022)", False),
+                                            ("URSoftware 10.7.0.1234 (Jan 1 2025)", False), ("", False)])
+def test_remote_control_is_asked_only_where_ur_rtde_asks_the_dashboard(version, asked):
+    """ur_rtde's isInRemoteControl asks a PolyScope 5.6 to 5.x and says False without asking any other: the link
+    must not take that False for local control (a PolyScope 10 was refused so)."""
+    assert _tells_remote_control(version) == asked
 
 
 def test_connect_to_nothing_names_the_port():

@@ -93,8 +93,8 @@ MOVE_TOLERANCE_M = 0.001  # a finished move (and a tap's retract) must end this 
 TOUCHING_FORCE_FRACTION = 0.5  # refuse a tap above this fraction of its force limit (cannot zero the sensor)
 UNLOCK_ACCEPTED = "Protective stop releasing"
 IN_USE_REPLY = "already in use"  # ur_rtde's error when the controller gives the RTDE inputs to another client
-# The dashboard's "is in remote control" exists from PolyScope 5.6 on; before (a CB3, which has no local mode, or an
-# e-Series before 5.6) ur_rtde's isInRemoteControl says False without asking.
+# The dashboard's "is in remote control" exists from PolyScope 5.6 on; ur_rtde's isInRemoteControl asks it on 5.6 to
+# 5.x only and says False without asking on any other (a CB3, which has no local mode, an e-Series before 5.6).
 REMOTE_CONTROL_QUERY_SINCE = (5, 6)
 DASHBOARD = f"the dashboard server (port {DASHBOARD_PORT})"
 RECEIVE_FIELDS = ["timestamp", "actual_TCP_pose", "actual_TCP_speed", "actual_TCP_force", "robot_mode",
@@ -617,10 +617,13 @@ class Link:
 
 
 def _tells_remote_control(polyscope_version: str) -> bool:
-    """Whether a dashboard that answers ``PolyscopeVersion`` with ``polyscope_version`` ("URSoftware 5.15.0.1234
-    (Nov 11 2023)") has "is in remote control"."""
+    """Whether ur_rtde asks a dashboard that answers ``PolyscopeVersion`` with ``polyscope_version`` ("URSoftware
+    5.15.0.1234 (Nov 11 2023)") "is in remote control", rather than saying False without asking."""
     found = re.search(r"(\d+)\.(\d+)", polyscope_version)
-    return found is not None and (int(found[1]), int(found[2])) >= REMOTE_CONTROL_QUERY_SINCE
+    if found is None:
+        return False
+    major, minor = int(found[1]), int(found[2])
+    return major == REMOTE_CONTROL_QUERY_SINCE[0] and minor >= REMOTE_CONTROL_QUERY_SINCE[1]
 
 
 def _way_back_blocked(state: ControllerState, stopped: bool) -> bool:
