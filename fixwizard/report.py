@@ -346,13 +346,16 @@ def _pose_from(section: object, path: Path, where: str) -> np.ndarray:
         raise InputError(f"{path}: {where}.rotvec_rad turns by more than pi rad: fixwizard writes no such rotation "
                          "vector; was the report edited?")
     base_T_cad = make_transform(Rotation.from_rotvec(rotvec), position)
-    _check_other_forms(section, base_T_cad, path, where)
+    _check_other_forms(section, base_T_cad, np.concatenate([position, rotvec]), path, where)
     return base_T_cad
 
 
-def _check_other_forms(section: dict, base_T_cad: np.ndarray, path: Path, where: str) -> None:
+def _check_other_forms(section: dict, base_T_cad: np.ndarray, values: np.ndarray, path: Path, where: str) -> None:
     """InputError unless the section's quaternion and UR literal, where it has them, are the pose of its position
-    and rotation vector (a robot program may read any of them): a report edited in one of them only."""
+    and rotation vector (``base_T_cad``; ``values``: the six numbers as written) (a robot program may read any of
+    them): a report edited in one of them only. The literal is compared with the numbers written, not with a rotation
+    vector of the matrix: half a turn has two, of opposite signs, and the written one may turn by a hair more than
+    pi."""
     quaternion = section.get("quaternion_xyzw")
     if quaternion is not None:
         try:
@@ -367,7 +370,6 @@ def _check_other_forms(section: dict, base_T_cad: np.ndarray, path: Path, where:
                              f"{np.degrees(apart_rad):.3g} deg apart: the report was edited in one of them only")
     literal = section.get("ur")
     if literal is not None:
-        values = np.concatenate([base_T_cad[:3, 3], Rotation.from_matrix(base_T_cad[:3, :3]).as_rotvec()])
         written = _ur_numbers(literal)
         # every fixwizard version wrote it with at least 6 decimals (version 1: 6 for each number)
         if written is None or not np.all(np.abs(written - values) <= 0.5e-6 + 1e-12):

@@ -292,3 +292,18 @@ def test_writing_replaces_the_file_whole(solved, tmp_path):
     written(solved, tmp_path)
     assert report.load(path).status == solved[2].status
     assert [entry.name for entry in tmp_path.iterdir()] == ["r.yaml"]
+
+
+@pytest.mark.parametrize("rotvec_rad", [[np.pi, 0.0, 0.0], [0.0, -np.pi, 0.0], [0.0, 0.0, np.pi],
+                                        [1.778264576, -1.231115296, -2.278537817]])
+def test_a_report_of_a_fixture_turned_half_way_round_is_read_back(tmp_path, rotvec_rad):
+    """A fixture mounted the other way round (180 deg about the base's z, or about any axis): the rotation vector,
+    rounded to 1e-6 rad, may turn by a hair more than pi, and one of its opposite sign is the same rotation. Such a
+    pose as fixwizard writes it was refused as edited ('pose.ur is not p[..., -3.14159], the pose of position_m and
+    rotvec_rad'): its UR literal was compared with the rotation vector the matrix gives back, of the other sign."""
+    data = yaml.safe_load(EXAMPLE_REPORT.read_text())
+    written_pose = with_pose(data, [0.45, -0.12, 0.02], rotvec_rad)["pose"]
+    loaded = report.load(report.write(tmp_path / "turned.yaml", data))
+    turn = Rotation.from_rotvec(rotvec_rad)
+    assert (Rotation.from_matrix(loaded.base_T_cad[:3, :3]).inv() * turn).magnitude() < 2e-6
+    assert loaded.ur_pose_to_use() == [*written_pose["position_m"], *written_pose["rotvec_rad"]]
