@@ -26,13 +26,14 @@ def yaml_problem(error: yaml.YAMLError) -> str:
 
 
 # fixwizard's documents take under 100 kB (a report of 1000 taps and a few candidate poses; 1 MB holds 1500 of them);
-# this YAML parser reads 60-200 kB/s, so a larger file (a point cloud saved as .yaml among the reports) would hold up
-# its reader, serve's calls included, for minutes (13.6 MB: 3.6 min): refused before it is read, as POINTS are.
+# PyYAML's own parser reads 60-200 kB/s (libyaml's, tried first, about ten times that), so a larger file (a point cloud
+# saved as .yaml among the reports) would hold up its reader, serve's calls included, for minutes (13.6 MB: 3.6 min
+# with PyYAML's): refused before it is read, as POINTS are.
 MAX_DOCUMENT_BYTES = 1_000_000
 
 
-class _Loader(yaml.SafeLoader):
-    """``yaml.safe_load``'s loader, except that an integer too large for a float reads as +-inf (also one of over
+class _Checks(yaml.constructor.SafeConstructor):
+    """``yaml.safe_load``'s constructor, except that an integer too large for a float reads as +-inf (also one of over
     4300 digits, which Python refuses to convert): where a number is read, it is then refused as not finite, with
     that place's message (``float()`` of it would raise); and a key
     given twice in one mapping is an error (PyYAML keeps the last one silently: a report with ``status`` twice
@@ -60,12 +61,28 @@ def _int_or_infinity(loader: yaml.SafeLoader, node: yaml.ScalarNode) -> int | fl
     return value if abs(value) <= sys.float_info.max else (math.inf if value > 0 else -math.inf)
 
 
-_Loader.add_constructor("tag:yaml.org,2002:int", _int_or_infinity)
+_Checks.add_constructor("tag:yaml.org,2002:int", _int_or_infinity)
+
+
+class _Loader(_Checks, yaml.SafeLoader):
+    """``_Checks`` on PyYAML's own parser: what a document that does not parse gets its message from."""
+
+
+# The same checks on libyaml's parser (where PyYAML has it): about ten times faster, which is what a folder of a
+# year's reports needs (PyYAML's own parser took 25-70 ms per report, so serve took 72 s to start on 1000 of them,
+# and every call waited as long after they were all touched); libyaml refuses nesting deeper than 1000 levels.
+_FastLoader: type | None = type("_FastLoader", (_Checks, yaml.CSafeLoader), {}) if yaml.__with_libyaml__ else None
 
 
 def parse_yaml(text: str) -> Any:
     """The YAML document in ``text``, as ``yaml.safe_load`` (raises ``yaml.YAMLError``) reads it but for integers
-    beyond any float (+-inf), and a ``yaml.YAMLError`` for lists or mappings nested too deeply to read."""
+    beyond any float (+-inf), and a ``yaml.YAMLError`` for lists or mappings nested too deeply to read. Read with
+    libyaml where it can; a document it does not take is read again by PyYAML's parser, whose errors say where."""
+    if _FastLoader is not None:
+        try:
+            return yaml.load(text, Loader=_FastLoader)  # safe constructors only: no arbitrary objects
+        except Exception:  # any refusal is said as PyYAML's parser says it
+            pass
     try:
         return yaml.load(text, Loader=_Loader)  # a SafeLoader subclass: no arbitrary objects
     except RecursionError:
