@@ -23,7 +23,7 @@ from typing import NoReturn
 
 from fixwizard.errors import FixwizardError, command_line_text, file_problem, likely_units
 from fixwizard.exit_codes import EXIT_BAD_INPUT, EXIT_CANCELLED, EXIT_CODES, EXIT_OK, EXIT_READER_GONE
-from fixwizard.units import parse_length_m
+from fixwizard.units import parse_duration_s, parse_length_m
 
 __all__ = ["EXIT_CODES", "EXIT_OK", "build_parser", "entry", "main"]
 DEFAULT_MAX_CELLS = 1e7
@@ -64,6 +64,15 @@ def _positive_length(text: str) -> str:
 
 def _diameter(text: str) -> str:
     return _length(text, allow_zero=True)
+
+
+def _age(text: str) -> str:
+    """A largest report age as typed (serve parses it again), refused here when it is no positive duration."""
+    try:
+        parse_duration_s(text)
+    except FixwizardError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+    return text
 
 
 def _port(text: str) -> int:
@@ -263,8 +272,8 @@ def _add_serve(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("--reports", default="reports", metavar="DIR", help="the reports folder (default reports)")
     parser.add_argument("--host", default=SERVE_HOST, help=f"address to listen on (default {SERVE_HOST}: all)")
     parser.add_argument("--port", type=_port, default=SERVE_PORT, help=f"port (default {SERVE_PORT})")
-    parser.add_argument("--max-age", default=SERVE_MAX_AGE, help=f"refuse older reports, e.g. 8h or 7d (default "
-                        f"{SERVE_MAX_AGE})")
+    parser.add_argument("--max-age", type=_age, default=SERVE_MAX_AGE, help=f"refuse older reports, e.g. 8h or 7d "
+                        f"(default {SERVE_MAX_AGE})")
     parser.add_argument("--log", metavar="FILE", help="also append the log of calls to FILE")
     parser.set_defaults(handler="fixwizard.serve:serve_command")
 

@@ -32,7 +32,6 @@ import contextlib
 import errno
 import inspect
 import logging
-import math
 import os
 import re
 import socket
@@ -51,6 +50,7 @@ from xmlrpc.server import SimpleXMLRPCRequestHandler, SimpleXMLRPCServer
 from fixwizard import report
 from fixwizard.atomic import home_expanded, same_file
 from fixwizard.errors import InputError, file_problem, one_line, quoted
+from fixwizard.units import parse_duration_s
 from fixwizard.workflow.cell_reports import SUFFIXES, CellReports, folder_state, report_files, scan
 from fixwizard.workflow.verify import age_text
 
@@ -65,19 +65,6 @@ NO_SUCH_FIXTURE, NOT_UNIQUE, SIMULATED, TOO_OLD, FROM_THE_FUTURE, BAD_CALL, NO_R
 _LOG_LINE = re.compile(rb"\d{4}-\d{2}-\d{2} \d{2}:\d{2}:\d{2},\d{3} ")
 _CONTENT_LENGTH = re.compile(r"[0-9]{1,18}")  # a request's length in bytes, as HTTP writes it (no sign)
 _NOT_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")  # characters XML 1.0 cannot carry
-_DURATION = re.compile(r"^\s*([-+]?\d+(?:\.\d+)?)\s*(s|min|h|d)?\s*$")  # a sign: refused as not positive
-_SECONDS = {"s": 1.0, "min": 60.0, "h": 3600.0, "d": 86400.0}
-
-
-def parse_duration_s(text: str) -> float:
-    """A duration such as ``90``, ``90s``, ``30min``, ``8h`` or ``30d`` in seconds."""
-    match = _DURATION.match(str(text))
-    if match is None:
-        raise InputError(f"cannot read the age {text!r}: write a number with s, min, h or d, e.g. 8h or 30d")
-    seconds = float(match.group(1)) * _SECONDS[match.group(2) or "s"]
-    if not math.isfinite(seconds) or seconds <= 0:
-        raise InputError(f"the largest report age must be positive, not {text!r}")
-    return seconds
 
 
 class Refused(xmlrpc.client.Fault):
