@@ -49,6 +49,7 @@ from xmlrpc.server import SimpleXMLRPCRequestHandler, SimpleXMLRPCServer
 
 from fixwizard import report
 from fixwizard.atomic import home_expanded, same_file
+from fixwizard.decimal_text import positional
 from fixwizard.errors import InputError, file_problem, one_line, quoted
 from fixwizard.units import parse_duration_s
 from fixwizard.workflow.cell_reports import SUFFIXES, CellReports, folder_state, report_files, scan
@@ -288,7 +289,7 @@ class FixtureServer(socketserver.ThreadingMixIn, SimpleXMLRPCServer):
     def _marshaled_dispatch(self, data: Any, dispatch_method: Any = None, path: Any = None) -> Any:
         """The answer (bytes; Any as typeshed's base, which calls it str) to the request's body ``data``."""
         try:
-            _, method = xmlrpc.client.loads(data)
+            params, method = xmlrpc.client.loads(data)
         except Exception as error:  # the parser's errors: expat's, ValueError, TypeError, RecursionError...
             return _refused(BAD_CALL, "fixwizard: the request is no XML-RPC call; call the functions as "
                             "rpc_factory(\"xmlrpc\", \"http://PC:50000\") does, e.g. get_pose(\"bracket\")",
@@ -297,7 +298,25 @@ class FixtureServer(socketserver.ThreadingMixIn, SimpleXMLRPCServer):
             offered = ", ".join(FixtureService.FUNCTIONS)
             return _refused(BAD_CALL, f"fixwizard: there is no function {quoted(method)}; the functions are {offered}",
                             f"called {quoted(method)}")
-        return super()._marshaled_dispatch(data, dispatch_method, path)
+        try:
+            answer = self._dispatch(method, params)
+        except xmlrpc.client.Fault as fault:  # every function's error is one (_logged)
+            return xmlrpc.client.dumps(fault, methodresponse=True).encode()
+        body = _PlainDoubles(None, self.allow_none).dumps((answer,))
+        return f"<?xml version='1.0'?>\n<methodResponse>\n{body}</methodResponse>\n".encode()
+
+
+def _plain_double(marshaller: xmlrpc.client.Marshaller, value: float, write: Callable[[str], object]) -> None:
+    """A double as XML-RPC writes it, in positional notation: the pose of a fixture flat on the table has rotations
+    such as 1.2e-05 rad, which Python writes so, while the XML-RPC specification gives a double no exponent (digits,
+    a point, digits); a controller's parser that stops at the ``e`` would read 1.2 rad."""
+    write(f"<value><double>{positional(value)}</double></value>\n")
+
+
+class _PlainDoubles(xmlrpc.client.Marshaller):
+    """XML-RPC's writer with every double in positional notation (``_plain_double``)."""
+
+    dispatch = {**xmlrpc.client.Marshaller.dispatch, float: _plain_double}
 
 
 def _logged(service: FixtureService, function: str) -> Callable[..., Any]:

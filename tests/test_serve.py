@@ -117,6 +117,27 @@ def test_get_pose_is_a_ur_pose_struct_of_the_pose_to_use(running, cell):
                                         guaranteed["max_point_displacement_m"]]
 
 
+def answer_to(port: int, function: str, *args: object) -> bytes:
+    """The XML ``fixwizard serve`` answers a call of ``function`` with, as the bytes a controller receives."""
+    return raw_answer(port, xmlrpc.client.dumps(args, function).encode())
+
+
+def test_every_double_is_written_as_xml_rpc_allows_without_an_exponent(running, cell):
+    """A fixture flat on the table turns by a few microradians about x and y, which Python writes as 1.2e-05;
+    XML-RPC's doubles have no exponent (a parser stopping at the e would read 1.2 rad): digits, a point, digits."""
+    data = with_pose(yaml.safe_load(EXAMPLE.read_text()), [0.45, -0.00002, 0.0000001], [0.000012, -0.000003, 1.5])
+    data["bounds"]["position_m"] = data["pose"]["guaranteed"]["position_m"] = 0.000053  # 53 micrometres
+    write_report(cell, "flat.yaml", "flat", **{key: data[key] for key in ("pose", "bounds")})
+    for function in ("get_pose", "get_bounds", "get_status"):
+        answer = answer_to(running.port, function, "flat")
+        doubles = re.findall(rb"<double>([^<]*)</double>", answer)
+        assert doubles and all(re.fullmatch(rb"-?[0-9]+\.[0-9]+", number) for number in doubles), answer
+    pose = running.client().get_pose("flat")
+    assert [pose[key] for key in ("x", "y", "z", "rx", "ry", "rz")] == [0.45, -0.00002, 0.0000001, 0.000012,
+                                                                         -0.000003, 1.5]
+    assert running.client().get_bounds("flat")[0] == 0.000053
+
+
 def test_every_fixture_of_the_cell_is_listed_and_has_a_status(running):
     fw = running.client()
     assert fw.list_fixtures() == ["bracket", "jig", "lid", "plate", "tray"]
@@ -161,8 +182,8 @@ def test_bad_calls_are_faults_in_plain_words(running):
     assert fw.get_pose("bracket")  # still serving
 
 
-def post(port: int, body: bytes) -> xmlrpc.client.Fault:
-    """The fault ``fixwizard serve`` answers a raw POST of ``body`` with (an XML-RPC answer, HTTP 200)."""
+def raw_answer(port: int, body: bytes) -> bytes:
+    """The body of the HTTP answer (200) of ``fixwizard serve`` to a raw POST of ``body``."""
     with socket.create_connection(("127.0.0.1", port), timeout=30) as connection:
         connection.sendall(b"POST / HTTP/1.1\r\nHost: x\r\nContent-Type: text/xml\r\nContent-Length: "
                            + str(len(body)).encode() + b"\r\n\r\n" + body)
@@ -172,7 +193,12 @@ def post(port: int, body: bytes) -> xmlrpc.client.Fault:
             if b"</methodResponse>" in answer:
                 break
     assert answer.startswith(b"HTTP/1.0 200 ")
-    return fault_of(lambda: xmlrpc.client.loads(answer.split(b"\r\n\r\n", 1)[1]))
+    return answer.split(b"\r\n\r\n", 1)[1]
+
+
+def post(port: int, body: bytes) -> xmlrpc.client.Fault:
+    """The fault ``fixwizard serve`` answers a raw POST of ``body`` with (an XML-RPC answer, HTTP 200)."""
+    return fault_of(lambda: xmlrpc.client.loads(raw_answer(port, body)))
 
 
 def test_a_report_file_name_that_is_not_utf8_or_holds_a_control_character_gives_answers_a_program_reads(running,

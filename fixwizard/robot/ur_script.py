@@ -30,8 +30,8 @@ in the base frame: m and rad. Speeds m/s, accelerations m/s^2, forces N, times s
 import math
 import numbers
 from collections.abc import Sequence
-from decimal import Decimal
 
+from fixwizard.decimal_text import positional
 from fixwizard.robot.base import (
     MAX_LINEAR_SPEED_M_S,
     MAX_MOVE_TRAVEL_M,
@@ -365,12 +365,10 @@ def _program(name: str, run_id: int, watchdog_hz: float, parameters: dict[str, f
 
 
 def _number(value: float) -> str:
-    """A URScript literal: an integer as it is, any other number (numpy's too) with the digits of its float's
-    shortest repr in positional notation (Python writes 1e-05 and 1.2e-17, which URScript's manual gives no form
-    for; numpy's repr is ``np.float64(0.02)``)."""
+    """A URScript literal: an integer as it is, any other number (numpy's too) in positional notation."""
     if isinstance(value, numbers.Integral):
         return str(int(value))
-    return format(Decimal(repr(float(value))), "f")
+    return positional(value)
 
 
 def pose_literal(pose: Sequence[float]) -> str:
