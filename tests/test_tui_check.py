@@ -146,7 +146,9 @@ def test_freedrive_comes_back_after_a_check_tap_only_when_it_ended_as_planned(tm
 @pytest.mark.slow
 @pytest.mark.parametrize("push_m, verdict", [
     (0.0, "consistent with the report: poses the report allows explain the 4 taps, so they show no move beyond the "
-          "report's bounds. Keep using the report's pose."),  # it named no next step
+          "report's bounds that takes a tapped point off its face. A move that keeps every tapped point on its face "
+          "would not show: 4 taps cannot see every move (6 or more on faces facing different ways can). Keep using "
+          "the report's pose unless the fixture may have moved so."),
     (0.004, "MOVED: no pose the report allows explains the 4 taps")], ids=["consistent", "moved"])
 def test_four_suggested_taps_tell_whether_the_fixture_moved_and_what_to_do_next(tmp_path, calibrated, push_m, verdict):
     cell, tip = context_for(tmp_path, calibrated, push_m)

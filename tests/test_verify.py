@@ -30,7 +30,9 @@ from fixwizard.workflow.verify import (
     SUPPORT_CLEARANCE_M,
     UP_FACING_NORMAL_Z,
     fixture_of,
+    sees_every_move,
     suggest_check_points,
+    verdict_lines,
     verify,
 )
 from shapes import as_fixture
@@ -266,7 +268,29 @@ def test_on_the_simulated_cell_four_suggested_taps_tell_a_moved_fixture(tmp_path
         result = verify(loaded, checked, new_taps, BALL_M, 0.00035)
         assert result.moved is expected
         assert result.with_report_taps and (result.bracket is not None) is expected
+        if not expected:  # consistent, and four taps cannot see a move that keeps each on its face: it says so
+            assert verdict_lines(result)[0].endswith("A move that keeps every tapped point on its face would not "
+                                                     "show: 4 taps cannot see every move (6 or more on faces facing "
+                                                     "different ways can). Keep using the report's pose unless the "
+                                                     "fixture may have moved so.")
     assert dt.datetime.now(dt.UTC) - loaded.created < dt.timedelta(minutes=10)
+
+
+def test_taps_see_every_move_only_when_six_or_more_face_different_ways():
+    """A move of the fixture that keeps every tapped point on its face changes no tap's distance: four taps always
+    leave such moves (six ways to move), eight on the top face leave slides along it and a turn about its normal;
+    eight and fourteen taps spread over the demo bracket's faces see every move."""
+    fixture = demo_fixture()
+    cell = SimulatedCell.with_fixture(fixture, seed=3)
+    cell.connect()
+    base_T_cad = cell.truth.base_T_cad
+    spread = spread_taps(cell, 14)
+    facing_up = (fixture.mesh.face_normals @ base_T_cad[:3, :3].T)[:, 2] > 0.99
+    on_top = touching_ball_centres(fixture.mesh, 8, BALL_M / 2.0, np.random.default_rng(0), facing_up)
+    assert sees_every_move(fixture, base_T_cad, spread)
+    assert sees_every_move(fixture, base_T_cad, spread[:8])
+    assert not sees_every_move(fixture, base_T_cad, spread[:4])
+    assert not sees_every_move(fixture, base_T_cad, transform_points(base_T_cad, on_top))
 
 
 @pytest.mark.parametrize("seed", range(6))

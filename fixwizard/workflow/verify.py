@@ -55,6 +55,11 @@ REACHABLE_NORMAL_Z = -0.2  # a face the tool reaches from above or the side poin
 SUGGESTION_CANDIDATES = 400
 SUPPORT_CLEARANCE_M = 0.002  # a suggested ball stays this far above the fixture's lowest point, where it rests
 UP_FACING_NORMAL_Z = 0.7  # on a fixture too thin for that clearance, suggestions are on faces within 45 deg of up
+RIGID_MOTIONS = 6  # the ways a rigid body moves: three slides, three turns
+# A move counts as seen when it changes some tap's distance from the surface by at least this share of its size
+# (a turn's size measured at the fixture's radius), to first order; below it, it keeps every tapped point on its face
+SEEN_MOVE_SHARE = 0.05
+GRADIENT_STEP_M = 1e-6  # central differences of the distance field at the taps
 
 
 def fixture_of(loaded: report.Report, mesh: str | Path | None = None) -> Fixture:
@@ -134,6 +139,7 @@ class VerifyResult:
     sample_bound_m: float
     ball_diameter_m: float
     bracket: BoundBracket | None
+    sees_every_move: bool  # ``sees_every_move`` of the new taps at the report's pose
 
     @property
     def moved(self) -> bool:
@@ -163,7 +169,27 @@ def verify(loaded: report.Report, fixture: Fixture, base_p_taps: np.ndarray, bal
     bracket = smallest_sample_bound(fixture, region, searched, ball_m, bound_m, cancel) if found.moved else None
     assert loaded.base_T_cad is not None  # region_of refused a report without a pose
     distances = tap_surface_distances_m(fixture, taps, ball_m, loaded.base_T_cad)
-    return VerifyResult(loaded, taps, found, distances, with_report_taps, bound_m, ball_m, bracket)
+    return VerifyResult(loaded, taps, found, distances, with_report_taps, bound_m, ball_m, bracket,
+                        sees_every_move(fixture, loaded.base_T_cad, taps))
+
+
+def sees_every_move(fixture: Fixture, base_T_cad: np.ndarray, base_p_taps: np.ndarray) -> bool:
+    """Whether every small move of the fixture from ``base_T_cad`` changes some tap's distance from its surface (to
+    first order, by ``SEEN_MOVE_SHARE`` of the move): the surface's directions at the taps (base frame) and their
+    moments about the fixture's centre (over its radius) span the six ways a rigid body moves. Fewer than six taps
+    never do, nor do taps on faces that all face the same way: a slide along those faces keeps every tap on its
+    face."""
+    if len(base_p_taps) < RIGID_MOTIONS:
+        return False
+    steps = np.vstack([np.eye(3), -np.eye(3)]) * GRADIENT_STEP_M
+    stepped = (base_p_taps[:, None, :] + steps[None]).reshape(-1, 3)
+    distances = fixture.signed_distance_at_m(base_T_cad, stepped).reshape(len(base_p_taps), 6)
+    gradients = (distances[:, :3] - distances[:, 3:]) / (2.0 * GRADIENT_STEP_M)
+    base_n = gradients / np.maximum(np.linalg.norm(gradients, axis=1, keepdims=True), 1e-12)
+    base_p_centre = fixture.base_T_fix(base_T_cad)[:3, 3]
+    moments = np.cross((base_p_taps - base_p_centre) / fixture.radius_m, base_n)
+    weakest = np.linalg.svd(np.hstack([base_n, moments]), compute_uv=False)[-1]
+    return bool(weakest >= SEEN_MOVE_SHARE)
 
 
 def verdict_lines(result: VerifyResult) -> list[str]:
@@ -185,9 +211,16 @@ def verdict_lines(result: VerifyResult) -> list[str]:
         lines.append(f"consistent with the report: poses the report allows explain the {taps}, so they show no move "
                      f"beyond the report's bounds. The report is {result.report.status}, so its pose is none a robot "
                      "program may use: tap more points and solve again for a unique pose.")
-    else:
+    elif result.sees_every_move:
         lines.append(f"consistent with the report: poses the report allows explain the {taps}, so they show no move "
                      "beyond the report's bounds. Keep using the report's pose.")
+    else:
+        these = f"{count} taps" if count < RIGID_MOTIONS else f"these {count} taps"
+        lines.append(f"consistent with the report: poses the report allows explain the {taps}, so they show no move "
+                     "beyond the report's bounds that takes a tapped point off its face. A move that keeps every "
+                     f"tapped point on its face would not show: {these} cannot see every move ({RIGID_MOTIONS} or more "
+                     "on faces facing different ways can). Keep using the report's pose unless the fixture may have "
+                     "moved so.")
     lines.append(f"At the report's pose the taps lie up to {distances_mm[worst]:.2f} mm off the surface (tap "
                  f"{worst + 1}; RMS {float(np.sqrt(np.mean(distances_mm**2))):.2f} mm); sample bound "
                  f"{result.sample_bound_m * 1e3:.2f} mm.")
