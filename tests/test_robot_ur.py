@@ -1087,6 +1087,43 @@ def test_the_wizard_s_process_killed_mid_move_stops_the_arm_and_its_link(control
         wizard.stdout.close()
 
 
+LINK_WHOSE_WIZARD_GOES = """
+import multiprocessing, sys
+from fixwizard.robot.ur import WATCHDOG_HZ
+from fixwizard.robot.ur_link import serve
+from fixwizard.robot.ur_state import SharedState
+context = multiprocessing.get_context("spawn")
+conn, child_conn = context.Pipe()
+link = context.Process(target=serve, args=(sys.argv[1], WATCHDOG_HZ, child_conn, SharedState(context),
+                                           context.Value("q", 0, lock=False)), daemon=True)
+link.start()
+child_conn.close()
+conn.send(("connect", ()))
+while (answer := conn.recv())[0] == "step":
+    pass
+print(answer[0], flush=True)
+conn.send(("tap", (0, 0.02, 0.02, 10.0)))
+conn.close()
+link.join(10.0)
+print(link.exitcode, flush=True)
+"""
+
+
+@pytest.mark.slow
+def test_a_link_whose_wizard_is_gone_mid_tap_ends_at_once_without_a_traceback(controller):
+    """The wizard's end of the link's pipe goes away while a tap runs (its process died, but its parent-watch has not
+    seen it yet): the link's next message (the contact) has nowhere to go. It ended with a BrokenPipeError traceback
+    on the terminal the wizard ran in, and went on holding the robot's RTDE inputs; it now ends at once, quietly, and
+    the arm stands (the tap's program ended, or the watchdog ended it)."""
+    wizard = subprocess.run([sys.executable, "-c", LINK_WHOSE_WIZARD_GOES, HOST], capture_output=True, text=True,
+                            timeout=30, env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    assert wizard.stdout.split() == ["done", "0"], wizard.stderr
+    assert "Traceback" not in wizard.stderr
+    assert [name for name, _, _ in controller.programs()] == ["setup", "tap"]
+    assert wait_until(lambda: not controller.program_running(), timeout_s=2.0)
+    assert_arm_stands(controller)
+
+
 @pytest.mark.parametrize("kill", [signal.SIGSEGV, signal.SIGKILL])
 def test_a_crashed_link_process_leaves_the_wizard_running(robot, controller, kill):
     tap = TapInThread(robot, controller, **FAST_TAP)

@@ -123,9 +123,18 @@ def serve(host: str, watchdog_hz: float, conn: Connection, shared: SharedState, 
             message = (f"fixwizard's robot link failed while trying to {command} ({error!r}; if it happens again, "
                        "report it)")
             answer = ("error", "LinkLost", message, None)
-        conn.send(answer)
+        send_or_leave(conn, answer)
         if command == "close":
             os._exit(0)
+
+
+def send_or_leave(conn: Connection, message: tuple) -> None:
+    """Send ``message`` to the wizard's process; where its end is gone (it died before its parent-watch saw it),
+    end this process at once and quietly: its kicks stop, so the watchdog ends any program of it."""
+    try:
+        conn.send(message)
+    except OSError:  # BrokenPipeError, ConnectionResetError
+        os._exit(0)
 
 
 class Link:
@@ -215,7 +224,7 @@ class Link:
                 state = self._fresh_state(context)
                 if state.phase == PHASE_SETTLED and result is None:
                     result = TapResult(state.base_T_tcp, state.travel_m, state.peak_force_n, state.settle_s)
-                    self._conn.send(("contact", result))
+                    send_or_leave(self._conn, ("contact", result))
                     self._request(run_id, REQUEST_RETRACT, unless_stopped=True)
                 if not state.program_running:
                     self._current_run = None
@@ -613,7 +622,7 @@ class Link:
                            f"({error.strerror or error})") from error
 
     def _step(self, what: str) -> None:
-        self._conn.send(("step", what))
+        send_or_leave(self._conn, ("step", what))
 
 
 def _tells_remote_control(polyscope_version: str) -> bool:
