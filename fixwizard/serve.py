@@ -15,8 +15,9 @@ fixture's name (``fixture.name`` in the report, see ``workflow/cell_reports.py``
 ``get_pose`` and ``get_bounds`` refuse, with an XML-RPC fault whose text says why and what to do, a fixture
 without a report, a report that is not ``unique``, one from the simulated cell, one older than ``max_age_s`` or
 dated in the future (a wrong clock), and one whose newest report cannot be read (``CellReports.damaged``: cut short,
-edited; an older report of it is not served instead): a URScript program stops on a fault, so a bad pose is never
-used as if good.
+edited; an older report of it is not served instead), also while a file in the folder cannot be read at all (no
+permission, a network folder's error: it may be a newer report of any fixture): a URScript program stops on a fault,
+so a bad pose is never used as if good.
 Before every call the folder is looked at (names, sizes, times): a new, replaced or removed report is served from
 the next call on; a folder that is gone or cannot be read is a fault saying so. Every call is logged with the
 caller's address, what it asked and what it got; so is a request that is no call of these functions (another
@@ -140,6 +141,11 @@ class FixtureService:
             raise Refused(DAMAGED, f"fixwizard: the newest report of '{name}' ({damaged.path.name}) cannot be read, "
                           f"so no older one is served in its place: {damaged.problem}; fix that file, or move it out "
                           f"of {self.folder} if an older report is to be served")
+        unknown = next((each for each in reports.unreadable if each.passing and each.name is None), None)
+        if unknown is not None:  # not even its start could be read: it may be a newer report of any fixture
+            raise Refused(DAMAGED, f"fixwizard: {unknown.path.name} in {self.folder} cannot be read, so it may be a "
+                          f"newer report of '{name}' and no older one is served in its place: {unknown.problem}; make "
+                          f"it readable, or move it out of {self.folder}")
         loaded = reports.newest.get(name)
         if loaded is None:
             known = ", ".join(reports.names) or "none yet"

@@ -25,6 +25,7 @@ from fixwizard import report
 from fixwizard.cli import main
 from fixwizard.errors import InputError
 from fixwizard.serve import (
+    DAMAGED,
     LOG,
     FixtureServer,
     FixtureService,
@@ -381,6 +382,36 @@ def test_a_report_that_could_not_be_read_just_then_is_read_again_at_the_next_cal
     monkeypatch.setattr(report, "load", load_with_a_glitch)
     fw.list_fixtures()  # the glitch
     assert fw.get_pose("bracket")["x"] == 0.5 and fw.get_status("bracket")["report"].endswith("bracket-2.yaml")
+
+
+def test_a_file_that_cannot_be_read_at_all_stops_every_fixture_being_served_from_an_older_report(running, cell,
+                                                                                                monkeypatch):
+    """A newer report of the bracket that cannot be read at all (no permission for serve's user, a network folder's
+    error): not even its start says which fixture it is of. The older bracket report was served in its place, and so
+    was every other fixture's: each is now refused with fault 8 naming that file, until it can be read."""
+    newer = cell / "bracket-2.yaml"
+    shutil.copy(cell / "bracket-1.yaml", newer)
+    load, claimed_fixture = report.load, report.claimed_fixture
+    denied = OSError(errno.EACCES, "Permission denied", str(newer))
+
+    def load_denied(path):
+        if Path(path) == newer:
+            raise InputError(f"cannot read the fixwizard report: {path}: no permission") from denied
+        return load(path)
+
+    monkeypatch.setattr(report, "load", load_denied)
+    monkeypatch.setattr(report, "claimed_fixture", lambda path: (None, None) if Path(path) == newer
+                        else claimed_fixture(path))
+    fw = running.client()
+    for name in ("bracket", "tray", "nothing-of-that-name"):
+        fault = fault_of(lambda name=name: fw.get_pose(name))
+        assert fault.faultCode == DAMAGED
+        assert fault.faultString.startswith(f"fixwizard: bracket-2.yaml in {cell} cannot be read, so it may be a "
+                                            f"newer report of '{name}' and no older one is served in its place")
+    assert not fw.is_usable("bracket")
+    monkeypatch.setattr(report, "load", load)
+    monkeypatch.setattr(report, "claimed_fixture", claimed_fixture)
+    assert fw.get_pose("bracket")  # readable again: read again at the next call
 
 
 def test_a_new_report_is_the_only_one_read_again_and_a_report_replaced_is_read_again(running, cell, monkeypatch):
