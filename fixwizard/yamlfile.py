@@ -1,5 +1,6 @@
 """Reading fixwizard's own YAML documents: parse, check the schema, and say what is wrong."""
 
+import contextlib
 import math
 import sys
 from pathlib import Path
@@ -79,10 +80,8 @@ def parse_yaml(text: str) -> Any:
     beyond any float (+-inf), and a ``yaml.YAMLError`` for lists or mappings nested too deeply to read. Read with
     libyaml where it can; a document it does not take is read again by PyYAML's parser, whose errors say where."""
     if _FastLoader is not None:
-        try:
+        with contextlib.suppress(Exception):  # any refusal is said as PyYAML's parser says it
             return yaml.load(text, Loader=_FastLoader)  # safe constructors only: no arbitrary objects
-        except Exception:  # any refusal is said as PyYAML's parser says it
-            pass
     try:
         return yaml.load(text, Loader=_Loader)  # a SafeLoader subclass: no arbitrary objects
     except RecursionError:
