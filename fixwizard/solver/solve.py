@@ -139,6 +139,9 @@ class Solution:
     fix_T_cad: np.ndarray = field(repr=False)
     effective_samples: float = 0.0
     diagnosis: Diagnosis | None = None
+    # Per mode (in ``modes``' order): whether a pose explaining every tap within the sample bound was found in it
+    # (``_explained``); empty where that was not looked for (undetermined, inconsistent).
+    explained: tuple[bool, ...] = ()
 
     @property
     def cells(self) -> CellSet | None:
@@ -472,4 +475,4 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
     stats = SearchStats(len(cells), cells.rotation_level, cells.position_level, time.perf_counter() - started,
                         max_cells)
     return Solution(status, top.base_T_cad, bounds, solution_intervals, modes, warnings, None, stats, tree, problem,
-                    fix_T_cad, effective)
+                    fix_T_cad, effective, explained=tuple(explained))

@@ -111,8 +111,7 @@ def _verdict(base_p_taps: np.ndarray, mesh: Path, mesh_units: str, ball_diameter
             return MeshVerdict(mesh, "ruled out", "no pose of this mesh explains the taps", max_cells=budget)
         rms_mm, worst_mm = _residuals_mm(fixture, base_p_taps, ball_diameter_m, solution.base_T_cad)
         if solution.status in ("unique", "ambiguous"):
-            poses = "one pose explains" if solution.status == "unique" else f"{len(solution.modes)} poses explain"
-            return MeshVerdict(mesh, "fits", f"{poses} the taps; at the most probable the taps lie "
+            return MeshVerdict(mesh, "fits", f"{_poses_text(solution)}; at the most probable the taps lie "
                                f"{rms_mm:.2f} mm off the surface (RMS, worst {worst_mm:.2f} mm)", rms_mm, worst_mm,
                                budget)
     if solution is None:
@@ -121,6 +120,19 @@ def _verdict(base_p_taps: np.ndarray, mesh: Path, mesh_units: str, ball_diameter
     return MeshVerdict(mesh, "not decided", f"neither ruled out nor pinned down within {solution.stats.max_cells:.0e} "
                        f"cells (RMS {rms_mm:.2f} mm off the surface at the most probable pose so far)", rms_mm,
                        worst_mm, solution.stats.max_cells)
+
+
+def _poses_text(solution: Solution) -> str:
+    """How many poses explain the taps of a pinned-down set: its modes, said to explain them only where a pose
+    explaining every tap within the sample bound was found in each (``Solution.explained``); a mode without one may
+    hold no pose, which only finer cells could prove."""
+    if solution.status == "unique":
+        return "one pose explains the taps"
+    modes, found = len(solution.modes), sum(solution.explained)
+    if found == modes:
+        return f"{modes} poses explain the taps"
+    return (f"{modes} poses may explain the taps (a pose explaining every tap within the sample bound was found for "
+            f"{found} of them; the other{'s' if modes - found > 1 else ''} could not be ruled out at this cell budget)")
 
 
 class _OutOfTime(Exception):
