@@ -32,7 +32,7 @@ from fixwizard.mesh_format import (
     content_format,
     unreadable_line_message,
 )
-from fixwizard.mesh_hygiene import ZIP_SHARE, clean_mesh, refuse_far_vertices, refuse_non_finite
+from fixwizard.mesh_hygiene import ZIP_SHARE, clean_mesh, refuse_far_vertices, refuse_non_finite, reliable_normals
 from fixwizard.obj_lines import (
     corner_before_first_vertex,
     face_triangles,
@@ -52,9 +52,6 @@ METRES_PER_INCH = 0.0254
 # box (the shortest way out, the fewest crossings), tilted by this off every axis and diagonal so that they graze
 # the edges of axis-aligned CAD faces as rarely as possible.
 PARITY_TILT = np.array([0.0117, 0.0131, 0.0093])
-# A face whose largest angle has a sine below this has no normal worth trusting for a sign (a sliver of zero area
-# left in to keep the mesh closed): points nearest to it are checked by ray parity.
-RELIABLE_NORMAL_SINE = 1e-6
 MESH_SUFFIXES = (".stl", ".ply", ".obj")
 POINTS_SUFFIXES = (".yaml", ".yml", ".csv")  # a POINTS file given as the mesh: the arguments swapped
 PLAUSIBLE_SIZE_M = (0.005, 2.5)
@@ -148,11 +145,7 @@ class DistanceOracle:
         self._distance = MeshDistance(self._vertices, self._faces)
         if signed:
             self._face_normals = np.asarray(mesh_m.face_normals, np.float64)
-            corners = self._vertices[self._faces]
-            edges = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)
-            twice_area = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
-            longest_pair = np.sort(edges, axis=1)[:, 1:].prod(axis=1)
-            self._reliable_normal = twice_area > RELIABLE_NORMAL_SINE * longest_pair
+            self._reliable_normal = reliable_normals(self._vertices, self._faces)
             if meeting_faces is not None:
                 self._reliable_normal &= ~np.asarray(meeting_faces, bool)
             edge_normals = np.zeros((len(mesh_m.edges_unique), 3))

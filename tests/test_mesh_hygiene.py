@@ -368,3 +368,34 @@ def test_a_mesh_path_that_is_no_regular_file_is_called_so_not_missing(tmp_path, 
         path.symlink_to("/dev/null")
     with pytest.raises(MeshError, match="is not a regular file .* holds no mesh to read"):
         load_fixture(path)
+
+
+def _self_crossing_extrusion() -> trimesh.Trimesh:
+    """A prism over an outline that crosses itself (as an extrusion of a sketch whose outline crosses itself exports),
+    its caps cut in fans: closed and wound consistently, but its cap triangles lie over one another facing opposite
+    ways, and its walls cross (found by an independent CLI harness, seed 4183)."""
+    outline = np.array([[-0.0255, 0.0281], [-0.0457, 0.0380], [-0.0216, 0.0130], [-0.0552, 0.0288], [-0.0239, 0.0030],
+                        [-0.0248, -0.0319]])
+    count, height_m = len(outline), 0.0324
+    vertices = np.vstack([np.column_stack([outline, np.zeros(count)]),
+                          np.column_stack([outline, np.full(count, height_m)])])
+    bottom = [[0, k + 1, k] for k in range(1, count - 1)]
+    top = [[count, count + k, count + k + 1] for k in range(1, count - 1)]
+    walls = [face for k in range(count)
+             for face in ([k, (k + 1) % count, count + (k + 1) % count], [k, count + (k + 1) % count, count + k])]
+    return trimesh.Trimesh(vertices, np.array(bottom + top + walls), process=False)
+
+
+def test_a_surface_that_crosses_itself_is_unsigned_so_no_point_outside_is_called_inside(tmp_path):
+    """The nearest face's plane signed points: below the prism's bottom, where a cap triangle facing up lies over one
+    facing down, 4233 of 19223 random points outside (winding number 0) were called inside, and taps of the true pose
+    were called inconsistent. Faces whose sides misplace inside and outside are found, and the distance is unsigned."""
+    mesh = _self_crossing_extrusion()
+    assert mesh.is_watertight and mesh.is_winding_consistent
+    mesh.export(tmp_path / "star.obj")
+    fixture = load_fixture(tmp_path / "star.obj", "m")
+    assert not fixture.signed and "mesh_self_intersecting" in _codes(fixture)
+    points = mesh.bounds[0] - 0.01 + np.random.default_rng(0).random((5000, 3)) * (mesh.extents + 0.02)
+    outside = points[np.abs(igl.winding_number(mesh.vertices, np.asarray(mesh.faces, np.int64), points)) < 0.01]
+    assert len(outside) > 4000
+    assert np.all(fixture.oracle.signed_distance_m(outside - fixture.cad_p_center) >= 0.0)
