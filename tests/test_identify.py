@@ -1,14 +1,16 @@
 """Which fixture is this: the taps rule out every mesh no pose of which explains them, the right mesh fits, two
 fitting meshes give a warning, and a mesh that cannot be read is reported without stopping the others."""
 
+import dataclasses
 import shutil
 
 import pytest
 
 from fixwizard.cli import main
-from fixwizard.demo import DEMO_MESH, DEMO_TAPS
+from fixwizard.demo import DEMO_MESH, DEMO_TAPS, demo_fixture
 from fixwizard.points import load_points
-from fixwizard.workflow.identify import identify, summary_lines
+from fixwizard.solver.solve import solve
+from fixwizard.workflow.identify import _poses_text, identify, summary_lines
 from shapes import l_prism
 from test_verdict_fuzz import random_case
 
@@ -144,3 +146,14 @@ def test_a_fit_whose_second_pose_was_not_found_to_explain_the_taps_says_it_may(t
     assert verdict.message.startswith(
         "2 poses may explain the taps (a pose explaining every tap within the sample bound was found for 1 of them; "
         "the other could not be ruled out at this cell budget); at the most probable the taps lie ")
+
+
+def test_a_unique_fit_whose_pose_was_not_found_to_explain_the_taps_says_it_may():
+    """A unique set whose one mode holds no pose found to explain every tap within the sample bound (solve then warns
+    that the pose is not one to use) was said to be explained by "one pose"; it says that one may, and why."""
+    solution = solve(demo_fixture(), load_points(DEMO_TAPS), 0.003, 0.001, max_cells=2e5)
+    assert solution.status == "unique" and solution.explained == (True,)
+    assert _poses_text(solution) == "one pose explains the taps"
+    assert _poses_text(dataclasses.replace(solution, explained=(False,))) == (
+        "one pose may explain the taps (none explaining every tap within the sample bound was found: the taps may fit "
+        "no pose at this bound)")

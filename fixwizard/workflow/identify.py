@@ -126,9 +126,10 @@ def _poses_text(solution: Solution) -> str:
     """How many poses explain the taps of a pinned-down set: its modes, said to explain them only where a pose
     explaining every tap within the sample bound was found in each (``Solution.explained``); a mode without one may
     hold no pose, which only finer cells could prove."""
-    if solution.status == "unique":
-        return "one pose explains the taps"
     modes, found = len(solution.modes), sum(solution.explained)
+    if solution.status == "unique":
+        return ("one pose explains the taps" if found else "one pose may explain the taps (none explaining every tap "
+                "within the sample bound was found: the taps may fit no pose at this bound)")
     if found == modes:
         return f"{modes} poses explain the taps"
     return (f"{modes} poses may explain the taps (a pose explaining every tap within the sample bound was found for "
