@@ -446,7 +446,8 @@ def _faces_whose_side_misleads(mesh: trimesh.Trimesh, skipped: np.ndarray) -> in
     on_faces = np.einsum("sk,fkd->fsd", weights, vertices[faces[checked]])
     points = np.concatenate([on_faces + step_m * normals[:, None], on_faces - step_m * normals[:, None]], axis=1)
     points = points.reshape(-1, 3)
-    inside = MeshDistance(vertices, faces).rays(points, SIDE_RAY)[1] % 2 == 1
+    # one direction per ray, as the oracle's parity passes them: the kernel's types the warm-up compiled
+    inside = MeshDistance(vertices, faces).rays(points, np.tile(SIDE_RAY, (len(points), 1)))[1] % 2 == 1
     expected = np.tile(np.repeat([False, True], len(weights)), len(checked))
     doubtful = np.flatnonzero(inside != expected)
     if len(doubtful):  # a ray grazing an edge may miscount: the winding number is exact
