@@ -410,13 +410,14 @@ def _orient(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, bool, li
                          + "; fixwizard takes them as one rigid fixture. If they are separate parts, solve each "
                          "with its own mesh."))
     crossing = _faces_whose_side_misleads(mesh, meeting_faces)
-    if crossing:
-        return mesh, False, [("mesh_self_intersecting",
-                              f"{name} crosses itself or has faces lying over one another ({crossing} of its "
-                              f"{len(faces)} faces face outside on their inner side or inside on their outer side), "
-                              "so fixwizard cannot tell inside from outside there and uses the unsigned distance: the "
-                              "bounds stay guaranteed but may be looser. Repair the mesh in CAD (a union of its "
-                              "solids, no faces crossing) for tighter bounds.")], np.zeros(len(faces), bool)
+    if crossing:  # the repairs said above still hold
+        warnings.append(("mesh_self_intersecting",
+                         f"{name} crosses itself or has faces lying over one another ({crossing} of its {len(faces)} "
+                         "faces face outside on their inner side or inside on their outer side), so fixwizard cannot "
+                         "tell inside from outside there and uses the unsigned distance: the bounds stay guaranteed "
+                         "but may be looser. Repair the mesh in CAD (a union of its solids, no faces crossing) for "
+                         "tighter bounds."))
+        return mesh, False, warnings, np.zeros(len(faces), bool)
     return mesh, True, warnings, meeting_faces
 
 
