@@ -308,7 +308,13 @@ class FixtureServer(socketserver.ThreadingMixIn, SimpleXMLRPCServer):
             answer = self._dispatch(method, params)
         except xmlrpc.client.Fault as fault:  # every function's error is one (_logged)
             return xmlrpc.client.dumps(fault, methodresponse=True).encode()
-        body = _PlainDoubles(None, self.allow_none).dumps((answer,))
+        try:
+            body = _PlainDoubles(None, self.allow_none).dumps((answer,))
+        except Exception:  # a bug: an answer XML-RPC cannot carry gets a fault, as the server's own dispatch gave
+            LOG.exception("%s %s -> internal error: the answer cannot be sent", getattr(_CALLER, "address", "?"),
+                          quoted(method))
+            return xmlrpc.client.dumps(xmlrpc.client.Fault(INTERNAL, f"fixwizard: internal error in {method}; see "
+                                                           "the serve log"), methodresponse=True).encode()
         return f"<?xml version='1.0'?>\n<methodResponse>\n{body}</methodResponse>\n".encode()
 
 

@@ -139,6 +139,21 @@ def test_every_double_is_written_as_xml_rpc_allows_without_an_exponent(running, 
     assert running.client().get_bounds("flat")[0] == 0.000053
 
 
+def test_an_answer_xml_rpc_cannot_carry_is_a_fault_the_program_sees(cell, monkeypatch, caplog):
+    """A function that returned what XML-RPC cannot carry (a bug) gets the caller a fault, as the server's own
+    dispatch gave before doubles were written positionally, not an HTTP error, and the log says why."""
+    monkeypatch.setattr(FixtureService, "list_fixtures", lambda self: {"bracket"})
+    served = Running(cell)
+    try:
+        fault = fault_of(served.client().list_fixtures)
+        assert fault.faultCode == 9 and fault.faultString == ("fixwizard: internal error in list_fixtures; see the "
+                                                              "serve log")
+        assert "the answer cannot be sent" in caplog.text
+        assert served.client().get_pose("bracket")  # still serving
+    finally:
+        served.stop()
+
+
 def test_every_fixture_of_the_cell_is_listed_and_has_a_status(running):
     fw = running.client()
     assert fw.list_fixtures() == ["bracket", "jig", "lid", "plate", "tray"]
