@@ -20,7 +20,7 @@ from fixwizard import stl_text
 from fixwizard.errors import MeshError, MeshUnitsError, file_problem, quoted
 from fixwizard.geometry.hull_cover import HullCover, hull_cover
 from fixwizard.geometry.meb import minimum_enclosing_ball
-from fixwizard.geometry.mesh_distance import MeshDistance
+from fixwizard.geometry.mesh_distance import FEATURE_MARGIN, MeshDistance
 from fixwizard.geometry.se3 import invert, make_transform, points_in_frames
 from fixwizard.mesh_format import (
     FORMAT_NAMES,
@@ -125,9 +125,7 @@ class DistanceOracle:
     trusting and does not matter.
     """
 
-    # A closest point within this barycentric margin of an edge or vertex takes that feature's pseudonormal (that
-    # is safe for points whose true closest feature is the face itself).
-    FEATURE_MARGIN = 1e-3
+    FEATURE_MARGIN = FEATURE_MARGIN  # the face's plane signs a closest point farther from its edges
     # Far above the intervals' widths (at most ~1e-8 m for metre-sized triangles of any shape), far below any
     # sample bound.
     SIGN_FREE_M = 1e-7

@@ -23,7 +23,8 @@ so the signed distance is used only where the mesh is closed and consistently or
   other count as separate solids, each oriented outward (a body counts as nested only when its vertices lie inside
   the other and the two surfaces do not meet: corners inside a concave body do not prove it);
 - a surface that crosses itself, or lays faces over one another facing opposite ways (a self-crossing outline
-  extruded): found where points just off a face lie inside on its outer side or outside on its inner side
+  extruded): found where another face meets a face inside (``geometry.face_contact``, a proof by separating axes),
+  or where points just off a face lie inside on its outer side or outside on its inner side
   (``_faces_whose_side_misleads``), unsigned distance;
 - several bodies: said, since the fixture is then taken as one rigid whole.
 
@@ -41,6 +42,7 @@ from scipy.sparse.csgraph import connected_components, shortest_path
 from scipy.spatial import cKDTree
 
 from fixwizard.errors import MeshError
+from fixwizard.geometry.face_contact import faces_met
 from fixwizard.geometry.mesh_distance import MeshDistance
 
 # Vertices of a body tested against another body's winding number to tell nesting apart from cutting through.
@@ -54,17 +56,13 @@ ZIP_SHARE = 1e-5
 # float64 rounding of a vertex's distance from another vertex or off an edge (a difference, a projection and a norm of
 # coordinates) and of a face's centroid, as a share of the largest coordinate: a few ulps each, taken generously.
 ZIP_ROUNDING = 16.0 * float(np.finfo(np.float64).eps)
-# Whether each face's plane tells inside from outside next to it is looked at just off it, on both sides, this share
-# of the mesh's bounding-box diagonal away (0.3 micrometres off a 300 mm fixture: far thinner than any wall), at its
-# centroid and three points between the centroid and its corners (barycentric), or at its centroid alone on a mesh of
-# more faces than ``SIDE_SAMPLED_FACES`` (1.3 million faces: 8 s, its ray hierarchy 4 s of them, instead of 11 s; the
-# matlab logo's 5600 faces: 20 ms).
+# Whether each face's plane tells inside from outside next to it is looked at just off its centroid, on both sides,
+# this share of the mesh's bounding-box diagonal away (0.3 micrometres off a 300 mm fixture: far thinner than any
+# wall), once no other face is found to meet it inside (``face_contact``).
 SIDE_STEP_SHARE = 1e-6
 # A face whose largest angle has a sine below this has no normal worth trusting for a sign (a sliver of zero area
 # left in to keep the mesh closed): points nearest to it are checked by ray parity, and its sides are not looked at.
 RELIABLE_NORMAL_SINE = 1e-6
-SIDE_POINTS = np.array([[1 / 3, 1 / 3, 1 / 3], [2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
-SIDE_SAMPLED_FACES = 200_000
 SIDE_RAY = np.array([0.0117, 0.0131, 1.0]) / np.linalg.norm([0.0117, 0.0131, 1.0])  # off every axis: parity rays
 
 
@@ -431,29 +429,31 @@ def reliable_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 
 def _faces_whose_side_misleads(mesh: trimesh.Trimesh, skipped: np.ndarray) -> int:
-    """How many faces (not ``skipped``, not slivers) have a point just off them that lies inside on their outer side
-    or outside on their inner side (``SIDE_POINTS``, ``SIDE_STEP_SHARE``): by ray parity, each disagreement with the
-    face settled by the exact winding number. On a closed surface that does not cross itself none has; one that
-    crosses itself, or lays faces over one another facing opposite ways, has them where it does, and there the plane
-    of the face nearest a point (which signs the distance inside a face) would call a point outside inside: the
-    true pose lost."""
+    """How many faces (not ``skipped``, not slivers) another face meets inside (``face_contact.faces_met``), or have
+    their centroid's point ``SIDE_STEP_SHARE`` off them inside on their outer side or outside on their inner side
+    (by ray parity, each disagreement with the face settled by the exact winding number). Where there is none, the
+    plane of the face nearest a point signs its distance rightly (``face_contact``'s module doc); a surface that
+    crosses itself, or lays faces over one another facing opposite ways, has them where it does, and there that
+    plane would call a point outside inside: the true pose lost."""
     vertices, faces = np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64)
     checked = np.flatnonzero(~skipped & reliable_normals(vertices, faces))  # a sliver's plane never signs
     if len(checked) == 0:
         return 0
-    weights = SIDE_POINTS if len(faces) <= SIDE_SAMPLED_FACES else SIDE_POINTS[:1]
     step_m = SIDE_STEP_SHARE * float(np.linalg.norm(np.ptp(vertices, axis=0)))
-    normals = np.asarray(mesh.face_normals)[checked]
-    on_faces = np.einsum("sk,fkd->fsd", weights, vertices[faces[checked]])
-    points = np.concatenate([on_faces + step_m * normals[:, None], on_faces - step_m * normals[:, None]], axis=1)
-    points = points.reshape(-1, 3)
+    surface = MeshDistance(vertices, faces)
+    met = faces_met(surface, vertices, faces, checked, step_m)
+    unmet = checked[~met]
+    normals = np.asarray(mesh.face_normals)[unmet]
+    centroids = vertices[faces[unmet]].mean(axis=1)
+    points = np.concatenate([centroids + step_m * normals, centroids - step_m * normals])
     # one direction per ray, as the oracle's parity passes them: the kernel's types the warm-up compiled
-    inside = MeshDistance(vertices, faces).rays(points, np.tile(SIDE_RAY, (len(points), 1)))[1] % 2 == 1
-    expected = np.tile(np.repeat([False, True], len(weights)), len(checked))
+    inside = surface.rays(points, np.tile(SIDE_RAY, (len(points), 1)))[1] % 2 == 1
+    expected = np.repeat([False, True], len(unmet))
     doubtful = np.flatnonzero(inside != expected)
     if len(doubtful):  # a ray grazing an edge may miscount: the winding number is exact
         inside[doubtful] = igl.winding_number(vertices, faces, points[doubtful]) > 0.5
-    return int(np.count_nonzero(np.any((inside != expected).reshape(len(checked), -1), axis=1)))
+    misleading = np.any((inside != expected).reshape(2, -1), axis=0)
+    return int(np.count_nonzero(met)) + int(np.count_nonzero(misleading))
 
 
 def _cracks_closed_message(name: str, closed: Closed) -> str:

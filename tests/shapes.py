@@ -63,6 +63,19 @@ def two_boss_bar(boss_spacing_m: float = 0.05) -> trimesh.Trimesh:
     return mesh
 
 
+def fan_capped_prism(outline: np.ndarray, height_m: float) -> trimesh.Trimesh:
+    """A prism over an outline (counter-clockwise, m; one that crosses itself gives a prism crossing itself), its caps
+    cut in fans from the outline's first vertex, as an extruded sketch exports."""
+    count = len(outline)
+    vertices = np.vstack([np.column_stack([outline, np.zeros(count)]),
+                          np.column_stack([outline, np.full(count, height_m)])])
+    bottom = [[0, k + 1, k] for k in range(1, count - 1)]
+    top = [[count, count + k, count + k + 1] for k in range(1, count - 1)]
+    walls = [face for k in range(count)
+             for face in ([k, (k + 1) % count, count + (k + 1) % count], [k, count + (k + 1) % count, count + k])]
+    return trimesh.Trimesh(vertices, np.array(bottom + top + walls), process=False)
+
+
 def with_t_junctions(mesh: trimesh.Trimesh, rng: np.random.Generator, share: float = 0.3,
                      rounds: int = 2) -> tuple[trimesh.Trimesh, np.ndarray]:
     """The mesh with a random ``share`` of its faces split at their edges' midpoints, ``rounds`` times (each round

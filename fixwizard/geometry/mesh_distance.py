@@ -46,6 +46,9 @@ import numpy as np
 from fixwizard.parallel import PARALLEL_KERNEL_LOCK
 
 UNIT_ROUNDOFF = 2.0**-53
+# A closest point within this barycentric margin of an edge or vertex takes that feature's pseudonormal for its sign
+# (that is safe for points whose true closest feature is the face itself); beyond it, the face's plane signs it.
+FEATURE_MARGIN = 1e-3
 Vector3 = tuple[float, float, float]  # a point or an offset (m) as three floats, as the compiled kernels pass them
 Arrays = tuple[Any, ...]  # several arrays passed to a compiled kernel as one argument
 ROUNDING_ULPS = 64.0

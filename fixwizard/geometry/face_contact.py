@@ -1,0 +1,228 @@
+"""Which faces of a triangle mesh another face meets inside them: where a face's plane cannot be trusted to tell
+inside from outside.
+
+The distance's sign at a point whose closest point lies inside a face (each barycentric weight above
+``FEATURE_MARGIN``) comes from that face's plane (``fixture.DistanceOracle`` and the search's compiled exact stage).
+Nothing crosses the segment from the point to its closest point (a crossing would lie nearer the point; the closest
+point's rounding is covered below), so that sign is right for every such point of a face when
+
+1. no other face meets the face's inner triangle (each weight at least ``INNER_MARGIN``, half ``FEATURE_MARGIN``:
+   room for the rounding of computed weights): the winding number just off the face is then the same all over it,
+   on each side, since it changes only across the surface; and
+2. just off one point of the face it is 0 on the outer side and 1 on the inner: ``mesh_hygiene`` looks at the
+   centroid, ``step_m`` off both ways, once this module has found that
+3. no other face meets that segment through the centroid, so both points lie just off this face.
+
+``faces_met`` finds the faces where 1 or 3 fails. Meeting is decided by separating axes: two convex sets are apart
+when their projections on some axis are. For two triangles the two normals, the cross products of their edges and
+each triangle's edges turned in its own and in the other's plane suffice, whatever their shapes (coplanar, slivers
+of zero area); for a segment and a triangle the normal, the segment's cross products with the edges, and the edges
+and the segment turned in the plane. A projection is rounded by a few ulps of the coordinates; a gap counts only
+beyond ``tolerance_m`` (``CONTACT_SHARE`` of the mesh's size, far above that rounding and the closest point's, far
+below any gap a part has), so what rounding hides counts as meeting: a face found unmet is unmet.
+"""
+
+import math
+
+import numba
+import numpy as np
+
+from fixwizard.geometry.mesh_distance import FEATURE_MARGIN, UNIT_ROUNDOFF, MeshDistance
+from fixwizard.parallel import PARALLEL_KERNEL_LOCK
+
+INNER_MARGIN = 0.5 * FEATURE_MARGIN
+# A gap between faces counts when wider than this share of the mesh's bounding-box diagonal (0.3 picometres on a 300 mm
+# fixture) plus CONTACT_ULPS of its largest coordinate: the projections round by a few ulps of the coordinates, a
+# closest point by about 1e-14 of the distance from its triangle's corner.
+CONTACT_SHARE = 1e-12
+CONTACT_ULPS = 256.0
+BLOCK_FACES = 256  # faces per parallel work item
+STACK_DEPTH = 128
+
+
+@numba.njit(nogil=True, cache=True, inline="always")
+def _cross(u0: float, u1: float, u2: float, v0: float, v1: float, v2: float) -> tuple[float, float, float]:
+    return u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0
+
+
+@numba.njit(nogil=True, cache=True, inline="always")
+def _edge(corners: np.ndarray, k: int) -> tuple[float, float, float]:
+    """Edge ``k`` of a triangle (3 x 3 corners; from corner k to corner k + 1), or the segment (2 x 3 ends) itself."""
+    following = (k + 1) % len(corners)
+    return (corners[following, 0] - corners[k, 0], corners[following, 1] - corners[k, 1],
+            corners[following, 2] - corners[k, 2])
+
+
+@numba.njit(nogil=True, cache=True, inline="always")
+def _range_along(points: np.ndarray, d0: float, d1: float, d2: float) -> tuple[float, float]:
+    low = high = points[0, 0] * d0 + points[0, 1] * d1 + points[0, 2] * d2
+    for k in range(1, len(points)):
+        value = points[k, 0] * d0 + points[k, 1] * d1 + points[k, 2] * d2
+        low, high = min(low, value), max(high, value)
+    return low, high
+
+
+@numba.njit(nogil=True, cache=True)
+def _apart_along(first: np.ndarray, second: np.ndarray, axis: tuple[float, float, float], tolerance_m: float) -> bool:
+    """Whether the points ``first`` and ``second`` (rows) project onto ``axis`` (any length) with a gap wider than
+    ``tolerance_m``; never for a zero axis."""
+    d0, d1, d2 = axis
+    length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    if length == 0.0:
+        return False
+    low_1, high_1 = _range_along(first, d0, d1, d2)
+    low_2, high_2 = _range_along(second, d0, d1, d2)
+    return max(low_2 - high_1, low_1 - high_2) > tolerance_m * length
+
+
+@numba.njit(nogil=True, cache=True)
+def _normal(corners: np.ndarray) -> tuple[float, float, float]:
+    u0, u1, u2 = _edge(corners, 0)
+    v0, v1, v2 = _edge(corners, 1)
+    return _cross(u0, u1, u2, v0, v1, v2)
+
+
+@numba.njit(nogil=True, cache=True)
+def triangles_apart(first: np.ndarray, second: np.ndarray, tolerance_m: float) -> bool:
+    """Whether two triangles (3 x 3 corners, m) lie more than ``tolerance_m`` apart along some separating axis: the
+    normals, each normal crossed with every edge (each triangle's edges turned in either plane), every edge of one
+    crossed with every edge of the other."""
+    normal_1, normal_2 = _normal(first), _normal(second)
+    if _apart_along(first, second, normal_1, tolerance_m) or _apart_along(first, second, normal_2, tolerance_m):
+        return True
+    for normal in (normal_1, normal_2):
+        for corners in (first, second):
+            for k in range(3):
+                e0, e1, e2 = _edge(corners, k)
+                if _apart_along(first, second, _cross(normal[0], normal[1], normal[2], e0, e1, e2), tolerance_m):
+                    return True
+    for i in range(3):
+        u0, u1, u2 = _edge(first, i)
+        for j in range(3):
+            v0, v1, v2 = _edge(second, j)
+            if _apart_along(first, second, _cross(u0, u1, u2, v0, v1, v2), tolerance_m):
+                return True
+    return False
+
+
+@numba.njit(nogil=True, cache=True)
+def segment_apart(ends: np.ndarray, corners: np.ndarray, tolerance_m: float) -> bool:
+    """Whether a segment (2 x 3 ends, m) and a triangle (3 x 3 corners) lie more than ``tolerance_m`` apart along
+    some separating axis: the normal, the segment crossed with each edge, the edges and the segment turned in the
+    plane, and for a triangle of zero area (a segment) the normals within a plane holding both."""
+    n0, n1, n2 = _normal(corners)
+    s0, s1, s2 = _edge(ends, 0)
+    if _apart_along(ends, corners, (n0, n1, n2), tolerance_m):
+        return True
+    if _apart_along(ends, corners, _cross(n0, n1, n2, s0, s1, s2), tolerance_m):
+        return True
+    for k in range(3):
+        e0, e1, e2 = _edge(corners, k)
+        a0, a1, a2 = _cross(s0, s1, s2, e0, e1, e2)
+        if (_apart_along(ends, corners, (a0, a1, a2), tolerance_m)
+                or _apart_along(ends, corners, _cross(n0, n1, n2, e0, e1, e2), tolerance_m)
+                or _apart_along(ends, corners, _cross(a0, a1, a2, s0, s1, s2), tolerance_m)
+                or _apart_along(ends, corners, _cross(a0, a1, a2, e0, e1, e2), tolerance_m)):
+            return True
+    return False
+
+
+@numba.njit(nogil=True, cache=True)
+def _face_met(face: int, vertices: np.ndarray, faces: np.ndarray, hierarchy: tuple[np.ndarray, ...], step_m: float,
+              tolerance_m: float) -> bool:
+    """Whether another face meets ``face``'s inner triangle or the segment ``step_m`` either side of its centroid
+    along its normal (coordinates relative to its first corner). The inner triangle and the segment both project
+    within the inner triangle's range onto its edges turned in its plane, and within the segment's onto its
+    normal: a face apart on one of those four axes is apart from both, which settles most faces near it."""
+    node_low, node_high, children, ranges, order = hierarchy
+    origin = vertices[faces[face, 0]]
+    inner = np.empty((3, 3))
+    ends = np.empty((2, 3))
+    other = np.empty((3, 3))
+    for axis in range(3):
+        ab = vertices[faces[face, 1], axis] - origin[axis]
+        ac = vertices[faces[face, 2], axis] - origin[axis]
+        inner[0, axis] = INNER_MARGIN * ab + INNER_MARGIN * ac
+        inner[1, axis] = (1.0 - 2.0 * INNER_MARGIN) * ab + INNER_MARGIN * ac
+        inner[2, axis] = INNER_MARGIN * ab + (1.0 - 2.0 * INNER_MARGIN) * ac
+        ends[0, axis] = ends[1, axis] = (ab + ac) / 3.0
+    n0, n1, n2 = _normal(inner)
+    length = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+    for axis, component in enumerate((n0, n1, n2)):
+        ends[0, axis] -= step_m * component / length
+        ends[1, axis] += step_m * component / length
+    in_plane = np.empty((3, 3))
+    in_plane_range = np.empty((3, 2))
+    for k in range(3):
+        e0, e1, e2 = _edge(inner, k)
+        in_plane[k] = _cross(n0, n1, n2, e0, e1, e2)
+        in_plane_range[k] = _range_along(inner, in_plane[k, 0], in_plane[k, 1], in_plane[k, 2])
+    normal_reach = (step_m + 2.0 * tolerance_m) * length  # the segment's range along the normal, widened
+    low, high = np.empty(3), np.empty(3)
+    for axis in range(3):
+        low[axis] = origin[axis] + min(inner[:, axis].min(), ends[:, axis].min()) - tolerance_m
+        high[axis] = origin[axis] + max(inner[:, axis].max(), ends[:, axis].max()) + tolerance_m
+    stack = np.empty(STACK_DEPTH, np.int64)
+    stack[0] = 0
+    depth = 1
+    while depth > 0:
+        depth -= 1
+        node = stack[depth]
+        outside = False
+        for axis in range(3):
+            outside |= node_low[node, axis] > high[axis] or node_high[node, axis] < low[axis]
+        if outside:
+            continue
+        if children[node, 0] >= 0:
+            stack[depth], stack[depth + 1] = children[node, 0], children[node, 1]
+            depth += 2
+            continue
+        for slot in range(ranges[node, 0], ranges[node, 1]):
+            candidate = order[slot]
+            if candidate == face:
+                continue
+            for corner in range(3):
+                for axis in range(3):
+                    other[corner, axis] = vertices[faces[candidate, corner], axis] - origin[axis]
+            low_n, high_n = _range_along(other, n0, n1, n2)
+            if low_n > normal_reach or high_n < -normal_reach:
+                continue
+            apart = False
+            for k in range(3):
+                low_k, high_k = _range_along(other, in_plane[k, 0], in_plane[k, 1], in_plane[k, 2])
+                width = tolerance_m * math.sqrt(in_plane[k, 0] ** 2 + in_plane[k, 1] ** 2 + in_plane[k, 2] ** 2)
+                apart |= low_k - in_plane_range[k, 1] > width or in_plane_range[k, 0] - high_k > width
+            if apart:
+                continue
+            if not triangles_apart(inner, other, tolerance_m) or not segment_apart(ends, other, tolerance_m):
+                return True
+    return False
+
+
+@numba.njit(nogil=True, cache=True, parallel=True)
+def _faces_met(vertices: np.ndarray, faces: np.ndarray, hierarchy: tuple[np.ndarray, ...], checked: np.ndarray,
+               step_m: float, tolerance_m: float, met_out: np.ndarray) -> None:
+    blocks = (len(checked) + BLOCK_FACES - 1) // BLOCK_FACES
+    for block in numba.prange(blocks):
+        for slot in range(block * BLOCK_FACES, min(len(checked), (block + 1) * BLOCK_FACES)):
+            met_out[slot] = _face_met(checked[slot], vertices, faces, hierarchy, step_m, tolerance_m)
+
+
+def tolerance_m(vertices_m: np.ndarray) -> float:
+    """The gap (m) below which two faces of this mesh count as meeting (``CONTACT_SHARE``, ``CONTACT_ULPS``)."""
+    size_m = float(np.linalg.norm(np.ptp(vertices_m, axis=0)))
+    return CONTACT_SHARE * size_m + CONTACT_ULPS * UNIT_ROUNDOFF * float(np.abs(vertices_m).max())
+
+
+def faces_met(surface: MeshDistance, vertices_m: np.ndarray, faces: np.ndarray, checked: np.ndarray,
+              step_m: float) -> np.ndarray:
+    """For each face of ``checked`` (indices; each with a normal: not a sliver), whether another face of the mesh
+    (``vertices_m`` (V, 3) m, ``faces`` (F, 3), ``surface`` its hierarchy) meets its inner triangle or the segment
+    ``step_m`` (m) either side of its centroid along its normal (see the module doc)."""
+    met = np.zeros(len(checked), bool)
+    if len(checked):
+        vertices = np.ascontiguousarray(vertices_m, np.float64)
+        with PARALLEL_KERNEL_LOCK:
+            _faces_met(vertices, np.ascontiguousarray(faces, np.int64), surface.hierarchy,
+                       np.ascontiguousarray(checked, np.int64), float(step_m), tolerance_m(vertices), met)
+    return met
