@@ -144,13 +144,16 @@ def test_freedrive_comes_back_after_a_check_tap_only_when_it_ended_as_planned(tm
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("push_m, verdict", [
-    (0.0, "consistent with the report: poses the report allows explain the 4 taps, so they show no move beyond the "
-          "report's bounds that takes a tapped point off its face. A move that keeps every tapped point on its face "
-          "would not show: 4 taps cannot see every move (6 or more on faces facing different ways can). Keep using "
-          "the report's pose unless the fixture may have moved so."),
-    (0.004, "MOVED: no pose the report allows explains the 4 taps")], ids=["consistent", "moved"])
-def test_four_suggested_taps_tell_whether_the_fixture_moved_and_what_to_do_next(tmp_path, calibrated, push_m, verdict):
+@pytest.mark.parametrize("push_m, verdict, advice", [
+    (0.0, "consistent with the report: poses the report allows explain the 4 taps, but they cannot see every move: ",
+     "changes no tap's distance (to first order), so a move of any size that way would not show. Use the report's "
+     "pose only if the fixture cannot have moved so, or tap a face pointing"),
+    (0.004, "MOVED: no pose the report allows explains the 4 taps", "Calibrate it again.")],
+    ids=["consistent", "moved"])
+def test_four_suggested_taps_tell_whether_the_fixture_moved_and_what_to_do_next(tmp_path, calibrated, push_m, verdict,
+                                                                                 advice):
+    """Four taps leave moves they cannot see (six ways to move): a consistent verdict names one and where to tap to see
+    it, and never says to keep using the report's pose outright."""
     cell, tip = context_for(tmp_path, calibrated, push_m)
 
     async def run():
@@ -164,7 +167,7 @@ def test_four_suggested_taps_tell_whether_the_fixture_moved_and_what_to_do_next(
             await tap_suggested(pilot, screen, 4)
             assert screen.query_one(DataTable).row_count == 4
             shown = await check(pilot, screen)
-            assert shown.startswith(verdict)
+            assert shown.startswith(verdict) and advice in shown and "Keep using" not in shown
             assert screen.query_one("#check-verdict").has_class("-moved") is (push_m > 0)
             await pilot.press("u")
             assert screen.result is None and screen.query_one(DataTable).row_count == 3

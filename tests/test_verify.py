@@ -4,6 +4,7 @@ simulated cell a moved fixture is found from four suggested taps; the start cell
 pose is never called moved, and a user's mistake gets a message."""
 
 import datetime as dt
+import re
 import shutil
 
 import numpy as np
@@ -26,11 +27,11 @@ from fixwizard.robot.sim_hands import SimulatedHands
 from fixwizard.solver.solve import solve
 from fixwizard.solver.verify_search import AllowedRegion, search_region, start_cells
 from fixwizard.synthetic import bounded_noise, touching_ball_centres
+from fixwizard.workflow.missable_move import missable_move, tap_jacobian
 from fixwizard.workflow.verify import (
     SUPPORT_CLEARANCE_M,
     UP_FACING_NORMAL_Z,
     fixture_of,
-    sees_every_move,
     suggest_check_points,
     verdict_lines,
     verify,
@@ -63,11 +64,45 @@ def run_verify(folder, report_path, taps, *extra) -> int:
     return main(["verify", str(report_path), str(points), *extra])
 
 
-def test_the_expert_runs_own_taps_are_consistent_with_its_report(expert, capsys):
+def within_mm(out: str) -> tuple[float, float]:
+    """How far (mm) a consistent verdict says the taps let the fixture's points be from the report's pose, and the
+    report's guarantee it compares that with."""
+    found = re.search(r"within ([0-9.]+) mm of the report's pose(?: only)?, (?:no )?more than the ([0-9.]+) mm", out)
+    assert found, out
+    return float(found[1]), float(found[2])
+
+
+def test_the_expert_runs_own_taps_are_consistent_with_its_report_and_say_to_keep_using_its_pose(expert, capsys):
+    """Its 20 taps spread over the logo see every move well: to first order they put every point of the fixture
+    within the report's own guarantee of its pose (3.22 mm at a 1 mm sample bound), so the pose is to be kept."""
     folder, path, taps, _ = expert
     assert run_verify(folder, path, taps) == 0
     out = capsys.readouterr().out
     assert "consistent with the report" in out and "with the report's own taps" in out and "MOVED" not in out
+    figure_mm, guaranteed_mm = within_mm(out)
+    assert guaranteed_mm == pytest.approx(report.load(path).pose_to_use()[1].max_point_displacement_m * 1e3, abs=0.01)
+    assert 2 * BOUND_M * 1e3 < figure_mm <= guaranteed_mm  # two sample bounds apart at least: the taps' own slack
+    assert "to first order (small moves)" in out and "Keep using the report's pose." in out
+
+
+def test_taps_just_above_the_old_seen_threshold_do_not_say_to_keep_using_the_pose(expert, real_data, capsys):
+    """Six of the expert's taps whose weakest singular value (0.0505) just passed the old yes/no threshold (0.05):
+    a move along that direction must be about 2 b / 0.05 before it takes a tap off its band, far more than the
+    report guarantees. The verdict said "Keep using the report's pose"; it now gives how far the taps let the
+    fixture be, names the move seen least and where to tap to see it."""
+    folder, path, taps, _ = expert
+    chosen = taps[[4, 8, 9, 10, 11, 19]]
+    pose = report.load(path).pose_to_use()[0]
+    jacobian = tap_jacobian(load_fixture(real_data / "meshes" / "matlab_logo.ply"), pose, chosen)[0]
+    weakest = np.linalg.svd(jacobian, compute_uv=False)[-1]
+    assert 0.05 <= weakest < 0.052
+    assert run_verify(folder, path, chosen) == 0
+    out = capsys.readouterr().out
+    assert "Keep using" not in out
+    figure_mm, guaranteed_mm = within_mm(out)
+    assert figure_mm > 2 * BOUND_M * 1e3 / 0.0505 > 10 * guaranteed_mm
+    assert "the report's pose may be off by up to" in out and "least (up to" in out
+    assert re.search(r"they see a (slide along|turn about) .* least", out) and "tap a face pointing" in out
 
 
 @pytest.mark.parametrize("offset_mm", [(3, 0, 0), (0, 3, 0), (0, 0, 3), (-2.1, 2.1, 0)])
@@ -269,17 +304,20 @@ def test_on_the_simulated_cell_four_suggested_taps_tell_a_moved_fixture(tmp_path
         assert result.moved is expected
         assert result.with_report_taps and (result.bracket is not None) is expected
         if not expected:  # consistent, and four taps cannot see a move that keeps each on its face: it says so
-            assert verdict_lines(result)[0].endswith("A move that keeps every tapped point on its face would not "
-                                                     "show: 4 taps cannot see every move (6 or more on faces facing "
-                                                     "different ways can). Keep using the report's pose unless the "
-                                                     "fixture may have moved so.")
+            said = verdict_lines(result)[0]
+            assert "4 taps, but they cannot see every move: " in said and "Keep using" not in said
+            assert said.endswith("changes no tap's distance (to first order), so a move of any size that way would "
+                                 "not show. Use the report's pose only if the fixture cannot have moved so, or tap "
+                                 f"{result.seeing_point.where}, which would see it, and check again (6 or more taps "
+                                 "on faces facing different ways see every move).")
     assert dt.datetime.now(dt.UTC) - loaded.created < dt.timedelta(minutes=10)
 
 
-def test_taps_see_every_move_only_when_six_or_more_face_different_ways():
+def test_taps_bound_the_move_only_when_six_or_more_face_different_ways():
     """A move of the fixture that keeps every tapped point on its face changes no tap's distance: four taps always
-    leave such moves (six ways to move), eight on the top face leave slides along it and a turn about its normal;
-    eight and fourteen taps spread over the demo bracket's faces see every move."""
+    leave such moves (six ways to move), eight on the top face leave slides along it and a turn about its normal:
+    no bound; eight and fourteen taps spread over the demo bracket's faces bound every move, more taps more
+    tightly."""
     fixture = demo_fixture()
     cell = SimulatedCell.with_fixture(fixture, seed=3)
     cell.connect()
@@ -287,10 +325,14 @@ def test_taps_see_every_move_only_when_six_or_more_face_different_ways():
     spread = spread_taps(cell, 14)
     facing_up = (fixture.mesh.face_normals @ base_T_cad[:3, :3].T)[:, 2] > 0.99
     on_top = touching_ball_centres(fixture.mesh, 8, BALL_M / 2.0, np.random.default_rng(0), facing_up)
-    assert sees_every_move(fixture, base_T_cad, spread)
-    assert sees_every_move(fixture, base_T_cad, spread[:8])
-    assert not sees_every_move(fixture, base_T_cad, spread[:4])
-    assert not sees_every_move(fixture, base_T_cad, transform_points(base_T_cad, on_top))
+    def point_m(taps):
+        return missable_move(fixture, base_T_cad, taps, BALL_M, 0.00035).point_m
+
+    assert 0.0 < point_m(spread) < point_m(spread[:8]) < fixture.radius_m
+    assert point_m(spread[:4]) == np.inf
+    on_top_move = missable_move(fixture, base_T_cad, transform_points(base_T_cad, on_top), BALL_M, 0.00035)
+    assert on_top_move.point_m == np.inf
+    assert np.abs(on_top_move.base_m_move[2:5]) == pytest.approx(0.0, abs=1e-3)  # keeps the top face in its plane
 
 
 @pytest.mark.parametrize("seed", range(6))

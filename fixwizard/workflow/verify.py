@@ -11,6 +11,13 @@ so an empty set stays a proof. When the new taps were measured with another ball
 taps cannot join the search (one ball radius for all); then only the new taps are tested against the bounds
 region, a weaker test that the verdict says it is.
 
+Consistent taps prove no move, but they may see some moves poorly (``missable_move``): to first order, the true
+pose explains every new tap within the sample bound, which puts each fixture point within a figure of the report's
+pose to use (inf along a move that changes no tap's distance: fewer than six taps, faces all facing one way). A
+unique report's verdict says "Keep using the report's pose" only where that figure is no larger than the report's
+own guarantee for the pose (``pose.guaranteed.max_point_displacement_m``); otherwise it gives the figure, names the
+move seen least (a slide along, or a turn about an axis along, a base direction) and a point whose tap would see it.
+
 How far off the taps are: each new tap's distance from the surface at the report's pose, and, for a moved
 fixture, the sample bound up to which no pose explains the taps (proved) and one with which some pose does.
 
@@ -45,6 +52,7 @@ from fixwizard.solver.verify_search import (
 from fixwizard.synthetic import touching_ball_contacts
 from fixwizard.units import parse_length_m
 from fixwizard.workflow.live import tap_surface_distances_m
+from fixwizard.workflow.missable_move import MissableMove, missable_move
 
 EXIT_CONSISTENT, EXIT_BAD_INPUT, EXIT_MOVED = 0, 1, 2
 MAX_TAPS = 200
@@ -56,10 +64,7 @@ SUGGESTION_CANDIDATES = 400
 SUPPORT_CLEARANCE_M = 0.002  # a suggested ball stays this far above the fixture's lowest point, where it rests
 UP_FACING_NORMAL_Z = 0.7  # on a fixture too thin for that clearance, suggestions are on faces within 45 deg of up
 RIGID_MOTIONS = 6  # the ways a rigid body moves: three slides, three turns
-# A move counts as seen when it changes some tap's distance from the surface by at least this share of its size
-# (a turn's size measured at the fixture's radius), to first order; below it, it keeps every tapped point on its face
-SEEN_MOVE_SHARE = 0.05
-GRADIENT_STEP_M = 1e-6  # central differences of the distance field at the taps
+SAME_AXIS_DEG = 10.0  # a direction within this of a base axis is named by it ("+x"), others by their components
 
 
 def fixture_of(loaded: report.Report, mesh: str | Path | None = None) -> Fixture:
@@ -125,6 +130,16 @@ def _report_taps(loaded: report.Report) -> np.ndarray:
 
 
 @dataclass(frozen=True)
+class CheckPoint:
+    """A suggested tap: the ball centre touching the surface (base frame, m) at the report's pose, the outward
+    normal there (base frame) and where it is, in words."""
+
+    base_p_ball_m: np.ndarray
+    base_n: np.ndarray
+    where: str
+
+
+@dataclass(frozen=True)
 class VerifyResult:
     """The verdict on new taps (N, 3, base frame, m). ``distances_m``: each new tap's distance from the surface at
     the report's pose (positive: short of it); ``with_report_taps``: the report's own taps were searched too (the
@@ -139,7 +154,8 @@ class VerifyResult:
     sample_bound_m: float
     ball_diameter_m: float
     bracket: BoundBracket | None
-    sees_every_move: bool  # ``sees_every_move`` of the new taps at the report's pose
+    missable: MissableMove | None  # consistent taps of a unique report: how far they let the fixture be from its pose
+    seeing_point: CheckPoint | None  # where a further tap would see the move ``missable`` says is seen least
 
     @property
     def moved(self) -> bool:
@@ -169,27 +185,45 @@ def verify(loaded: report.Report, fixture: Fixture, base_p_taps: np.ndarray, bal
     bracket = smallest_sample_bound(fixture, region, searched, ball_m, bound_m, cancel) if found.moved else None
     assert loaded.base_T_cad is not None  # region_of refused a report without a pose
     distances = tap_surface_distances_m(fixture, taps, ball_m, loaded.base_T_cad)
-    return VerifyResult(loaded, taps, found, distances, with_report_taps, bound_m, ball_m, bracket,
-                        sees_every_move(fixture, loaded.base_T_cad, taps))
+    missable, seeing = None, None
+    to_use = loaded.pose_to_use()
+    if not found.moved and loaded.status == "unique" and len(taps) >= SUGGESTED_TAPS[0] and to_use is not None:
+        missable = missable_move(fixture, to_use[0], taps, ball_m, bound_m)
+        seeing = seeing_point(fixture, to_use[0], ball_m, missable)
+    return VerifyResult(loaded, taps, found, distances, with_report_taps, bound_m, ball_m, bracket, missable, seeing)
 
 
-def sees_every_move(fixture: Fixture, base_T_cad: np.ndarray, base_p_taps: np.ndarray) -> bool:
-    """Whether every small move of the fixture from ``base_T_cad`` changes some tap's distance from its surface (to
-    first order, by ``SEEN_MOVE_SHARE`` of the move): the surface's directions at the taps (base frame) and their
-    moments about the fixture's centre (over its radius) span the six ways a rigid body moves. Fewer than six taps
-    never do, nor do taps on faces that all face the same way: a slide along those faces keeps every tap on its
-    face."""
-    if len(base_p_taps) < RIGID_MOTIONS:
-        return False
-    steps = np.vstack([np.eye(3), -np.eye(3)]) * GRADIENT_STEP_M
-    stepped = (base_p_taps[:, None, :] + steps[None]).reshape(-1, 3)
-    distances = fixture.signed_distance_at_m(base_T_cad, stepped).reshape(len(base_p_taps), 6)
-    gradients = (distances[:, :3] - distances[:, 3:]) / (2.0 * GRADIENT_STEP_M)
-    base_n = gradients / np.maximum(np.linalg.norm(gradients, axis=1, keepdims=True), 1e-12)
-    base_p_centre = fixture.base_T_fix(base_T_cad)[:3, 3]
-    moments = np.cross((base_p_taps - base_p_centre) / fixture.radius_m, base_n)
-    weakest = np.linalg.svd(np.hstack([base_n, moments]), compute_uv=False)[-1]
-    return bool(weakest >= SEEN_MOVE_SHARE)
+def _direction_words(base_u: np.ndarray) -> str:
+    """A base-frame direction: the axis it lies along (within ``SAME_AXIS_DEG``, "x", either sense), else its unit
+    components ("(0.71, 0.71, 0.00)")."""
+    unit = base_u / np.linalg.norm(base_u)
+    axis = int(np.argmax(np.abs(unit)))
+    if abs(unit[axis]) >= math.cos(math.radians(SAME_AXIS_DEG)):
+        return "xyz"[axis]
+    unit = unit if unit[axis] > 0 else -unit
+    return "(" + ", ".join(f"{value:.2f}" for value in unit) + ")"
+
+
+def move_words(missable: MissableMove) -> str:
+    """The move ``missable`` says is seen least, in words: a slide along a base direction, or a turn about an axis
+    along one through a point (base frame, mm): the screw axis of the move, through ``c + w x v / |w|^2``."""
+    base_v, base_w = missable.base_m_move[:3], missable.base_m_move[3:] / missable.radius_m
+    if not missable.mostly_turn:
+        return f"a slide along {_direction_words(base_v)} of the base frame"
+    base_p_axis = missable.base_p_centre + np.cross(base_w, base_v) / float(base_w @ base_w)
+    return (f"a turn about an axis along {_direction_words(base_w)} of the base frame through x "
+            f"{base_p_axis[0] * 1e3:.0f}, y {base_p_axis[1] * 1e3:.0f}, z {base_p_axis[2] * 1e3:.0f} mm")
+
+
+def seeing_point(fixture: Fixture, base_T_cad: np.ndarray, ball_diameter_m: float,
+                 missable: MissableMove) -> CheckPoint:
+    """Where to tap to see the move ``missable`` says is seen least: among the points ``suggest_check_points`` picks
+    from, the one whose distance from the surface that move changes most (``|n . (v + w x (p - c))|``)."""
+    base_p, base_n = _reachable_contacts(fixture, base_T_cad, ball_diameter_m)
+    base_v, base_w = missable.base_m_move[:3], missable.base_m_move[3:] / missable.radius_m
+    moved = base_v + np.cross(base_w, base_p - missable.base_p_centre)
+    best = int(np.argmax(np.abs(np.sum(base_n * moved, axis=1))))
+    return _check_point(base_p[best], base_n[best])
 
 
 def verdict_lines(result: VerifyResult) -> list[str]:
@@ -211,16 +245,8 @@ def verdict_lines(result: VerifyResult) -> list[str]:
         lines.append(f"consistent with the report: poses the report allows explain the {taps}, so they show no move "
                      f"beyond the report's bounds. The report is {result.report.status}, so its pose is none a robot "
                      "program may use: tap more points and solve again for a unique pose.")
-    elif result.sees_every_move:
-        lines.append(f"consistent with the report: poses the report allows explain the {taps}, so they show no move "
-                     "beyond the report's bounds. Keep using the report's pose.")
     else:
-        these = f"{count} taps" if count < RIGID_MOTIONS else f"these {count} taps"
-        lines.append(f"consistent with the report: poses the report allows explain the {taps}, so they show no move "
-                     "beyond the report's bounds that takes a tapped point off its face. A move that keeps every "
-                     f"tapped point on its face would not show: {these} cannot see every move ({RIGID_MOTIONS} or more "
-                     "on faces facing different ways can). Keep using the report's pose unless the fixture may have "
-                     "moved so.")
+        lines.append(_unique_consistent_line(result, taps))
     lines.append(f"At the report's pose the taps lie up to {distances_mm[worst]:.2f} mm off the surface (tap "
                  f"{worst + 1}; RMS {float(np.sqrt(np.mean(distances_mm**2))):.2f} mm); sample bound "
                  f"{result.sample_bound_m * 1e3:.2f} mm.")
@@ -242,6 +268,39 @@ def verdict_lines(result: VerifyResult) -> list[str]:
                   "join: a weaker test)")
     lines.append(f"Tested {tested}, to within {search.slack_m * 1e3:.2f} mm, in {search.elapsed_s:.1f} s.")
     return lines
+
+
+def _unique_consistent_line(result: VerifyResult, taps: str) -> str:
+    """The verdict on taps consistent with a unique report: "Keep using the report's pose" only where, to first
+    order, they put every fixture point within the report's own guarantee of its pose (``missable_move``); else how
+    far they let it be, the move they see least and where a tap would see it."""
+    missable, seeing, to_use = result.missable, result.seeing_point, result.report.pose_to_use()
+    assert missable is not None and seeing is not None and to_use is not None  # verify gives them for a unique report
+    allowed_m, point_m = to_use[1].max_point_displacement_m, missable.point_m
+    said = f"consistent with the report: poses the report allows explain the {taps}"
+    tap_there = f"tap {seeing.where}, which would see it, and check again"
+    if point_m is None:
+        return (f"{said}, but they lie where the surface bends (at edges), so how far they let the fixture be from "
+                "the report's pose cannot be told. Before using the report's pose, tap points in the middle of faces "
+                "and check again.")
+    if point_m >= missable.radius_m:  # beyond first order: a move the size of the fixture, or one never seen
+        unseen = ("changes no tap's distance (to first order), so a move of any size that way would not show"
+                  if math.isinf(point_m) else "changes the taps' distances so little (to first order) that a move "
+                  "that way would not show before it moved the fixture by as much as its own radius")
+        return (f"{said}, but they cannot see every move: {move_words(missable)} {unseen}. Use the report's pose only "
+                f"if the fixture cannot have moved so, or {tap_there} ({RIGID_MOTIONS} or more taps on faces facing "
+                "different ways see every move).")
+    assert missable.slide_m is not None and missable.turn_rad is not None
+    within = (f"to first order (small moves) they put every point of the fixture within {point_m * 1e3:.2f} mm of "
+              f"the report's pose")
+    if point_m <= allowed_m:
+        return (f"{said}, and {within}, no more than the {allowed_m * 1e3:.2f} mm the report guarantees. Keep using "
+                "the report's pose.")
+    size = (f"{math.degrees(missable.turn_rad):.2f} deg" if missable.mostly_turn
+            else f"{missable.slide_m * 1e3:.2f} mm")
+    return (f"{said}, but {within} only, more than the {allowed_m * 1e3:.2f} mm the report guarantees; they see "
+            f"{move_words(missable)} least (up to {size} would not show), so the report's pose may be off by up to "
+            f"{point_m * 1e3:.2f} mm: {tap_there}.")
 
 
 def report_lines(loaded: report.Report, now_age_s: float) -> list[str]:
@@ -269,16 +328,6 @@ def age_text(age_s: float) -> str:
     return f"{age_s:.0f} s"
 
 
-@dataclass(frozen=True)
-class CheckPoint:
-    """A suggested tap: the ball centre touching the surface (base frame, m) at the report's pose, the outward
-    normal there (base frame) and where it is, in words."""
-
-    base_p_ball_m: np.ndarray
-    base_n: np.ndarray
-    where: str
-
-
 def _facing(base_n: np.ndarray) -> str:
     if base_n[2] >= 0.9:
         return "a face pointing up"
@@ -294,6 +343,19 @@ def suggest_check_points(fixture: Fixture, base_T_cad: np.ndarray, ball_diameter
     for the same inputs). The ball of each stays ``SUPPORT_CLEARANCE_M`` above the fixture's lowest point (base z):
     the foot of a side face is where the table or the clamp is. On a fixture too thin for that (a sheet), the balls
     are on faces pointing up (``UP_FACING_NORMAL_Z``), never at its edge."""
+    base_p, base_n = _reachable_contacts(fixture, base_T_cad, ball_diameter_m)
+    features = np.hstack([base_p, fixture.radius_m * base_n])
+    chosen = [int(np.argmax(base_n[:, 2]))]
+    while len(chosen) < min(count, len(base_p)):
+        distance = np.min(np.linalg.norm(features[:, None] - features[chosen][None], axis=2), axis=1)
+        chosen.append(int(np.argmax(distance)))
+    return [_check_point(base_p[index], base_n[index]) for index in chosen]
+
+
+def _reachable_contacts(fixture: Fixture, base_T_cad: np.ndarray,
+                        ball_diameter_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Candidate taps (ball centres (K, 3) and outward normals (K, 3), base frame) at the report's pose, on faces the
+    tool reaches and clear of where the fixture rests (see ``suggest_check_points``)."""
     base_R_cad = base_T_cad[:3, :3]
     radius_m = ball_diameter_m / 2.0
     reachable = (fixture.mesh.face_normals @ base_R_cad.T)[:, 2] >= REACHABLE_NORMAL_Z
@@ -308,14 +370,12 @@ def suggest_check_points(fixture: Fixture, base_T_cad: np.ndarray, ball_diameter
         clear = base_n[:, 2] >= UP_FACING_NORMAL_Z
     if np.any(clear):
         base_p, base_n = base_p[clear], base_n[clear]
-    features = np.hstack([base_p, fixture.radius_m * base_n])
-    chosen = [int(np.argmax(base_n[:, 2]))]
-    while len(chosen) < min(count, len(base_p)):
-        distance = np.min(np.linalg.norm(features[:, None] - features[chosen][None], axis=2), axis=1)
-        chosen.append(int(np.argmax(distance)))
-    return [CheckPoint(base_p[index], base_n[index],
-                       f"{_facing(base_n[index])} at x {base_p[index, 0] * 1e3:.0f}, y {base_p[index, 1] * 1e3:.0f}, "
-                       f"z {base_p[index, 2] * 1e3:.0f} mm") for index in chosen]
+    return base_p, base_n
+
+
+def _check_point(base_p_ball: np.ndarray, base_n: np.ndarray) -> CheckPoint:
+    return CheckPoint(base_p_ball, base_n, f"{_facing(base_n)} at x {base_p_ball[0] * 1e3:.0f}, y "
+                                           f"{base_p_ball[1] * 1e3:.0f}, z {base_p_ball[2] * 1e3:.0f} mm")
 
 
 def _report_argument(args: argparse.Namespace) -> report.Report:
