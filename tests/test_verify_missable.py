@@ -1,7 +1,7 @@
 """How far a check's taps let the fixture be from the report's pose (``missable_move``), against the real ``verify``
 search: the fixture moved along the direction the taps see least, by random small amounts, never lies farther from
 the report's pose than a consistent verdict says; the direction net behind the figure comes as close to every unit
-vector as its documented angle."""
+vector as its documented angle; taps no move fits to first order get no figure."""
 
 import os
 
@@ -14,8 +14,10 @@ from fixwizard.demo import demo_fixture
 from fixwizard.geometry.se3 import make_transform, transform_points
 from fixwizard.robot.sim import SimulatedCell
 from fixwizard.solver.solve import solve
+from fixwizard.synthetic import touching_ball_contacts
 from fixwizard.workflow.missable_move import NET_ANGLE_RAD, missable_move, net_directions
 from fixwizard.workflow.verify import fixture_of, suggest_check_points, verify
+from shapes import as_fixture
 from tui_cell import spread_taps
 
 BALL_M, BOUND_M = 0.003, 0.00035
@@ -28,6 +30,17 @@ def test_the_direction_net_comes_within_its_angle_of_every_direction():
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
     nearest = np.max(directions @ net_directions().T, axis=1)
     assert np.arccos(np.clip(np.min(nearest), -1.0, 1.0)) <= NET_ANGLE_RAD
+
+
+def test_taps_no_pose_fits_to_first_order_get_no_figure():
+    """One point of a brick tapped twice, 1.5 sample bounds above and below touching: no move fits both within the
+    bound, so no figure is given (the verdict then never says to keep the pose), rather than a number or inf."""
+    fixture = as_fixture("brick")
+    rng = np.random.default_rng(1)
+    taps, normals = touching_ball_contacts(fixture.mesh, 40, BALL_M / 2, rng)
+    twice = np.vstack([taps, taps[:1] + 1.5 * BOUND_M * normals[:1], taps[:1] - 1.5 * BOUND_M * normals[:1]])
+    assert 0.0 < missable_move(fixture, np.eye(4), taps, BALL_M, BOUND_M).point_m < fixture.radius_m
+    assert missable_move(fixture, np.eye(4), twice, BALL_M, BOUND_M).point_m is None
 
 
 @pytest.fixture(scope="module")

@@ -280,9 +280,10 @@ def _unique_consistent_line(result: VerifyResult, taps: str) -> str:
     said = f"consistent with the report: poses the report allows explain the {taps}"
     tap_there = f"tap {seeing.where}, which would see it, and check again"
     if point_m is None:
-        return (f"{said}, but they lie where the surface bends (at edges), so how far they let the fixture be from "
-                "the report's pose cannot be told. Before using the report's pose, tap points in the middle of faces "
-                "and check again.")
+        return (f"{said}, but to first order no pose near the report's fits them within the sample bound (taps at "
+                "edges, where the surface bends, or errors at the bound), so how far they let the fixture be from the "
+                "report's pose cannot be told. Before using the report's pose, tap points in the middle of faces and "
+                "check again.")
     if point_m >= missable.radius_m:  # beyond first order: a move the size of the fixture, or one never seen
         unseen = ("changes no tap's distance (to first order), so a move of any size that way would not show"
                   if math.isinf(point_m) else "changes the taps' distances so little (to first order) that a move "
