@@ -224,7 +224,7 @@ def _add_verify(commands: argparse._SubParsersAction) -> None:
                                  "input.")
     parser.add_argument("report", metavar="REPORT", help="the fixture's report (fixwizard.report/1 or /2)")
     parser.add_argument("points", metavar="POINTS", help="the new taps: YAML {frame: base, points_m: [...]} or CSV "
-                        "x,y,z (3-5 spread over the fixture)")
+                        "x,y,z (6-8 spread over the fixture)")
     parser.add_argument("--mesh", metavar="PATH", help="the report's mesh, if it has moved to another folder (it must "
                         "be the same file)")
     parser.add_argument("--ball-diameter", type=_diameter, help="the new taps' ball, e.g. 3mm (default: the report's)")

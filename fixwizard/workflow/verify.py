@@ -22,7 +22,8 @@ How far off the taps are: each new tap's distance from the surface at the report
 fixture, the sample bound up to which no pose explains the taps (proved) and one with which some pose does.
 
 ``fixwizard verify REPORT POINTS`` prints the verdict; the wizard's "Check a calibrated fixture" runs the same
-on taps it records, after suggesting 3-5 spread over the fixture (``suggest_check_points``).
+on taps it records, after suggesting 7 spread over the fixture and the directions its faces face
+(``suggest_check_points``): six or more are needed to see every move.
 """
 
 import argparse
@@ -56,7 +57,7 @@ from fixwizard.workflow.missable_move import MissableMove, missable_move
 
 EXIT_CONSISTENT, EXIT_BAD_INPUT, EXIT_MOVED = 0, 1, 2
 MAX_TAPS = 200
-SUGGESTED_TAPS = (3, 5)
+SUGGESTED_TAPS = (6, 8)  # six ways to move: fewer taps always leave a move they cannot see
 REPORT_TAPS_ROUNDING_M = 1e-7  # the report writes its taps to 0.1 um: their error grows by at most this
 SAME_BALL_M = 1e-9
 REACHABLE_NORMAL_Z = -0.2  # a face the tool reaches from above or the side points at least this much up (base frame)
@@ -108,9 +109,9 @@ def region_of(loaded: report.Report) -> AllowedRegion:
 def _checked_taps(base_p_taps: np.ndarray) -> np.ndarray:
     taps = np.asarray(base_p_taps, float)
     if taps.ndim != 2 or taps.shape[1] != 3 or len(taps) == 0:
-        raise InputError("give at least one tap as [x, y, z] in metres (3-5 spread over the fixture are best)")
+        raise InputError("give at least one tap as [x, y, z] in metres (6-8 spread over the fixture are best)")
     if len(taps) > MAX_TAPS:
-        raise InputError(f"{len(taps)} taps are far more than a check needs: give 3-5 spread over the fixture")
+        raise InputError(f"{len(taps)} taps are far more than a check needs: give 6-8 spread over the fixture")
     bad = np.flatnonzero(~np.all(np.isfinite(taps), axis=1))
     if len(bad):
         raise InputError(f"tap {bad[0] + 1} has a coordinate that is not a finite number; fix or remove it")
@@ -237,14 +238,14 @@ def verdict_lines(result: VerifyResult) -> list[str]:
     if result.moved:
         lines.append(f"MOVED: no pose the report allows explains the {taps} (this is a proof): the fixture has moved "
                      "since the report, or the taps are off (another fixture, the wrong tip). Calibrate it again.")
+    elif result.report.status != "unique":  # whatever the taps, its pose is none to keep using
+        lines.append(f"consistent with the report: poses the report allows explain the {taps}. The report is "
+                     f"{result.report.status}, so its pose is none a robot program may use: tap more points and solve "
+                     "again for a unique pose.")
     elif count < SUGGESTED_TAPS[0]:
         lines.append(f"consistent with the report: poses the report allows explain the {taps}, too few to see a small "
                      f"move: tap {SUGGESTED_TAPS[0]}-{SUGGESTED_TAPS[1]} points spread over the fixture, then check "
                      "again.")
-    elif result.report.status != "unique":
-        lines.append(f"consistent with the report: poses the report allows explain the {taps}, so they show no move "
-                     f"beyond the report's bounds. The report is {result.report.status}, so its pose is none a robot "
-                     "program may use: tap more points and solve again for a unique pose.")
     else:
         lines.append(_unique_consistent_line(result, taps))
     lines.append(f"At the report's pose the taps lie up to {distances_mm[worst]:.2f} mm off the surface (tap "
@@ -337,7 +338,7 @@ def _facing(base_n: np.ndarray) -> str:
 
 
 def suggest_check_points(fixture: Fixture, base_T_cad: np.ndarray, ball_diameter_m: float,
-                         count: int = 4) -> list[CheckPoint]:
+                         count: int = SUGGESTED_TAPS[1] - 1) -> list[CheckPoint]:
     """``count`` points to tap for a check at the report's pose, on faces the tool reaches (not facing down), spread
     over the fixture and over the directions its faces point in, so that a move in any direction shows: farthest
     points in position and normal (scaled by the fixture's radius) among random surface points (the same points

@@ -1,4 +1,4 @@
-"""The "Check a calibrated fixture" screen: pick a fixture that has a report, tap the 3-5 suggested points spread
+"""The "Check a calibrated fixture" screen: pick a fixture that has a report, tap the 6-8 suggested points spread
 over it, and learn whether it is still where the report says (``workflow.verify``: moved is a proof).
 
 The fixtures are the newest report of each name in the reports folder (``workflow.cell_reports``). Freedrive is
@@ -74,7 +74,7 @@ class CheckScreen(Screen[None]):
         keys.binding(keys.FREEDRIVE, show=False),
     ]
     HELP_TITLE = "check a calibrated fixture"
-    HELP_ABOUT = ("Choose the fixture, then tap 3-5 of the suggested points spread over it (freedrive is on; the "
+    HELP_ABOUT = ("Choose the fixture, then tap 6-8 of the suggested points spread over it (freedrive is on; the "
                   "ball 5-10 mm above the surface, then tap) and check: the taps either fit the report's pose, or "
                   "prove the fixture has moved. Esc goes back to the start screen.")
 
@@ -165,7 +165,7 @@ class CheckScreen(Screen[None]):
 
         def load() -> tuple[Fixture, list[CheckPoint]]:
             fixture = fixture_of(loaded)
-            return fixture, suggest_check_points(fixture, base_T_cad, ball_m, count=SUGGESTED_TAPS[1] - 1)
+            return fixture, suggest_check_points(fixture, base_T_cad, ball_m)
 
         def loaded_mesh(found: tuple[Fixture, list[CheckPoint]]) -> None:
             if self.loaded is loaded:
@@ -217,7 +217,7 @@ class CheckScreen(Screen[None]):
     def action_check(self) -> None:
         taps = self._taps()
         if self.fixture is None or self.loaded is None or not len(taps):
-            self._say("Tap at least one point first (3-5 spread over the fixture are best).")
+            self._say("Tap at least one point first (6-8 spread over the fixture are best).")
             return
         self._cancel.set()
         cancel = self._cancel = threading.Event()
