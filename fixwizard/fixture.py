@@ -71,7 +71,7 @@ class Fixture:
     ``mesh``: CAD-frame mesh (m), checked and repaired (``mesh_hygiene``). ``signed``: whether inside and
     outside can be told apart (closed, consistently oriented). ``cad_p_center``: minimum enclosing ball centre
     in the CAD frame (m). ``radius_m``: that ball's radius. ``warnings``: (code, message) pairs to pass on.
-    ``meeting_faces``: the faces of bodies that cut through or touch another (``CleanMesh.meeting_faces``;
+    ``plane_unsigned_faces``: faces whose plane does not sign the distance (``CleanMesh.plane_unsigned_faces``;
     None: none). ``surface_offset_m``: how far ``mesh``'s surface may lie from the file's (closed cracks,
     ``CleanMesh.surface_offset_m``, and polygon faces that are not flat, ``polygon_faces``).
     """
@@ -84,7 +84,7 @@ class Fixture:
     sha256: str
     signed: bool = True
     warnings: tuple[tuple[str, str], ...] = field(default=())
-    meeting_faces: np.ndarray | None = None
+    plane_unsigned_faces: np.ndarray | None = None
     surface_offset_m: float = 0.0
 
     @property
@@ -109,7 +109,7 @@ class Fixture:
     def oracle(self) -> "DistanceOracle":
         """Distance queries in the internal frame (signed where inside and outside can be told apart)."""
         fix_mesh = trimesh.Trimesh(self.fix_vertices_m, self.mesh.faces, process=False)
-        return DistanceOracle(fix_mesh, signed=self.signed, meeting_faces=self.meeting_faces,
+        return DistanceOracle(fix_mesh, signed=self.signed, plane_unsigned_faces=self.plane_unsigned_faces,
                               surface_offset_m=self.surface_offset_m)
 
 
@@ -130,10 +130,10 @@ class DistanceOracle:
     # sample bound.
     SIGN_FREE_M = 1e-7
 
-    def __init__(self, mesh_m: trimesh.Trimesh, signed: bool, meeting_faces: np.ndarray | None = None,
+    def __init__(self, mesh_m: trimesh.Trimesh, signed: bool, plane_unsigned_faces: np.ndarray | None = None,
                  surface_offset_m: float = 0.0) -> None:
-        """``meeting_faces``: faces whose plane does not tell inside from outside (of a body that cuts through or
-        touches another, ``CleanMesh.meeting_faces``): their points are signed as near an edge.
+        """``plane_unsigned_faces``: faces whose plane does not sign the distance (``CleanMesh.plane_unsigned_faces``):
+        their points are signed as near an edge.
         ``surface_offset_m``: how far this mesh's surface may lie from the fixture's as exported (m); the distances
         are this mesh's, and the search widens each tap's band by it (``SearchProblem.tap_bound_m``)."""
         self.signed = signed
@@ -144,8 +144,8 @@ class DistanceOracle:
         if signed:
             self._face_normals = np.asarray(mesh_m.face_normals, np.float64)
             self._reliable_normal = reliable_normals(self._vertices, self._faces)
-            if meeting_faces is not None:
-                self._reliable_normal &= ~np.asarray(meeting_faces, bool)
+            if plane_unsigned_faces is not None:
+                self._reliable_normal &= ~np.asarray(plane_unsigned_faces, bool)
             edge_normals = np.zeros((len(mesh_m.edges_unique), 3))
             np.add.at(edge_normals, mesh_m.faces_unique_edges.ravel(), np.repeat(self._face_normals, 3, axis=0))
             self._edge_normals = edge_normals[mesh_m.faces_unique_edges]
@@ -523,7 +523,8 @@ def fixture_from_mesh(mesh_m: trimesh.Trimesh, path: Path, units: str, sha256: s
         warnings += (_float32_warning(path.name, float32_spacing_m),)
     return Fixture(path=path, units=units, mesh=clean.mesh, cad_p_center=ball.center, radius_m=ball.radius,
                    sha256=sha256, signed=clean.signed, warnings=warnings,
-                   meeting_faces=clean.meeting_faces if np.any(clean.meeting_faces) else None,
+                   plane_unsigned_faces=(clean.plane_unsigned_faces if np.any(clean.plane_unsigned_faces)
+                                         else None),
                    surface_offset_m=clean.surface_offset_m + polygon_warp_m + float32_spacing_m)
 
 

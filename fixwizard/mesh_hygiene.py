@@ -42,7 +42,7 @@ from scipy.sparse.csgraph import connected_components, shortest_path
 from scipy.spatial import cKDTree
 
 from fixwizard.errors import MeshError
-from fixwizard.geometry.face_contact import faces_met
+from fixwizard.geometry.face_contact import CROWDED, MET, UNMET, faces_met
 from fixwizard.geometry.mesh_distance import MeshDistance
 
 # Vertices of a body tested against another body's winding number to tell nesting apart from cutting through.
@@ -68,16 +68,17 @@ SIDE_RAY = np.array([0.0117, 0.0131, 1.0]) / np.linalg.norm([0.0117, 0.0131, 1.0
 
 @dataclass(frozen=True)
 class CleanMesh:
-    """A checked mesh (m), whether its signed distance can be trusted, (code, message) warnings, which faces
-    belong to a body that meets another (``meeting_faces``, one per face): a point nearest to one of them may lie
-    inside the other body, so such a face's plane does not tell inside from outside), and how far the mesh's
-    surface may lie from the exported one (m: every point of either within that of the other; zero unless
-    cracks were closed)."""
+    """A checked mesh (m), whether its signed distance can be trusted, (code, message) warnings, which faces'
+    planes do not sign the distance (``plane_unsigned_faces``, one per face; points nearest to them are signed as
+    near an edge, by ray parity and the winding number): those of a body that meets another (a point nearest to one
+    may lie inside the other body) and those too crowded by long thin faces to check (``face_contact.CROWDED``); and
+    how far the mesh's surface may lie from the exported one (m: every point of either within that of the other; zero
+    unless cracks were closed)."""
 
     mesh: trimesh.Trimesh
     signed: bool
     warnings: tuple[tuple[str, str], ...]
-    meeting_faces: np.ndarray
+    plane_unsigned_faces: np.ndarray
     surface_offset_m: float = 0.0
 
 
@@ -362,7 +363,7 @@ def _close_cracks(mesh: trimesh.Trimesh) -> Closed | None:
 
 def _orient(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, bool, list[tuple[str, str]], np.ndarray]:
     """A closed mesh consistently wound with every body oriented by its nesting, whether that succeeded, and its
-    faces that belong to a body meeting another (``CleanMesh.meeting_faces``)."""
+    faces whose planes do not sign the distance (``CleanMesh.plane_unsigned_faces``)."""
     original = np.asarray(mesh.faces)
     consistent = mesh.is_winding_consistent
     if not consistent:
@@ -382,9 +383,9 @@ def _orient(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, bool, li
             faces[body] = faces[body][:, ::-1]
             inverted[depth % 2] += 1
     mesh = trimesh.Trimesh(mesh.vertices, faces, process=False)
-    meeting_faces = np.zeros(len(faces), bool)
+    plane_unsigned_faces = np.zeros(len(faces), bool)
     for meets, body_faces in zip(meeting, bodies, strict=True):
-        meeting_faces[body_faces] = meets
+        plane_unsigned_faces[body_faces] = meets
     turned = int(np.count_nonzero(np.any(faces != original, axis=1)))
     warnings: list[tuple[str, str]] = []
     if not consistent:
@@ -407,7 +408,7 @@ def _orient(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, bool, li
                                                                            if cavities else "")
                          + "; fixwizard takes them as one rigid fixture. If they are separate parts, solve each "
                          "with its own mesh."))
-    crossing = _faces_whose_side_misleads(mesh, meeting_faces)
+    crossing, crowded = _faces_whose_side_misleads(mesh, plane_unsigned_faces)
     if crossing:  # the repairs said above still hold
         warnings.append(("mesh_self_intersecting",
                          f"{name} crosses itself or has faces lying over one another ({crossing} of its {len(faces)} "
@@ -416,7 +417,7 @@ def _orient(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, bool, li
                          "but may be looser. Repair the mesh in CAD (a union of its solids, no faces crossing) for "
                          "tighter bounds."))
         return mesh, False, warnings, np.zeros(len(faces), bool)
-    return mesh, True, warnings, meeting_faces
+    return mesh, True, warnings, plane_unsigned_faces | crowded
 
 
 def reliable_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -428,21 +429,24 @@ def reliable_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return twice_area > RELIABLE_NORMAL_SINE * longest_pair
 
 
-def _faces_whose_side_misleads(mesh: trimesh.Trimesh, skipped: np.ndarray) -> int:
+def _faces_whose_side_misleads(mesh: trimesh.Trimesh, skipped: np.ndarray) -> tuple[int, np.ndarray]:
     """How many faces (not ``skipped``, not slivers) another face meets inside (``face_contact.faces_met``), or have
     their centroid's point ``SIDE_STEP_SHARE`` off them inside on their outer side or outside on their inner side
-    (by ray parity, each disagreement with the face settled by the exact winding number). Where there is none, the
-    plane of the face nearest a point signs its distance rightly (``face_contact``'s module doc); a surface that
+    (by ray parity, each disagreement with the face settled by the exact winding number); and which faces were too
+    crowded to check (``face_contact.CROWDED``: their planes must not sign). Where there is none, the plane of every
+    other face signs the distance of a point nearest to it rightly (``face_contact``'s module doc); a surface that
     crosses itself, or lays faces over one another facing opposite ways, has them where it does, and there that
     plane would call a point outside inside: the true pose lost."""
     vertices, faces = np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64)
     checked = np.flatnonzero(~skipped & reliable_normals(vertices, faces))  # a sliver's plane never signs
+    crowded = np.zeros(len(faces), bool)
     if len(checked) == 0:
-        return 0
+        return 0, crowded
     step_m = SIDE_STEP_SHARE * float(np.linalg.norm(np.ptp(vertices, axis=0)))
     surface = MeshDistance(vertices, faces)
-    met = faces_met(surface, vertices, faces, checked, step_m)
-    unmet = checked[~met]
+    status = faces_met(surface, vertices, faces, checked, step_m)
+    crowded[checked[status == CROWDED]] = True
+    unmet = checked[status == UNMET]
     normals = np.asarray(mesh.face_normals)[unmet]
     centroids = vertices[faces[unmet]].mean(axis=1)
     points = np.concatenate([centroids + step_m * normals, centroids - step_m * normals])
@@ -453,7 +457,7 @@ def _faces_whose_side_misleads(mesh: trimesh.Trimesh, skipped: np.ndarray) -> in
     if len(doubtful):  # a ray grazing an edge may miscount: the winding number is exact
         inside[doubtful] = igl.winding_number(vertices, faces, points[doubtful]) > 0.5
     misleading = np.any((inside != expected).reshape(2, -1), axis=0)
-    return int(np.count_nonzero(met)) + int(np.count_nonzero(misleading))
+    return int(np.count_nonzero(status == MET)) + int(np.count_nonzero(misleading)), crowded
 
 
 def _cracks_closed_message(name: str, closed: Closed) -> str:
@@ -478,14 +482,15 @@ def clean_mesh(mesh: trimesh.Trimesh, name: str) -> CleanMesh:
     if not mesh.is_watertight:
         closed = _close_cracks(mesh)
         if closed is not None:
-            oriented, signed, orient_warnings, meeting_faces = _orient(closed.mesh, name)
+            oriented, signed, orient_warnings, plane_unsigned_faces = _orient(closed.mesh, name)
             if signed:
                 warnings.append(("mesh_cracks_closed", _cracks_closed_message(name, closed)))
-                return CleanMesh(oriented, True, tuple(warnings + orient_warnings), meeting_faces, closed.offset_m)
+                return CleanMesh(oriented, True, tuple(warnings + orient_warnings), plane_unsigned_faces,
+                                 closed.offset_m)
         warnings.append(("mesh_not_watertight",
                          f"{name} is not watertight (it has holes or open edges), so fixwizard cannot tell inside "
                          "from outside and uses the unsigned distance: the bounds stay guaranteed but may be "
                          "looser. Close the mesh in CAD for tighter bounds."))
         return CleanMesh(mesh, False, tuple(warnings), np.zeros(len(mesh.faces), bool))
-    mesh, signed, orient_warnings, meeting_faces = _orient(mesh, name)
-    return CleanMesh(mesh, signed, tuple(warnings + orient_warnings), meeting_faces)
+    mesh, signed, orient_warnings, plane_unsigned_faces = _orient(mesh, name)
+    return CleanMesh(mesh, signed, tuple(warnings + orient_warnings), plane_unsigned_faces)

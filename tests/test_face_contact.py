@@ -12,7 +12,15 @@ import trimesh
 
 import fixwizard
 import shapes
-from fixwizard.geometry.face_contact import INNER_MARGIN, faces_met, segment_apart, triangles_apart
+from fixwizard.geometry.face_contact import (
+    CROWDED,
+    INNER_MARGIN,
+    MET,
+    UNMET,
+    faces_met,
+    segment_apart,
+    triangles_apart,
+)
 from fixwizard.geometry.mesh_distance import MeshDistance
 from fixwizard.mesh_hygiene import reliable_normals
 
@@ -123,7 +131,7 @@ def _met(mesh: trimesh.Trimesh, step_m: float = 1e-7) -> np.ndarray:
     vertices, faces = np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
     checked = np.flatnonzero(reliable_normals(vertices, faces))
     met = np.zeros(len(faces), bool)
-    met[checked] = faces_met(MeshDistance(vertices, faces), vertices, faces, checked, step_m)
+    met[checked] = faces_met(MeshDistance(vertices, faces), vertices, faces, checked, step_m) == MET
     return met
 
 
@@ -178,11 +186,21 @@ def test_a_face_lying_just_over_another_is_met_through_its_centroid_segment():
     vertices = np.vstack([lower, upper])
     faces = np.array([[0, 1, 2], [3, 4, 5]])
     surface = MeshDistance(vertices, faces)
-    assert faces_met(surface, vertices, faces, np.array([0]), 1e-7)[0]
-    assert not faces_met(surface, vertices, faces, np.array([0]), 1e-8)[0]
+    assert faces_met(surface, vertices, faces, np.array([0]), 1e-7)[0] == MET
+    assert faces_met(surface, vertices, faces, np.array([0]), 1e-8)[0] == UNMET
 
 
 def test_the_inner_triangle_leaves_room_for_the_rounding_of_the_oracles_feature_margin():
     from fixwizard.fixture import DistanceOracle
 
     assert 0.0 < INNER_MARGIN < DistanceOracle.FEATURE_MARGIN
+
+
+def test_a_face_with_more_faces_near_it_than_the_limit_is_left_crowded_never_called_unmet():
+    """A disc's caps cut in fans of 400 thin faces: each cap face has about 100 faces near it (their boxes overlap
+    its own), more than a limit of 50: crowded; the walls' faces have a few."""
+    disc = trimesh.creation.cylinder(radius=0.05, height=0.02, sections=400)
+    vertices, faces = np.asarray(disc.vertices, float), np.asarray(disc.faces, np.int64)
+    status = faces_met(MeshDistance(vertices, faces), vertices, faces, np.arange(len(faces)), 1e-7, candidate_limit=50)
+    on_caps = np.abs(np.asarray(disc.face_normals)[:, 2]) > 0.99
+    assert np.all(status[on_caps] == CROWDED) and np.all(status[~on_caps] == UNMET)

@@ -20,6 +20,11 @@ of zero area); for a segment and a triangle the normal, the segment's cross prod
 and the segment turned in the plane. A projection is rounded by a few ulps of the coordinates; a gap counts only
 beyond ``tolerance_m`` (``CONTACT_SHARE`` of the mesh's size, far above that rounding and the closest point's, far
 below any gap a part has), so what rounding hides counts as meeting: a face found unmet is unmet.
+
+The faces near a face are those of the bounding-volume hierarchy whose boxes overlap its inner triangle's and the
+segment's, and are not apart from them on its quick axes (its normal, its edges turned in its plane). A disc cut
+in a fan of thousands of thin faces meeting at its centre gives each of them thousands (every box holds the centre),
+quadratic time; a face with more than ``CANDIDATE_LIMIT`` is left ``CROWDED``, and its plane must not sign.
 """
 
 import math
@@ -37,6 +42,10 @@ INNER_MARGIN = 0.5 * FEATURE_MARGIN
 CONTACT_SHARE = 1e-12
 CONTACT_ULPS = 256.0
 BLOCK_FACES = 256  # faces per parallel work item
+# A face with more faces near it than this (boxes overlapping its own, not apart on its quick axes) is not checked:
+# thousands of long thin faces meeting at one vertex (a disc cut in a fan of thousands) would take quadratic time.
+CANDIDATE_LIMIT = 512
+UNMET, MET, CROWDED = 0, 1, 2
 STACK_DEPTH = 128
 
 
@@ -127,13 +136,47 @@ def segment_apart(ends: np.ndarray, corners: np.ndarray, tolerance_m: float) -> 
     return False
 
 
+@numba.njit(nogil=True, cache=True, inline="always")
+def _beyond(low: float, high: float, probe: np.ndarray, axis: np.ndarray, tolerance_m: float) -> bool:
+    """Whether ``[low, high]`` lies more than ``tolerance_m`` beyond ``probe`` (low, high) along ``axis``."""
+    width = tolerance_m * math.sqrt(axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2])
+    return low - probe[1] > width or probe[0] - high > width
+
+
+@numba.njit(nogil=True, cache=True)
+def _points_apart(points: np.ndarray, axes: np.ndarray, probe_ranges: np.ndarray, tolerance_m: float) -> bool:
+    """Whether the points (rows) lie beyond the probe's range on one of ``axes``."""
+    for k in range(len(axes)):
+        low, high = _range_along(points, axes[k, 0], axes[k, 1], axes[k, 2])
+        if _beyond(low, high, probe_ranges[k], axes[k], tolerance_m):
+            return True
+    return False
+
+
+@numba.njit(nogil=True, cache=True)
+def _box_apart(box_low: np.ndarray, box_high: np.ndarray, origin: np.ndarray, axes: np.ndarray,
+               probe_ranges: np.ndarray, tolerance_m: float) -> bool:
+    """Whether a box (absolute coordinates, m) lies beyond the probe's range (relative to ``origin``) on one of
+    ``axes``: a subtree of the hierarchy no face of which can meet the probe."""
+    for k in range(len(axes)):
+        middle = spread = 0.0
+        for axis in range(3):
+            middle += (0.5 * (box_low[axis] + box_high[axis]) - origin[axis]) * axes[k, axis]
+            spread += 0.5 * (box_high[axis] - box_low[axis]) * abs(axes[k, axis])
+        if _beyond(middle - spread, middle + spread, probe_ranges[k], axes[k], tolerance_m):
+            return True
+    return False
+
+
 @numba.njit(nogil=True, cache=True)
 def _face_met(face: int, vertices: np.ndarray, faces: np.ndarray, hierarchy: tuple[np.ndarray, ...], step_m: float,
-              tolerance_m: float) -> bool:
+              tolerance_m: float, candidate_limit: int) -> tuple[int, int]:
     """Whether another face meets ``face``'s inner triangle or the segment ``step_m`` either side of its centroid
-    along its normal (coordinates relative to its first corner). The inner triangle and the segment both project
-    within the inner triangle's range onto its edges turned in its plane, and within the segment's onto its
-    normal: a face apart on one of those four axes is apart from both, which settles most faces near it."""
+    along its normal (coordinates relative to its first corner): ``MET``, ``UNMET``, or ``CROWDED`` when more than
+    ``candidate_limit`` faces lie near it; and how many faces were looked at. The inner triangle and the segment
+    both project within the inner triangle's range onto its edges turned in its plane, and within the segment's
+    onto its normal: a face (or a box of the hierarchy) apart on one of those four axes is apart from both, which
+    settles most faces near it."""
     node_low, node_high, children, ranges, order = hierarchy
     origin = vertices[faces[face, 0]]
     inner = np.empty((3, 3))
@@ -151,13 +194,17 @@ def _face_met(face: int, vertices: np.ndarray, faces: np.ndarray, hierarchy: tup
     for axis, component in enumerate((n0, n1, n2)):
         ends[0, axis] -= step_m * component / length
         ends[1, axis] += step_m * component / length
-    in_plane = np.empty((3, 3))
-    in_plane_range = np.empty((3, 2))
+    # the quick axes: the normal (the segment's range, widened by twice the tolerance), the inner edges turned in
+    # the plane (the inner triangle's ranges: the segment lies within them)
+    quick_axes = np.empty((4, 3))
+    quick_ranges = np.empty((4, 2))
+    quick_axes[0, 0], quick_axes[0, 1], quick_axes[0, 2] = n0, n1, n2
+    quick_ranges[0, 1] = (step_m + 2.0 * tolerance_m) * length
+    quick_ranges[0, 0] = -quick_ranges[0, 1]
     for k in range(3):
         e0, e1, e2 = _edge(inner, k)
-        in_plane[k] = _cross(n0, n1, n2, e0, e1, e2)
-        in_plane_range[k] = _range_along(inner, in_plane[k, 0], in_plane[k, 1], in_plane[k, 2])
-    normal_reach = (step_m + 2.0 * tolerance_m) * length  # the segment's range along the normal, widened
+        quick_axes[k + 1] = _cross(n0, n1, n2, e0, e1, e2)
+        quick_ranges[k + 1] = _range_along(inner, quick_axes[k + 1, 0], quick_axes[k + 1, 1], quick_axes[k + 1, 2])
     low, high = np.empty(3), np.empty(3)
     for axis in range(3):
         low[axis] = origin[axis] + min(inner[:, axis].min(), ends[:, axis].min()) - tolerance_m
@@ -165,13 +212,14 @@ def _face_met(face: int, vertices: np.ndarray, faces: np.ndarray, hierarchy: tup
     stack = np.empty(STACK_DEPTH, np.int64)
     stack[0] = 0
     depth = 1
+    candidates = 0
     while depth > 0:
         depth -= 1
         node = stack[depth]
         outside = False
         for axis in range(3):
             outside |= node_low[node, axis] > high[axis] or node_high[node, axis] < low[axis]
-        if outside:
+        if outside or _box_apart(node_low[node], node_high[node], origin, quick_axes, quick_ranges, tolerance_m):
             continue
         if children[node, 0] >= 0:
             stack[depth], stack[depth + 1] = children[node, 0], children[node, 1]
@@ -181,31 +229,27 @@ def _face_met(face: int, vertices: np.ndarray, faces: np.ndarray, hierarchy: tup
             candidate = order[slot]
             if candidate == face:
                 continue
+            candidates += 1
+            if candidates > candidate_limit:
+                return CROWDED, candidates
             for corner in range(3):
                 for axis in range(3):
                     other[corner, axis] = vertices[faces[candidate, corner], axis] - origin[axis]
-            low_n, high_n = _range_along(other, n0, n1, n2)
-            if low_n > normal_reach or high_n < -normal_reach:
-                continue
-            apart = False
-            for k in range(3):
-                low_k, high_k = _range_along(other, in_plane[k, 0], in_plane[k, 1], in_plane[k, 2])
-                width = tolerance_m * math.sqrt(in_plane[k, 0] ** 2 + in_plane[k, 1] ** 2 + in_plane[k, 2] ** 2)
-                apart |= low_k - in_plane_range[k, 1] > width or in_plane_range[k, 0] - high_k > width
-            if apart:
+            if _points_apart(other, quick_axes, quick_ranges, tolerance_m):
                 continue
             if not triangles_apart(inner, other, tolerance_m) or not segment_apart(ends, other, tolerance_m):
-                return True
-    return False
+                return MET, candidates
+    return UNMET, candidates
 
 
 @numba.njit(nogil=True, cache=True, parallel=True)
 def _faces_met(vertices: np.ndarray, faces: np.ndarray, hierarchy: tuple[np.ndarray, ...], checked: np.ndarray,
-               step_m: float, tolerance_m: float, met_out: np.ndarray) -> None:
+               step_m: float, tolerance_m: float, candidate_limit: int, status_out: np.ndarray) -> None:
     blocks = (len(checked) + BLOCK_FACES - 1) // BLOCK_FACES
     for block in numba.prange(blocks):
         for slot in range(block * BLOCK_FACES, min(len(checked), (block + 1) * BLOCK_FACES)):
-            met_out[slot] = _face_met(checked[slot], vertices, faces, hierarchy, step_m, tolerance_m)
+            status_out[slot] = _face_met(checked[slot], vertices, faces, hierarchy, step_m, tolerance_m,
+                                         candidate_limit)[0]
 
 
 def tolerance_m(vertices_m: np.ndarray) -> float:
@@ -215,14 +259,16 @@ def tolerance_m(vertices_m: np.ndarray) -> float:
 
 
 def faces_met(surface: MeshDistance, vertices_m: np.ndarray, faces: np.ndarray, checked: np.ndarray,
-              step_m: float) -> np.ndarray:
+              step_m: float, candidate_limit: int = CANDIDATE_LIMIT) -> np.ndarray:
     """For each face of ``checked`` (indices; each with a normal: not a sliver), whether another face of the mesh
     (``vertices_m`` (V, 3) m, ``faces`` (F, 3), ``surface`` its hierarchy) meets its inner triangle or the segment
-    ``step_m`` (m) either side of its centroid along its normal (see the module doc)."""
-    met = np.zeros(len(checked), bool)
+    ``step_m`` (m) either side of its centroid along its normal (see the module doc): ``MET``, ``UNMET``, or
+    ``CROWDED`` (not checked: more than ``candidate_limit`` faces near it)."""
+    status = np.zeros(len(checked), np.int8)
     if len(checked):
         vertices = np.ascontiguousarray(vertices_m, np.float64)
         with PARALLEL_KERNEL_LOCK:
             _faces_met(vertices, np.ascontiguousarray(faces, np.int64), surface.hierarchy,
-                       np.ascontiguousarray(checked, np.int64), float(step_m), tolerance_m(vertices), met)
-    return met
+                       np.ascontiguousarray(checked, np.int64), float(step_m), tolerance_m(vertices),
+                       int(candidate_limit), status)
+    return status
