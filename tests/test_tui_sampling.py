@@ -239,8 +239,9 @@ async def test_once_the_pose_is_pinned_down_the_screen_suggests_a_tap_and_moves_
         before = cell.base_T_tcp()
         await pilot.press("g")
         await until(pilot, lambda: isinstance(app.screen, ConfirmMove))
-        await pilot.press("n")
+        await pilot.press("enter")  # the focused button is Cancel
         await until(pilot, lambda: app.screen is screen)
+        assert text_of(screen, "#note").startswith("Not moved. Press g to move above the suggested point")
         np.testing.assert_allclose(cell.base_T_tcp()[:3, 3], before[:3, 3], atol=1e-3)  # cancelled: no motion
         target = screen.advice.base_p_point_m
         await pilot.press("g")

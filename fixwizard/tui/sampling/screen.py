@@ -232,6 +232,9 @@ class SamplingScreen(Screen[bool]):
 
                 self._run_robot(lambda: self._move_above(plan, cancel), hovering,
                                 doing="Moving above the suggested point", cancel=cancel)
+            else:  # Cancel (the focused button: Enter), n or Esc
+                self._say(f"Not moved. Press {keys.name(keys.GO)} to move above the suggested point, or guide the "
+                          "ball there by hand.")
 
         self.app.push_screen(ConfirmMove("Move the robot?", hover_question(plan, self.cell.simulated)), answered)
 
