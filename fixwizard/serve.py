@@ -141,11 +141,13 @@ class FixtureService:
             raise Refused(DAMAGED, f"fixwizard: the newest report of '{name}' ({damaged.path.name}) cannot be read, "
                           f"so no older one is served in its place: {damaged.problem}; fix that file, or move it out "
                           f"of {self.folder} if an older report is to be served")
-        unknown = next((each for each in reports.unreadable if each.passing and each.name is None), None)
-        if unknown is not None:  # not even its start could be read: it may be a newer report of any fixture
-            raise Refused(DAMAGED, f"fixwizard: {unknown.path.name} in {self.folder} cannot be read, so it may be a "
-                          f"newer report of '{name}' and no older one is served in its place: {unknown.problem}; make "
-                          f"it readable, or move it out of {self.folder}")
+        unknown = next((each for each in reports.unreadable if each.of_any_fixture), None)
+        if unknown is not None:  # it does not say which fixture it is of: it may be a newer report of any fixture
+            how = ("cannot be read" if unknown.passing else
+                   "is a fixwizard report cut short or damaged before it names its fixture")
+            raise Refused(DAMAGED, f"fixwizard: {unknown.path.name} in {self.folder} {how}, so it may be a newer "
+                          f"report of '{name}' and no older one is served in its place: {unknown.problem}; "
+                          f"{'make it readable' if unknown.passing else 'fix it'}, or move it out of {self.folder}")
         loaded = reports.newest.get(name)
         if loaded is None:
             known = ", ".join(reports.names) or "none yet"

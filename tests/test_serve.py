@@ -529,8 +529,27 @@ def test_a_damaged_report_older_than_the_newest_readable_one_changes_nothing(run
     older = re.sub(r"created: '2020\d{4}", "created: '2020", older)
     (cell / "bracket-0.yaml").write_text(older.replace("status: unique", "status: perfect"))
     assert fw.is_usable("bracket") and fw.get_status("bracket")["report"].endswith("bracket-1.yaml")
-    (cell / "nameless.yaml").write_text("schema: fixwizard.report/2\nstatus: [\n")  # says no fixture: refuses none
     assert fw.list_fixtures() == ["bracket", "jig", "lid", "plate", "tray"]
+
+
+def test_a_report_cut_short_before_it_names_its_fixture_stops_every_fixture_being_served_from_an_older_report(
+        running, cell):
+    """A recalibration's report that a copy cut within its first lines (before its fixture's name) said no fixture:
+    it was skipped, and the older report of its fixture, from before the fixture moved, was served as usable. Like a
+    file that cannot be read at all, it may be a newer report of any fixture: each is refused with fault 8 naming
+    it. A YAML file that does not say it is a fixwizard report (notes.yaml) refuses none."""
+    fw = running.client()
+    text = (cell / "bracket-1.yaml").read_text()
+    (cell / "bracket-2.yaml").write_text(text[:text.index("fixture:")])
+    for name in ("bracket", "tray"):
+        fault = fault_of(lambda name=name: fw.get_pose(name))
+        assert fault.faultCode == DAMAGED
+        assert fault.faultString.startswith(
+            f"fixwizard: bracket-2.yaml in {cell} is a fixwizard report cut short or damaged before it names its "
+            f"fixture, so it may be a newer report of '{name}' and no older one is served in its place: ")
+        assert fault.faultString.endswith(f"; fix it, or move it out of {cell}")
+    (cell / "bracket-2.yaml").rename(cell.parent / "bracket-2.yaml")  # moved out: each is judged by its own again
+    assert fw.is_usable("bracket") and fault_of(lambda: fw.get_pose("tray")).faultCode != DAMAGED
 
 
 def serve_process(cell: Path, *options: str) -> tuple[subprocess.Popen, xmlrpc.client.ServerProxy, str]:

@@ -24,13 +24,21 @@ SUFFIXES = (".yaml", ".yml")
 class Unreadable:
     """A file in the folder that is no readable report, and why; the fixture ``name`` and ``created`` it still
     claims, where it does (``report.claimed_fixture``); ``passing``: the file could not be read then (an OSError),
-    so reading it again may give another answer though nothing changed."""
+    so reading it again may give another answer though nothing changed; ``a_report``: its start says it is a
+    fixwizard report (``report.is_report_file``)."""
 
     path: Path
     problem: str
     name: str | None = None
     created: dt.datetime | None = None
     passing: bool = False
+    a_report: bool = False
+
+    @property
+    def of_any_fixture(self) -> bool:
+        """Whether it may be a report of any fixture: it could not be read at all, or it is a report cut short (or
+        damaged) before it names its fixture."""
+        return self.name is None and (self.passing or self.a_report)
 
 
 @dataclass(frozen=True)
@@ -85,7 +93,8 @@ def _read(path: Path, known: CellReports | None) -> tuple[tuple, report.Report |
         return before, report.load(path)
     except (InputError, OSError) as error:
         passing = isinstance(error, OSError) or isinstance(error.__cause__, OSError)
-        return (), Unreadable(path, str(error), *report.claimed_fixture(path), passing=passing)
+        return (), Unreadable(path, str(error), *report.claimed_fixture(path), passing=passing,
+                              a_report=report.is_report_file(path))
 
 
 def scan(folder: str | Path, known: CellReports | None = None) -> CellReports:
