@@ -83,6 +83,16 @@ def test_the_expert_runs_own_taps_are_consistent_with_its_report_and_say_to_keep
     assert guaranteed_mm == pytest.approx(report.load(path).pose_to_use()[1].max_point_displacement_m * 1e3, abs=0.01)
     assert 2 * BOUND_M * 1e3 < figure_mm <= guaranteed_mm  # two sample bounds apart at least: the taps' own slack
     assert "to first order (small moves)" in out and "Keep using the report's pose." in out
+    assert "sample bound 1.00 mm." in out  # the report's, as given by default: nothing to say
+
+
+def test_a_sample_bound_below_the_reports_is_raised_to_it_and_said_so(expert, capsys):
+    """One bound serves the report's taps and the new ones: --sample-bound 0.5mm against a report of 1 mm was raised
+    to 1 mm without a word (the line showed 1.00 mm, as if given)."""
+    folder, path, taps, _ = expert
+    assert run_verify(folder, path, taps[:8], "--sample-bound", "0.5mm") == 0
+    assert ("sample bound 1.00 mm (the report's: one bound serves its taps and the new ones; 0.50 mm was given)."
+            in capsys.readouterr().out)
 
 
 def test_taps_just_above_the_old_seen_threshold_do_not_say_to_keep_using_the_pose(expert, real_data, capsys):

@@ -157,6 +157,7 @@ class VerifyResult:
     bracket: BoundBracket | None
     missable: MissableMove | None  # consistent taps of a unique report: how far they let the fixture be from its pose
     seeing_point: CheckPoint | None  # where a further tap would see the move ``missable`` says is seen least
+    given_sample_bound_m: float  # the new taps' bound as given; ``sample_bound_m`` is larger with the report's taps
 
     @property
     def moved(self) -> bool:
@@ -169,7 +170,7 @@ def verify(loaded: report.Report, fixture: Fixture, base_p_taps: np.ndarray, bal
     to the report's. Raises ``SearchCancelled`` when ``cancel`` is set meanwhile."""
     taps = _checked_taps(base_p_taps)
     ball_m = loaded.ball_diameter_m if ball_diameter_m is None else ball_diameter_m
-    bound_m = loaded.sample_bound_m if sample_bound_m is None else sample_bound_m
+    bound_m = given_m = loaded.sample_bound_m if sample_bound_m is None else sample_bound_m
     if not (math.isfinite(ball_m) and 0.0 <= ball_m <= MAX_BALL_DIAMETER_M):
         raise InputError(f"a {ball_m * 1e3:g} mm tip ball is implausible; give the diameter with its unit, e.g. "
                          "--ball-diameter 3mm")
@@ -191,7 +192,8 @@ def verify(loaded: report.Report, fixture: Fixture, base_p_taps: np.ndarray, bal
     if not found.moved and loaded.status == "unique" and len(taps) >= SUGGESTED_TAPS[0] and to_use is not None:
         missable = missable_move(fixture, to_use[0], taps, ball_m, bound_m)
         seeing = seeing_point(fixture, to_use[0], ball_m, missable)
-    return VerifyResult(loaded, taps, found, distances, with_report_taps, bound_m, ball_m, bracket, missable, seeing)
+    return VerifyResult(loaded, taps, found, distances, with_report_taps, bound_m, ball_m, bracket, missable, seeing,
+                        given_m)
 
 
 def _direction_words(base_u: np.ndarray) -> str:
@@ -248,9 +250,11 @@ def verdict_lines(result: VerifyResult) -> list[str]:
                      "again.")
     else:
         lines.append(_unique_consistent_line(result, taps))
+    raised = (f" (the report's: one bound serves its taps and the new ones; {result.given_sample_bound_m * 1e3:.2f} mm "
+              "was given)" if result.sample_bound_m > result.given_sample_bound_m + 2 * REPORT_TAPS_ROUNDING_M else "")
     lines.append(f"At the report's pose the taps lie up to {distances_mm[worst]:.2f} mm off the surface (tap "
                  f"{worst + 1}; RMS {float(np.sqrt(np.mean(distances_mm**2))):.2f} mm); sample bound "
-                 f"{result.sample_bound_m * 1e3:.2f} mm.")
+                 f"{result.sample_bound_m * 1e3:.2f} mm{raised}.")
     bracket = result.bracket
     explained_m = None if bracket is None else bracket.explained_m
     if bracket is not None and explained_m is None:
