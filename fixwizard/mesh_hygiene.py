@@ -412,7 +412,8 @@ def _orient(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, bool, li
     if crossing:  # the repairs said above still hold
         warnings.append(("mesh_self_intersecting",
                          f"{name} crosses itself or has faces lying over one another ({crossing} of its {len(faces)} "
-                         "faces face outside on their inner side or inside on their outer side), so fixwizard cannot "
+                         "faces are crossed or touched inside by another face, or face outside on their inner side "
+                         "or inside on their outer side), so fixwizard cannot "
                          "tell inside from outside there and uses the unsigned distance: the bounds stay guaranteed "
                          "but may be looser. Repair the mesh in CAD (a union of its solids, no faces crossing) for "
                          "tighter bounds."))
