@@ -444,17 +444,62 @@ def test_on_dented_and_self_crossing_surfaces_no_point_outside_is_called_inside(
         mesh.export(path)
         fixture = load_fixture(path, "m")
         signed += fixture.signed
-        corners = np.asarray(mesh.vertices)[mesh.faces]
-        on_faces = np.einsum("fk,fkd->fd", rng.dirichlet(np.ones(3), len(corners)), corners)
-        near = np.vstack([on_faces, np.asarray(mesh.vertices)])
-        near = np.repeat(near, 8, axis=0)
-        directions = rng.normal(size=near.shape)
-        directions /= np.linalg.norm(directions, axis=1, keepdims=True)
-        points = near + directions * 10 ** rng.uniform(-6.0, -1.7, (len(near), 1))
-        outside = np.abs(igl.winding_number(mesh.vertices, np.asarray(mesh.faces, np.int64), points)) < 0.5
-        distances = fixture.oracle.signed_distance_m(points[outside] - fixture.cad_p_center)
-        assert np.all(distances >= 0.0), (seed, trial, fixture.signed, int(np.sum(distances < 0.0)))
+        called_inside = _outside_points_called_inside(fixture, mesh, rng)
+        assert called_inside == 0, (seed, trial, fixture.signed, called_inside)
     assert signed > 0  # each seed draws surfaces that stay signed (4-6 of 6 over seeds 0-19)
+
+
+def _outside_points_called_inside(fixture, mesh: trimesh.Trimesh, rng: np.random.Generator) -> int:
+    """How many points outside ``mesh`` (winding number 0), near its faces and vertices (a micrometre to
+    centimetres off), the fixture gives a negative distance."""
+    corners = np.asarray(mesh.vertices)[mesh.faces]
+    on_faces = np.einsum("fk,fkd->fd", rng.dirichlet(np.ones(3), len(corners)), corners)
+    near = np.repeat(np.vstack([on_faces, np.asarray(mesh.vertices)]), 8, axis=0)
+    directions = rng.normal(size=near.shape)
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    points = near + directions * 10 ** rng.uniform(-6.0, -1.7, (len(near), 1))
+    outside = np.abs(igl.winding_number(mesh.vertices, np.asarray(mesh.faces, np.int64), points)) < 0.5
+    return int(np.sum(fixture.oracle.signed_distance_m(points[outside] - fixture.cad_p_center) < 0.0))
+
+
+def _snapped(rng: np.random.Generator) -> trimesh.Trimesh:
+    """A box, sphere or cylinder of 12-80 faces with one or two vertices put exactly where a crossing is hardest to
+    see: on another face's centroid, an edge's middle or a corner, through a face by 1e-12 to 1e-3 of it, into a
+    face's 5e-4 margin band, or mirrored through a face's plane (a fold); 2-200 mm, up to 50 m from the origin,
+    some rounded to float32."""
+    mesh = (trimesh.creation.icosphere(int(rng.integers(0, 2))), trimesh.creation.box((2, 2, 2)).subdivide(),
+            trimesh.creation.cylinder(1.0, 2.0, sections=int(rng.integers(6, 20))))[rng.integers(3)]
+    vertices, faces = np.asarray(mesh.vertices).copy(), np.asarray(mesh.faces)
+    for vertex in rng.choice(len(vertices), rng.integers(1, 3), replace=False):
+        corners = vertices[faces[rng.integers(len(faces))]]
+        normal = np.cross(corners[1] - corners[0], corners[2] - corners[0])
+        normal /= np.linalg.norm(normal)
+        vertices[vertex] = (corners.mean(axis=0), 0.5 * (corners[0] + corners[1]), corners[0],
+                            corners.mean(axis=0) - normal * 10 ** rng.uniform(-12, -3),
+                            rng.permutation([1 - 6e-4, 3e-4, 3e-4]) @ corners - normal * 10 ** rng.uniform(-9, -2),
+                            vertices[vertex] - 2.0 * np.dot(vertices[vertex] - corners[0], normal) * normal,
+                            )[rng.integers(6)]
+    vertices = vertices * rng.choice([0.001, 0.02, 0.1]) + rng.choice([0.0, 3.0, 50.0])
+    if rng.random() < 0.3:
+        vertices = vertices.astype(np.float32).astype(np.float64)
+    return trimesh.Trimesh(vertices, faces, process=False)
+
+
+@pytest.mark.parametrize("seed", range(int(os.environ.get("FUZZ_RUNS", "12"))))
+def test_on_surfaces_with_a_vertex_snapped_onto_another_face_no_point_outside_is_called_inside(seed):
+    """The same condition where crossings lie exactly along edges, at corners, in one face's margin band, or fold a
+    face over another: some stay signed (their crossings touch no face's inner triangle), the others are found
+    crossing themselves. Seed 10 draws one that only ``face_contact`` finds (without it, points outside are called
+    inside)."""
+    rng = np.random.default_rng(seed)
+    for trial in range(10):
+        mesh = _snapped(rng)
+        try:
+            fixture = as_fixture(f"snapped{trial}", mesh)
+        except MeshError:  # float32 coordinates 50 m out: too coarse for the finest bound, refused
+            continue
+        called_inside = _outside_points_called_inside(fixture, mesh, rng)
+        assert called_inside == 0, (seed, trial, fixture.signed, called_inside)
 
 
 def test_a_disc_cut_in_a_fan_of_thousands_stays_signed_and_its_caps_are_signed_by_the_winding_number(tmp_path):
