@@ -473,6 +473,8 @@ def _snapped(rng: np.random.Generator) -> trimesh.Trimesh:
     for vertex in rng.choice(len(vertices), rng.integers(1, 3), replace=False):
         corners = vertices[faces[rng.integers(len(faces))]]
         normal = np.cross(corners[1] - corners[0], corners[2] - corners[0])
+        if not np.linalg.norm(normal) > 0.0:  # a face an earlier snap left of zero area
+            continue
         normal /= np.linalg.norm(normal)
         vertices[vertex] = (corners.mean(axis=0), 0.5 * (corners[0] + corners[1]), corners[0],
                             corners.mean(axis=0) - normal * 10 ** rng.uniform(-12, -3),
