@@ -76,6 +76,9 @@ DASHBOARD_STOP_TIMEOUT_S = 1.0
 POLL_S = 0.005
 LOCK_TIMEOUT_S = 2 * COMMAND_DEADLINE_S
 EXIT_WAIT_S = 2.0
+# Data gone stale: how long the link process is given to show it is gone (killed, crashed) before the staleness is
+# blamed on the network; the watchdog on the controller stops the arm meanwhile either way.
+DEAD_LINK_WAIT_S = 0.2
 ROTATION_TOLERANCE = 1e-6  # a target's rotation part must be this close to orthonormal
 
 
@@ -269,12 +272,15 @@ class URRobot:
                     error = self._abandon(link, str(error), getattr(error, "tap_result", None))
                 raise error
             problem = None
+            ended = f"fixwizard's robot link process ended unexpectedly{context}"
             if ready or not link.process.is_alive():
                 link.process.join(EXIT_WAIT_S)  # its pipe closes just before it is gone: wait for its exit code
-                problem = f"fixwizard's robot link process ended unexpectedly{context} ({_exit_text(link.process)})"
+                problem = f"{ended} ({_exit_text(link.process)})"
             elif watch_state and self._fresh(link) is None:
                 if not link.shared.read()[2]:
-                    problem = (f"no data from the robot for {LINK_STALE_S:g} s{context} (the network dropped, or "
+                    link.process.join(DEAD_LINK_WAIT_S)  # its data stops too where it was killed: say that instead
+                    problem = (f"{ended} ({_exit_text(link.process)})" if not link.process.is_alive() else
+                               f"no data from the robot for {LINK_STALE_S:g} s{context} (the network dropped, or "
                                "this computer stalled)")
                 else:  # the link process saw its connection drop: its answer, coming, names the cause
                     lost_seen_at = lost_seen_at or time.monotonic()
