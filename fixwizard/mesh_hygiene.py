@@ -71,7 +71,8 @@ class CleanMesh:
     """A checked mesh (m), whether its signed distance can be trusted, (code, message) warnings, which faces'
     planes do not sign the distance (``plane_unsigned_faces``, one per face; points nearest to them are signed as
     near an edge, by ray parity and the winding number): those of a body that meets another (a point nearest to one
-    may lie inside the other body) and those too crowded by long thin faces to check (``face_contact.CROWDED``); and
+    may lie inside the other body), and those the self-crossing check did not look at (slivers, and faces too
+    crowded by long thin faces: ``face_contact.CROWDED``); and
     how far the mesh's surface may lie from the exported one (m: every point of either within that of the other; zero
     unless cracks were closed)."""
 
@@ -408,7 +409,7 @@ def _orient(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, bool, li
                                                                            if cavities else "")
                          + "; fixwizard takes them as one rigid fixture. If they are separate parts, solve each "
                          "with its own mesh."))
-    crossing, crowded = _faces_whose_side_misleads(mesh, plane_unsigned_faces)
+    crossing, unchecked = _faces_whose_side_misleads(mesh, plane_unsigned_faces)
     if crossing:  # the repairs said above still hold
         warnings.append(("mesh_self_intersecting",
                          f"{name} crosses itself or has faces lying over one another ({crossing} of its {len(faces)} "
@@ -418,7 +419,7 @@ def _orient(mesh: trimesh.Trimesh, name: str) -> tuple[trimesh.Trimesh, bool, li
                          "but may be looser. Repair the mesh in CAD (a union of its solids, no faces crossing) for "
                          "tighter bounds."))
         return mesh, False, warnings, np.zeros(len(faces), bool)
-    return mesh, True, warnings, plane_unsigned_faces | crowded
+    return mesh, True, warnings, plane_unsigned_faces | unchecked
 
 
 def reliable_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -433,20 +434,22 @@ def reliable_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 def _faces_whose_side_misleads(mesh: trimesh.Trimesh, skipped: np.ndarray) -> tuple[int, np.ndarray]:
     """How many faces (not ``skipped``, not slivers) another face meets inside (``face_contact.faces_met``), or have
     their centroid's point ``SIDE_STEP_SHARE`` off them inside on their outer side or outside on their inner side
-    (by ray parity, each disagreement with the face settled by the exact winding number); and which faces were too
-    crowded to check (``face_contact.CROWDED``: their planes must not sign). Where there is none, the plane of every
-    other face signs the distance of a point nearest to it rightly (``face_contact``'s module doc); a surface that
-    crosses itself, or lays faces over one another facing opposite ways, has them where it does, and there that
-    plane would call a point outside inside: the true pose lost."""
+    (by ray parity, each disagreement with the face settled by the exact winding number); and which faces it did not
+    look at (``skipped`` ones aside): slivers, and faces too crowded to check (``face_contact.CROWDED``). Their planes
+    must not sign (the oracle, on the mesh moved to its internal frame, tells slivers after its own rounding). Where
+    there is none, the plane of every other face signs the distance of a point nearest to it rightly
+    (``face_contact``'s module doc); a surface that crosses itself, or lays faces over one another facing opposite
+    ways, has them where it does, and there that plane would call a point outside inside: the true pose lost."""
     vertices, faces = np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64)
-    checked = np.flatnonzero(~skipped & reliable_normals(vertices, faces))  # a sliver's plane never signs
-    crowded = np.zeros(len(faces), bool)
+    reliable = reliable_normals(vertices, faces)
+    checked = np.flatnonzero(~skipped & reliable)  # a sliver's plane never signs
+    unchecked = ~skipped & ~reliable
     if len(checked) == 0:
-        return 0, crowded
+        return 0, unchecked
     step_m = SIDE_STEP_SHARE * float(np.linalg.norm(np.ptp(vertices, axis=0)))
     surface = MeshDistance(vertices, faces)
     status = faces_met(surface, vertices, faces, checked, step_m)
-    crowded[checked[status == CROWDED]] = True
+    unchecked[checked[status == CROWDED]] = True
     unmet = checked[status == UNMET]
     normals = np.asarray(mesh.face_normals)[unmet]
     centroids = vertices[faces[unmet]].mean(axis=1)
@@ -458,7 +461,7 @@ def _faces_whose_side_misleads(mesh: trimesh.Trimesh, skipped: np.ndarray) -> tu
     if len(doubtful):  # a ray grazing an edge may miscount: the winding number is exact
         inside[doubtful] = igl.winding_number(vertices, faces, points[doubtful]) > 0.5
     misleading = np.any((inside != expected).reshape(2, -1), axis=0)
-    return int(np.count_nonzero(status == MET)) + int(np.count_nonzero(misleading)), crowded
+    return int(np.count_nonzero(status == MET)) + int(np.count_nonzero(misleading)), unchecked
 
 
 def _cracks_closed_message(name: str, closed: Closed) -> str:

@@ -520,3 +520,24 @@ def test_a_disc_cut_in_a_fan_of_thousands_stays_signed_and_its_caps_are_signed_b
     points = np.column_stack([radius * np.cos(angle), radius * np.sin(angle), height])
     distances = fixture.oracle.signed_distance_m(points - fixture.cad_p_center)
     np.testing.assert_array_equal(distances > 0.0, np.abs(height) > 0.01)
+
+
+def test_a_sliver_the_self_crossing_check_did_not_look_at_is_never_signed_by_its_plane(tmp_path):
+    """The check looks at faces with a trustworthy normal in the CAD frame; the oracle decides which faces have one
+    again after moving the mesh to its internal frame, where rounding may tip a borderline sliver the other way: every
+    face the check skipped is handed over as one whose plane must not sign."""
+    box = trimesh.creation.box((0.05, 0.04, 0.03))
+    vertices, faces = np.asarray(box.vertices), np.asarray(box.faces)
+    top = np.flatnonzero(np.all(np.isclose(vertices[faces][:, :, 2], 0.015), axis=1))
+    a, b, c = faces[top[0]]
+    near_ac = 0.5 * (vertices[a] + vertices[c]) + np.cross(vertices[c] - vertices[a], [0.0, 0.0, 1.0]) * 1e-9
+    split = [[a, b, 8], [b, c, 8], [c, a, 8]]  # the last a sliver: its third corner 1e-9 of its length off its base
+    mesh = trimesh.Trimesh(np.vstack([vertices, near_ac]), np.vstack([np.delete(faces, top[0], axis=0), split]),
+                           process=False)
+    assert mesh.is_watertight and mesh.is_winding_consistent
+    mesh.export(tmp_path / "sliver.obj")
+    fixture = load_fixture(tmp_path / "sliver.obj", "m")
+    assert fixture.signed and _codes(fixture) == []
+    areas = np.asarray(fixture.mesh.area_faces)
+    assert fixture.plane_unsigned_faces is not None
+    assert fixture.plane_unsigned_faces[np.argmin(areas)] and np.count_nonzero(fixture.plane_unsigned_faces) == 1

@@ -18,8 +18,8 @@ when their projections on some axis are. For two triangles the two normals, the 
 each triangle's edges turned in its own and in the other's plane suffice, whatever their shapes (coplanar, slivers
 of zero area); for a segment and a triangle the normal, the segment's cross products with the edges, and the edges
 and the segment turned in the plane. A projection is rounded by a few ulps of the coordinates; a gap counts only
-beyond ``tolerance_m`` (``CONTACT_SHARE`` of the mesh's size, far above that rounding and the closest point's, far
-below any gap a part has), so what rounding hides counts as meeting: a face found unmet is unmet.
+beyond ``contact_tolerance_m`` (``CONTACT_SHARE`` of the mesh's size, far above that rounding and the closest
+point's, far below any gap a part has), so what rounding hides counts as meeting: a face found unmet is unmet.
 
 The faces near a face are those of the bounding-volume hierarchy whose boxes overlap its inner triangle's and the
 segment's, and are not apart from them on its quick axes (its normal, its edges turned in its plane). A disc cut
@@ -32,7 +32,7 @@ import math
 import numba
 import numpy as np
 
-from fixwizard.geometry.mesh_distance import FEATURE_MARGIN, UNIT_ROUNDOFF, MeshDistance
+from fixwizard.geometry.mesh_distance import FEATURE_MARGIN, STACK_DEPTH, UNIT_ROUNDOFF, MeshDistance
 from fixwizard.parallel import PARALLEL_KERNEL_LOCK
 
 INNER_MARGIN = 0.5 * FEATURE_MARGIN
@@ -46,7 +46,6 @@ BLOCK_FACES = 256  # faces per parallel work item
 # thousands of long thin faces meeting at one vertex (a disc cut in a fan of thousands) would take quadratic time.
 CANDIDATE_LIMIT = 512
 UNMET, MET, CROWDED = 0, 1, 2
-STACK_DEPTH = 128
 
 
 @numba.njit(nogil=True, cache=True, inline="always")
@@ -252,7 +251,7 @@ def _faces_met(vertices: np.ndarray, faces: np.ndarray, hierarchy: tuple[np.ndar
                                          candidate_limit)[0]
 
 
-def tolerance_m(vertices_m: np.ndarray) -> float:
+def contact_tolerance_m(vertices_m: np.ndarray) -> float:
     """The gap (m) below which two faces of this mesh count as meeting (``CONTACT_SHARE``, ``CONTACT_ULPS``)."""
     size_m = float(np.linalg.norm(np.ptp(vertices_m, axis=0)))
     return CONTACT_SHARE * size_m + CONTACT_ULPS * UNIT_ROUNDOFF * float(np.abs(vertices_m).max())
@@ -269,6 +268,6 @@ def faces_met(surface: MeshDistance, vertices_m: np.ndarray, faces: np.ndarray, 
         vertices = np.ascontiguousarray(vertices_m, np.float64)
         with PARALLEL_KERNEL_LOCK:
             _faces_met(vertices, np.ascontiguousarray(faces, np.int64), surface.hierarchy,
-                       np.ascontiguousarray(checked, np.int64), float(step_m), tolerance_m(vertices),
+                       np.ascontiguousarray(checked, np.int64), float(step_m), contact_tolerance_m(vertices),
                        int(candidate_limit), status)
     return status

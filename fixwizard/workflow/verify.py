@@ -65,7 +65,7 @@ SUGGESTION_CANDIDATES = 400
 SUPPORT_CLEARANCE_M = 0.002  # a suggested ball stays this far above the fixture's lowest point, where it rests
 UP_FACING_NORMAL_Z = 0.7  # on a fixture too thin for that clearance, suggestions are on faces within 45 deg of up
 RIGID_MOTIONS = 6  # the ways a rigid body moves: three slides, three turns
-SAME_AXIS_DEG = 10.0  # a direction within this of a base axis is named by it ("+x"), others by their components
+SAME_AXIS_DEG = 10.0  # a direction within this of a base axis is named by it ("x"), others by their components
 
 
 def fixture_of(loaded: report.Report, mesh: str | Path | None = None) -> Fixture:
