@@ -12,6 +12,7 @@ import pytest
 import trimesh
 
 from fixwizard.geometry.mesh_distance import (
+    STACK_DEPTH,
     MeshDistance,
     row_normal,
     triangle_interval_m,
@@ -212,6 +213,37 @@ def test_the_hierarchy_finds_the_nearest_triangle_of_a_whole_mesh(seed):
     corners = mesh.triangles[faces]  # the face returned is a nearest one
     on_face = np.linalg.norm(points - closest_on_triangles(points, corners[:, 0], corners[:, 1], corners[:, 2]), axis=1)
     assert np.all(np.abs(on_face - truth) <= 1e-12)
+
+
+def _hierarchy_depth(distance: MeshDistance) -> int:
+    children = distance.hierarchy[2]
+    levels = np.zeros(len(children), np.int64)
+    for node in range(len(children)):  # children are numbered after their parent
+        if children[node, 0] >= 0:
+            levels[children[node]] = levels[node] + 1
+    return int(levels.max())
+
+
+@pytest.mark.parametrize("ratio", [0.5, 0.25])
+def test_a_mesh_graded_towards_a_point_gets_a_hierarchy_the_traversals_can_hold(ratio):
+    """Triangles shrinking geometrically towards a point (the surface-area heuristic peels off one per level):
+    the hierarchy stays shallower than the traversals' stack (it was 568 levels deep, and queries corrupted
+    memory), and the queries and rays are still exact."""
+    count = 1000
+    sizes = ratio ** np.arange(count)
+    corners = np.stack([np.column_stack([sizes, np.zeros(count), 0.01 * sizes]),
+                        np.column_stack([sizes * ratio, np.zeros(count), np.zeros(count)]),
+                        np.column_stack([sizes, 0.1 * sizes, np.zeros(count)])], axis=1)
+    vertices, faces = corners.reshape(-1, 3), np.arange(3 * count).reshape(count, 3)
+    distance = MeshDistance(vertices, faces)
+    assert _hierarchy_depth(distance) < STACK_DEPTH - 1
+    rng = np.random.default_rng(3)
+    points = rng.uniform(-1.0, 1.0, (3000, 3)) * rng.choice([1e-6, 1e-3, 1.0], (3000, 1))
+    low, high, _, _ = distance.query(points)
+    truth = exact_distances_m(trimesh.Trimesh(vertices, faces, process=False), points)
+    assert np.all(low <= truth + 1e-12) and np.all(truth <= high + 1e-12)
+    first, crossings = distance.rays(points, np.array([0.0, 0.0, -1.0]))
+    assert np.all(crossings <= 1) and np.all(np.isinf(first) == (crossings == 0))
 
 
 def test_a_hint_face_only_speeds_the_search_up():

@@ -54,7 +54,12 @@ Arrays = tuple[Any, ...]  # several arrays passed to a compiled kernel as one ar
 ROUNDING_ULPS = 64.0
 NORMAL_ULPS = 16.0
 LEAF_TRIANGLES = 4
+# The traversals keep one stacked node per level of the hierarchy (and the root's): a hierarchy deeper than this
+# would overrun them. The surface-area heuristic can peel off one triangle per level (triangles shrinking
+# geometrically, as on a mesh graded towards a point), so below SAH_DEPTH every node is split at its median instead,
+# which adds at most log2(F / LEAF_TRIANGLES) < 30 levels for any mesh that fits in memory.
 STACK_DEPTH = 128
+SAH_DEPTH = 64
 BLOCK_POINTS = 1024  # points per parallel work item
 SERIAL_POINTS = 2 * BLOCK_POINTS  # fewer points are queried on the calling thread
 
@@ -328,7 +333,8 @@ def _best_split(lows: np.ndarray, highs: np.ndarray, members: np.ndarray) -> int
 @numba.njit(nogil=True, cache=True)
 def _build_hierarchy(lows: np.ndarray, highs: np.ndarray) -> Arrays:
     """Bounding-volume hierarchy over boxes ``(F, 3)`` (m): each node split along the widest axis of its centres
-    where the surface-area heuristic says, at most ``LEAF_TRIANGLES`` per leaf. Returns the nodes' boxes (low,
+    where the surface-area heuristic says (at its median from level ``SAH_DEPTH`` on, so that no traversal's
+    ``STACK_DEPTH`` is overrun), at most ``LEAF_TRIANGLES`` per leaf. Returns the nodes' boxes (low,
     high), each inner node's two children (-1 for a leaf), each node's range in ``order``, and ``order`` (the
     triangles, leaf by leaf)."""
     count = len(lows)
@@ -339,12 +345,12 @@ def _build_hierarchy(lows: np.ndarray, highs: np.ndarray) -> Arrays:
     node_high = np.empty((capacity, 3))
     children = np.full((capacity, 2), -1, np.int64)
     ranges = np.zeros((capacity, 2), np.int64)
-    stack = np.empty((capacity, 3), np.int64)  # node, start, stop
-    stack[0, 0], stack[0, 1], stack[0, 2] = 0, 0, count
+    stack = np.empty((capacity, 4), np.int64)  # node, start, stop, its level (the root's: 0)
+    stack[0, 0], stack[0, 1], stack[0, 2], stack[0, 3] = 0, 0, count, 0
     nodes, depth = 1, 1
     while depth > 0:
         depth -= 1
-        node, start, stop = stack[depth, 0], stack[depth, 1], stack[depth, 2]
+        node, start, stop, level = stack[depth, 0], stack[depth, 1], stack[depth, 2], stack[depth, 3]
         members = order[start:stop]
         spread = np.empty(3)
         for axis in range(3):
@@ -356,10 +362,11 @@ def _build_hierarchy(lows: np.ndarray, highs: np.ndarray) -> Arrays:
             continue
         members = members[np.argsort(centres[members, np.argmax(spread)], kind="mergesort")]
         order[start:stop] = members
-        middle = start + _best_split(lows, highs, members)
+        middle = start + (_best_split(lows, highs, members) if level < SAH_DEPTH else (stop - start) // 2)
         children[node, 0], children[node, 1] = nodes, nodes + 1
-        stack[depth, 0], stack[depth, 1], stack[depth, 2] = nodes, start, middle
+        stack[depth, 0], stack[depth, 1], stack[depth, 2], stack[depth, 3] = nodes, start, middle, level + 1
         stack[depth + 1, 0], stack[depth + 1, 1], stack[depth + 1, 2] = nodes + 1, middle, stop
+        stack[depth + 1, 3] = level + 1
         nodes += 2
         depth += 2
     return node_low[:nodes], node_high[:nodes], children[:nodes], ranges[:nodes], order
