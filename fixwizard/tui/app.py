@@ -442,12 +442,18 @@ class FixwizardApp(App[None]):
             await self._step_or_error(lambda: self._end_session(sampling, report_path))
 
     def _end_session(self, sampling: Sampling, report_path: Path | None) -> None:
-        """Close the session naming its report, or release it unfinished."""
+        """Close the session naming its report, or release it unfinished (also when its closing record could not be
+        saved: held on, it could not be resumed in this wizard), selected to resume on the start screen."""
         session = sampling.session
         if session.closed:
             return
-        if report_path is not None:
-            session.close(report=str(report_path))
-        else:
-            session.release()
-            self._left_session = session.path
+        try:
+            if report_path is not None:
+                session.close(report=str(report_path))
+        except (FixwizardError, OSError) as error:
+            error.add_note("The session stays unfinished: it is selected on the start screen to resume.")
+            raise
+        finally:
+            if not session.closed:
+                session.release()
+                self._left_session = session.path
