@@ -242,6 +242,23 @@ def test_an_automatic_tap_the_full_disk_refused_stops_the_taps_and_running_again
     assert len(CalibrationJournal.open(workflow.journal.path).poses["table"]) == 16
 
 
+@pytest.mark.parametrize("saved_to", [None, "saved.yaml"], ids=["given up", "saved"])
+def test_a_calibration_whose_end_the_full_disk_refused_can_be_continued_in_the_same_wizard(fixture, tmp_path,
+                                                                                          monkeypatch, saved_to):
+    """The closing record refused: the journal stayed open in the wizard, so the start screen offered it to continue
+    and continuing it said it was "open in another fixwizard" until the operator quit."""
+    cell = new_cell(fixture)
+    workflow = journaled(cell, tmp_path)
+    workflow.capture_pivot_pose()
+    FullDisk(monkeypatch, workflow.journal.journal.handle)
+    with pytest.raises(CalibrationJournalError, match="The end of the calibration was not saved"):
+        workflow.close(None if saved_to is None else tmp_path / saved_to)
+    (offered,) = find_unfinished_calibrations(tmp_path, ROBOT)
+    continued = open_tip_calibration(Cell(cell, ROBOT, simulated=True, calibrations_dir=tmp_path), offered.path)
+    assert len(continued.poses("pivot")) == 1
+    continued.journal.release()
+
+
 def test_a_torn_last_record_is_set_aside_and_the_rest_continues(fixture, tmp_path):
     path = pivot_journal(fixture, tmp_path, 3)
     with open(path, "ab") as stream:

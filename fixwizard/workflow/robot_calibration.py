@@ -130,12 +130,16 @@ class RobotTipCalibration:
         self._clear(STEPS)
 
     def close(self, saved_to: Path | None) -> None:
-        """End the journal, if any: the calibration was saved to ``saved_to``, or given up (None)."""
+        """End the journal, if any: the calibration was saved to ``saved_to``, or given up (None). A closing record
+        the disk refused leaves the journal unfinished and let go of, so that it can be continued."""
         if self.journal is not None:
-            if saved_to is None:
-                self.journal.close("discarded")
-            else:
-                self.journal.close("saved", calibration=str(saved_to))
+            try:
+                if saved_to is None:
+                    self.journal.close("discarded")
+                else:
+                    self.journal.close("saved", calibration=str(saved_to))
+            finally:
+                self.journal.release()
 
     def poses(self, step: Step) -> np.ndarray:
         """The flange poses ``base_T_tcp`` (N, 4, 4) recorded so far in ``step``."""
