@@ -14,7 +14,8 @@ complete one (journals of older versions appended after a failed write) is skipp
 kept. A complete line that fails its checksum is damage to an acknowledged record: an error naming the line, since
 fixwizard will not guess what it held; the last line too, unless it is no JSON at all (a power cut before its fsync
 kept the page with its end and lost the one with its start): that one is torn. One writer at a time, enforced with
-a non-blocking ``flock``.
+a non-blocking ``flock``. A journal deleted while open (its folder removed) is written back at its path before the
+next record; another file renamed over it is left alone, and records are refused until it is moved away.
 """
 
 import errno
@@ -169,6 +170,7 @@ class Journal:
         assert self.handle is not None
         noun, error = self.kind.noun, self.kind.error
         try:
+            self._rejoin(what)
             _write_all(self.handle, line)
             os.fsync(self.handle)
         except OSError as failure:
@@ -184,6 +186,33 @@ class Journal:
                                 "now)")
             raise problem from failure
         self._end += len(line)
+
+    def _rejoin(self, what: str) -> None:
+        """Put the journal back at its path when the file open here is in no folder any more (deleted, its folder
+        removed, or another file renamed over it): records written on to it would be lost once it is let go of.
+        Everything saved is copied into a new file there, which is written to from then on; a file now at the path
+        is left alone (the kind's error says ``what`` was not saved)."""
+        assert self.handle is not None
+        if os.fstat(self.handle).st_nlink > 0:
+            return
+        if os.path.lexists(self.path):
+            raise self.kind.error(f"the {self.kind.noun} {self.path} was replaced by another file while fixwizard "
+                                  f"was writing to it, so {what} was not saved; move that file away and try again: "
+                                  "fixwizard then writes every saved record back there")
+        saved = os.pread(self.handle, self._end, 0)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        handle = os.open(self.path, os.O_RDWR | os.O_APPEND | os.O_CREAT | os.O_EXCL, 0o666)
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            _write_all(handle, saved)
+            os.fsync(handle)
+            _fsync_dir(self.path.parent)
+        except BaseException:
+            os.close(handle)
+            self.path.unlink(missing_ok=True)
+            raise
+        os.close(self.handle)
+        self.handle = handle
 
 
 def replay(kind: JournalKind, path: str | Path, replayed: Callable[[Journal], T]) -> T:

@@ -4,6 +4,7 @@ import errno
 import json
 import os
 import select
+import shutil
 import signal
 import subprocess
 import sys
@@ -330,6 +331,42 @@ def test_a_failed_undo_drop_or_close_is_not_applied(tmp_path, monkeypatch):
         assert failing.times == 0 and not session.closed
         assert [tap.id for tap in session.taps] == [1, 2, 3]
         assert session.undo().id == 3
+    with SamplingSession.open(session.path) as resumed:
+        assert [tap.id for tap in resumed.taps] == [1, 2]
+
+
+def test_a_journal_deleted_while_open_is_written_back_with_every_saved_tap(tmp_path):
+    """Its folder removed while the wizard sampled (a clean-up): the taps after were said to be saved, written to a
+    file in no folder, and gone once the wizard let go of it."""
+    session = new_session(tmp_path, "sessions/a.jsonl")
+    session.record_tap(pose(0))
+    session.undo()
+    session.record_tap(pose(1))
+    shutil.rmtree(tmp_path / "sessions")
+    assert session.record_tap(pose(2)).id == 3
+    session.path.unlink()  # and the file alone
+    assert session.record_tap(pose(3)).id == 4
+    session.release()
+    with SamplingSession.open(session.path) as resumed:
+        assert resumed.recovered == () and [tap.id for tap in resumed.taps] == [2, 3, 4]
+
+
+def test_a_journal_replaced_while_open_is_not_written_over_and_keeps_every_saved_tap(tmp_path):
+    """Another file renamed over the journal (an editor saving it): the taps after went to the file it replaced."""
+    session = new_session(tmp_path)
+    session.record_tap(pose(0))
+    other = tmp_path / "edited.jsonl"
+    other.write_text("someone's edit\n")
+    os.replace(other, session.path)
+    with pytest.raises(SessionError, match=f"the session {session.path} was replaced by another file while "
+                                           "fixwizard was writing to it, so this tap was not saved; move that file "
+                                           "away and try again: fixwizard then writes every saved record back "
+                                           "there"):
+        session.record_tap(pose(1))
+    assert session.path.read_text() == "someone's edit\n"
+    session.path.rename(tmp_path / "moved-away.jsonl")
+    assert session.record_tap(pose(1)).id == 2
+    session.release()
     with SamplingSession.open(session.path) as resumed:
         assert [tap.id for tap in resumed.taps] == [1, 2]
 
