@@ -219,6 +219,29 @@ async def test_a_report_path_naming_a_file_asks_before_replacing_it(tapped, tmp_
 
 
 @pytest.mark.slow
+async def test_a_report_path_naming_an_input_is_refused_without_asking_to_replace_it(tapped):
+    """The session journal or the mesh typed as the report's path: the screen asked "Replace the file? What it holds
+    now is lost" about the operator's journal, and refused only once told to replace it. Now it refuses at once."""
+    tapped.with_cell(max_cells=1e5)  # a coarse result is enough to write
+    solved(tapped)
+    journal = tapped.session.path.read_bytes()
+    app = ScreenHost(lambda: tapped.results_screen())
+    async with app.run_test(size=SIZE) as pilot:
+        results = app.screen
+        path_input = results.query_one("#report-path", Input)
+        for typed, what in ((tapped.session.path, "the session journal"), (tapped.fixture.path, "the fixture mesh")):
+            await pilot.press("e")
+            await until(pilot, lambda: path_input.has_focus)
+            path_input.value = str(typed)
+            await pilot.press("enter")
+            await pilot.pause()
+            assert app.screen is results, f"{what}: asked {type(app.screen).__name__}"
+            assert text_of(results, "#written").startswith(f"The report was not written: {typed} is {what} ")
+            assert "choose another report path" in text_of(results, "#written") and results.written is None
+    assert tapped.session.path.read_bytes() == journal
+
+
+@pytest.mark.slow
 async def test_an_inconsistent_result_names_the_suspect_and_dropping_it_solves(tapped):
     tapped.session.record_tap(np.eye(4), base_p_ball_m=point_above_fixture_m(tapped, 0.05))
     solved(tapped)

@@ -33,11 +33,17 @@ def session_report(solution: Solution, fixture: Fixture, session: SamplingSessio
     return data
 
 
+def report_target(path: str | Path, fixture: Fixture, session: SamplingSession) -> Path:
+    """The file a report written to ``path`` replaces (``atomic.check_output``); InputError for a path that is one of
+    the inputs (mesh, journal, tip calibration), a folder or a device."""
+    return check_output(path, [("fixture mesh", fixture.path), ("session journal", session.path),
+                               ("tip calibration", session.header.get("tip", {}).get("calibration"))],
+                        "choose another report path")
+
+
 def write_session_report(path: str | Path, solution: Solution, fixture: Fixture, session: SamplingSession,
                          calibration: TipCalibration, simulated: bool) -> Path:
-    """Write the report atomically and return its absolute path; InputError for a path that is one of the
-    inputs (mesh, journal, tip calibration), a folder or a device, OSError when the disk refuses it."""
-    check_output(path, [("fixture mesh", fixture.path), ("session journal", session.path),
-                        ("tip calibration", session.header.get("tip", {}).get("calibration"))],
-                 "choose another report path")
+    """Write the report atomically and return its absolute path; InputError for a path ``report_target`` refuses,
+    OSError when the disk refuses it."""
+    report_target(path, fixture, session)
     return report.write(Path(path), session_report(solution, fixture, session, calibration, simulated)).resolve()

@@ -16,7 +16,6 @@ from textual.containers import Horizontal, VerticalScroll
 from textual.screen import Screen
 from textual.widgets import Input, Label, Static, TabbedContent, TabPane, Tabs
 
-from fixwizard.atomic import output_target
 from fixwizard.errors import FixwizardError
 from fixwizard.plots import rotation_map_for_solution, taps_view_for_solution
 from fixwizard.solver.solve import Solution
@@ -35,7 +34,7 @@ from fixwizard.tui.widgets.key_footer import KeyFooter
 from fixwizard.tui.widgets.picture_view import PictureView
 from fixwizard.workflow.advice import distinguishing_tap
 from fixwizard.workflow.details import details_lines
-from fixwizard.workflow.wizard_report import default_report_path, write_session_report
+from fixwizard.workflow.wizard_report import default_report_path, report_target, write_session_report
 
 
 @dataclass(frozen=True)
@@ -156,13 +155,13 @@ class ResultsScreen(Screen[Outcome]):
 
     def action_write(self) -> None:
         """Write the report to the path typed; asks before replacing a file this screen did not write (another
-        fixture's report, say)."""
+        fixture's report, say), after refusing one of the inputs (the journal, the mesh) without asking."""
         typed = self.query_one("#report-path", Input).value.strip()
         if not typed:
             self._say("Type where the report should go (e), then press w.", problem=True)
             return
         try:
-            target = output_target(typed)
+            target = report_target(typed, self.sampling.fixture, self.sampling.session)
         except (FixwizardError, OSError) as error:
             self._say(f"The report was not written: {error_message(error)}", problem=True)
             return
