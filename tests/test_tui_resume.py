@@ -4,6 +4,7 @@ it opened; every refusal is explained on screen and leaves the operator on the s
 import asyncio
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -99,6 +100,13 @@ def damaged_calibration(path: Path) -> str:
     return str(path)
 
 
+def calibration_missing_a_step(path: Path) -> str:
+    """A calibration that parses but lacks a step's figures (its message ends with a full stop)."""
+    calibration = path.parents[1] / "calibrations" / "example_matlab_logo.yaml"
+    calibration.write_text(calibration.read_text().replace("steps:\n  pivot:", "steps:\n  pivot_gone:"))
+    return str(path)
+
+
 def not_a_number_in_a_tap(path: Path) -> str:
     """A tap line with NaN (which JSON readers take, and no record holds), its checksum made to match."""
     record = json.loads(path.read_bytes().splitlines()[2])
@@ -150,6 +158,7 @@ def no_unfinished_session(path: Path) -> str:
     (checksum_mismatch, "is damaged (checksum or JSON)"),
     (deleted_calibration, "example_matlab_logo.yaml"),
     (damaged_calibration, "example_matlab_logo.yaml"),
+    (calibration_missing_a_step, "'steps.pivot' is missing"),
     (not_a_number_in_a_tap, "line 3 of the session"),
     (deeply_nested_line, "line 3 of the session"),
     (header_naming_no_fixture, "was not started by the wizard"),
@@ -169,6 +178,7 @@ def test_every_refused_resume_is_explained_on_the_start_screen(tmp_path, spoil, 
             assert message.startswith("Could not resume ") and reason in message
             assert message.endswith("On the start screen, resume another session or start a new one.")
             assert "Traceback" not in message
+            assert re.search(r"[^.]\.\. ", message) is None, message  # one full stop between two sentences
             await pilot.press("escape")
             await until(pilot, lambda: isinstance(app.screen, StartScreen))
             assert reason in str(app.screen.query_one("#resume-problem", Static).render())  # it stays in view

@@ -65,8 +65,8 @@ def resume_session(cell: Cell, path: Path) -> Resumed:
         try:
             calibration = load_calibration(calibration_path)
         except CalibrationFileError as error:
-            raise SessionError(f"{error}. The session was recorded with that tip calibration: put it back, or "
-                               "start a new session") from error
+            raise SessionError(f"{str(error).rstrip('.')}. The session was recorded with that tip calibration: put "
+                               "it back, or start a new session") from error
     except BaseException:
         session.release()
         raise
