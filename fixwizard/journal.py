@@ -347,6 +347,10 @@ def _read(kind: JournalKind, path: Path, data: bytes) -> _Read:
     header = _header_of(kind, lines)
     if header is None:
         found = (_decode(lines[0]) or {}).get("schema") if lines else None
+        if found == kind.schema:  # the header itself checks out: only its newline is missing
+            raise kind.error(f"the first line of the {kind.noun} {path} does not end with a newline (LF) as "
+                             "fixwizard writes it: an editor or a copy changed its line ends; change them back to "
+                             "newlines and resume again")
         newer = other_version(path, f"{kind.noun} journal", found, (kind.schema,))
         if newer is not None:
             raise kind.error(newer)

@@ -177,6 +177,19 @@ def test_a_session_of_another_fixwizard_version_is_said_to_be_one(tmp_path):
         SamplingSession.open(path)
 
 
+@pytest.mark.parametrize("line_ends", [b"\r", b""], ids=["carriage returns", "none"])
+def test_a_session_whose_line_ends_were_changed_is_said_to_be_so(tmp_path, line_ends):
+    """Newlines turned into carriage returns (an old Mac editor), or the header's removed: the journal was called
+    "of a version this fixwizard does not read ('fixwizard.session/1'; it reads fixwizard.session/1)"."""
+    path = recorded(tmp_path, 1 if line_ends else 0)
+    path.write_bytes(path.read_bytes().replace(b"\n", line_ends))
+    with pytest.raises(SessionError) as refused:
+        SamplingSession.open(path)
+    assert str(refused.value) == (f"the first line of the session {path} does not end with a newline (LF) as "
+                                  "fixwizard writes it: an editor or a copy changed its line ends; change them back "
+                                  "to newlines and resume again")
+
+
 def test_existing_session_is_not_overwritten(tmp_path):
     path = recorded(tmp_path, 1)
     with pytest.raises(SessionError, match="exists already"):
