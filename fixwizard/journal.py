@@ -14,8 +14,9 @@ complete one (journals of older versions appended after a failed write) is skipp
 kept. A complete line that fails its checksum is damage to an acknowledged record: an error naming the line, since
 fixwizard will not guess what it held; the last line too, unless it is no JSON at all (a power cut before its fsync
 kept the page with its end and lost the one with its start): that one is torn. One writer at a time, enforced with
-a non-blocking ``flock``. A journal deleted while open (its folder removed) is written back at its path before the
-next record; another file renamed over it is left alone, and records are refused until it is moved away.
+a non-blocking ``flock``. A journal deleted or moved away while open (its folder removed) is written back at its path
+before the next record (from the copy of the saved records kept in memory); a file another program put at the path
+or changed there (renamed or copied over it) is left alone, and records are refused until it is moved away.
 """
 
 import errno
@@ -83,7 +84,7 @@ class Journal:
         self.records = records  # (1-based line, record) as read on open
         self.recovered = recovered
         self.handle: int | None = handle
-        self._end = os.fstat(handle).st_size  # the journal's length up to its last saved record
+        self._saved = _read_all(handle)  # the journal up to its last saved record, to write it back if need be
 
     @classmethod
     def create(cls, kind: JournalKind, path: str | Path, header: dict) -> Self:
@@ -178,33 +179,40 @@ class Journal:
                             f"{what[:1].upper()}{what[1:]} was not saved; everything saved before is kept, so try "
                             "again once that is fixed")
             try:
-                os.ftruncate(self.handle, self._end)
+                os.ftruncate(self.handle, len(self._saved))
                 os.fsync(self.handle)
             except OSError:
                 self.release()  # opening again cuts the partial record off; writing on could follow it
                 problem = error(f"{problem} (quit and resume the {noun}: the partial record could not be removed "
                                 "now)")
             raise problem from failure
-        self._end += len(line)
+        self._saved += line
 
     def _rejoin(self, what: str) -> None:
-        """Put the journal back at its path when the file open here is in no folder any more (deleted, its folder
-        removed, or another file renamed over it): records written on to it would be lost once it is let go of.
-        Everything saved is copied into a new file there, which is written to from then on; a file now at the path
-        is left alone (the kind's error says ``what`` was not saved)."""
+        """Put the journal back at its path when the file open here is no longer there (deleted, its folder removed,
+        moved away): records written on to it would be lost or go elsewhere. Everything saved is written into a new
+        file there, which is written to from then on. A file that another program put at the path (renamed over
+        the journal, an editor saving it) or changed (copied over it) is left alone: the kind's error says ``what``
+        was not saved and to move that file away."""
         assert self.handle is not None
-        if os.fstat(self.handle).st_nlink > 0:
+        held = os.fstat(self.handle)
+        try:
+            found = os.stat(self.path)
+        except FileNotFoundError:
+            found = None
+        if found is not None and (found.st_dev, found.st_ino) == (held.st_dev, held.st_ino) and \
+                held.st_size == len(self._saved):
             return
-        if os.path.lexists(self.path):
-            raise self.kind.error(f"the {self.kind.noun} {self.path} was replaced by another file while fixwizard "
-                                  f"was writing to it, so {what} was not saved; move that file away and try again: "
-                                  "fixwizard then writes every saved record back there")
-        saved = os.pread(self.handle, self._end, 0)
+        if found is not None:
+            changed = "replaced by another file" if found.st_ino != held.st_ino else "changed by another program"
+            raise self.kind.error(f"the {self.kind.noun} {self.path} was {changed} while fixwizard was writing to "
+                                  f"it, so {what} was not saved; move that file away and try again: fixwizard then "
+                                  "writes every saved record back there")
         self.path.parent.mkdir(parents=True, exist_ok=True)
         handle = os.open(self.path, os.O_RDWR | os.O_APPEND | os.O_CREAT | os.O_EXCL, 0o666)
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            _write_all(handle, saved)
+            _write_all(handle, bytes(self._saved))
             os.fsync(handle)
             _fsync_dir(self.path.parent)
         except BaseException:
@@ -401,6 +409,14 @@ def _write_all(handle: int, line: bytes) -> None:
         if written == 0:
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
         view = view[written:]
+
+
+def _read_all(handle: int) -> bytearray:
+    """The whole file open at ``handle``, read from its start."""
+    data = bytearray()
+    while chunk := os.pread(handle, 1 << 20, len(data)):
+        data += chunk
+    return data
 
 
 def _move_aside(noun: str, path: Path, handle: int, line_number: int, offset: int, torn: bytes) -> TornRecord:

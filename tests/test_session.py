@@ -350,7 +350,7 @@ def test_a_failed_undo_drop_or_close_is_not_applied(tmp_path, monkeypatch):
 
 def test_a_journal_deleted_while_open_is_written_back_with_every_saved_tap(tmp_path):
     """Its folder removed while the wizard sampled (a clean-up): the taps after were said to be saved, written to a
-    file in no folder, and gone once the wizard let go of it."""
+    file in no folder, and gone once the wizard let go of it. Moved away, it took the taps after with it."""
     session = new_session(tmp_path, "sessions/a.jsonl")
     session.record_tap(pose(0))
     session.undo()
@@ -359,9 +359,11 @@ def test_a_journal_deleted_while_open_is_written_back_with_every_saved_tap(tmp_p
     assert session.record_tap(pose(2)).id == 3
     session.path.unlink()  # and the file alone
     assert session.record_tap(pose(3)).id == 4
+    session.path.rename(tmp_path / "moved-away.jsonl")  # and moved away
+    assert session.record_tap(pose(4)).id == 5
     session.release()
     with SamplingSession.open(session.path) as resumed:
-        assert resumed.recovered == () and [tap.id for tap in resumed.taps] == [2, 3, 4]
+        assert resumed.recovered == () and [tap.id for tap in resumed.taps] == [2, 3, 4, 5]
 
 
 def test_a_journal_replaced_while_open_is_not_written_over_and_keeps_every_saved_tap(tmp_path):
@@ -382,6 +384,26 @@ def test_a_journal_replaced_while_open_is_not_written_over_and_keeps_every_saved
     session.release()
     with SamplingSession.open(session.path) as resumed:
         assert [tap.id for tap in resumed.taps] == [1, 2]
+
+
+def test_a_journal_copied_over_while_open_is_not_written_to_and_keeps_every_saved_tap(tmp_path):
+    """Another session copied over the journal (the same file, new content): the next tap was appended to the other
+    session's taps, and the ones before it were gone."""
+    other = recorded(tmp_path / "other", 5)
+    session = new_session(tmp_path, "sessions/a.jsonl")
+    session.record_tap(pose(0))
+    session.record_tap(pose(1))
+    shutil.copyfile(other, session.path)
+    with pytest.raises(SessionError, match="was changed by another program while fixwizard was writing to it, so "
+                                           "this tap was not saved; move that file away"):
+        session.record_tap(pose(2))
+    assert session.path.read_bytes() == other.read_bytes()
+    session.path.rename(tmp_path / "copied-over.jsonl")
+    assert session.record_tap(pose(2)).id == 3
+    session.release()
+    with SamplingSession.open(session.path) as resumed:
+        assert [tap.id for tap in resumed.taps] == [1, 2, 3]
+        np.testing.assert_array_equal(resumed.taps[2].base_T_tcp, pose(2))
 
 
 def test_a_failed_fsync_is_not_acknowledged_and_is_cut_off(tmp_path, monkeypatch):
