@@ -5,10 +5,11 @@ import asyncio
 
 from textual.app import App
 
+from fixwizard.calibration.errors import CalibrationError, CalibrationFileError
 from fixwizard.errors import InputError
 from fixwizard.robot.base import ConnectionLost, ProtectiveStop
 from fixwizard.robot.ur_errors import LinkLost, URProtectiveStop
-from fixwizard.tui.widgets.errors import ErrorModal, error_message
+from fixwizard.tui.widgets.errors import ErrorModal, error_message, error_title
 from pilot_wait import until
 
 
@@ -48,3 +49,9 @@ def test_a_message_is_a_sentence_but_a_path_it_starts_with_stays_as_typed():
         "mymesh.stl is the fixture mesh; choose another path"
     assert error_message(InputError("sessions/a.jsonl is open elsewhere")).startswith("sessions/a.jsonl ")
     assert error_message(InputError("the disk is full")) == "The disk is full"
+
+
+def test_a_tip_calibration_that_cannot_go_on_is_not_called_a_file_problem():
+    """The automatic taps refused with the ball 528 mm from the table corner were headed "File or input problem"."""
+    assert error_title(CalibrationError("the ball is 528 mm away from the table corner")) == "Tip calibration problem"
+    assert error_title(CalibrationFileError("the tip calibration t.yaml is damaged")) == "File or input problem"

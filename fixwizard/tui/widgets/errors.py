@@ -7,6 +7,7 @@ from typing import Literal
 
 from textual.widgets import Button
 
+from fixwizard.calibration.errors import CalibrationError
 from fixwizard.errors import FixwizardError, InputError, file_problem, sentence
 from fixwizard.robot.base import ConnectionLost, ProtectiveStop, RobotError
 from fixwizard.tui.widgets.dialog import Dialog
@@ -24,6 +25,8 @@ def error_title(error: Exception) -> str:
         return "Cannot resume the session"
     if isinstance(error, RobotError):
         return "Robot problem"
+    if isinstance(error, CalibrationError):  # the poses or the arm's place, not a file (that is CalibrationFileError)
+        return "Tip calibration problem"
     if isinstance(error, (InputError, OSError)):
         return "File or input problem"
     return "Problem"
