@@ -220,6 +220,56 @@ def test_the_start_screen_resume_says_which_session_it_opened(tmp_path):
     asyncio.run(run())
 
 
+def test_continue_pressed_again_while_the_session_opens_opens_it_once(tmp_path):
+    """Continue pressed a second time before the resume was back (a large mesh takes seconds to load, with nothing
+    to show for it) resumed the session again: "could not resume ...: the session ... is open in another fixwizard"
+    about the session this wizard was opening. Now the second press says to wait, and the session opens once."""
+    path = recorded_session(tmp_path, taps=2)
+
+    async def run():
+        app = FixwizardApp(simulated_cell(3, pace_s=0.0, folder=tmp_path))
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await until(pilot, lambda: isinstance(app.screen, StartScreen) and start_fixture(app) is not None)
+            app.screen.query_one("#session").value = str(path)
+            await pilot.pause()
+            button = app.screen.query_one("#continue")
+            button.press()
+            button.press()  # the second, before the resume is back
+            stacks = []
+            while not ("Resumed" in sampling_note(app) or isinstance(app.screen, ErrorModal)):
+                stacks.append([type(screen).__name__ for screen in app.screen_stack])
+                await pilot.pause(0.02)
+                assert len(stacks) < 3000, stacks[-1]
+            assert not isinstance(app.screen, ErrorModal), app.screen.query_one("#dialog-message").render()
+            assert not any("ErrorModal" in stack for stack in stacks)
+            assert [str(note.message) for note in app._notifications] == [
+                f"Still opening the session {path.name}: wait a moment."]
+    asyncio.run(run())
+
+
+def test_after_a_refused_resume_on_the_start_screen_continue_works_again(tmp_path):
+    path = recorded_session(tmp_path, taps=2)
+    checksum_mismatch(path)
+
+    async def run():
+        app = FixwizardApp(simulated_cell(3, pace_s=0.0, folder=tmp_path))
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await until(pilot, lambda: isinstance(app.screen, StartScreen) and start_fixture(app) is not None)
+            start = app.screen
+            start.query_one("#session").value = str(path)
+            await pilot.pause()
+            start.query_one("#continue").press()
+            await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+            await pilot.press("escape")
+            await until(pilot, lambda: app.screen is start)
+            assert "Last change" in str(start.query_one("#session-info", Static).render())
+            start.query_one("#continue").press()  # the same session again: refused again, not "still opening"
+            await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+            assert "is damaged (checksum or JSON)" in str(app.screen.query_one("#dialog-message", Static).render())
+            assert not any("Still opening" in str(note.message) for note in app._notifications)
+    asyncio.run(run())
+
+
 def test_the_wizard_without_a_terminal_says_it_needs_one(tmp_path):
     result = subprocess.run([sys.executable, "-m", "fixwizard.cli"], cwd=tmp_path, stdin=subprocess.DEVNULL,
                             capture_output=True, timeout=60, check=False, env={**os.environ, "PYTHONPATH": str(REPO)})

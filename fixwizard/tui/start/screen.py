@@ -68,6 +68,7 @@ class StartScreen(Screen[StartChoice]):
         self._sessions = session_choices(cell.sessions_dir)
         self._requested: tuple[Path, str] | None = None
         self._loaded: tuple[Path, str] | None = None
+        self._opening: Path | None = None  # the session being resumed (its mesh may take seconds to load)
 
     def compose(self) -> ComposeResult:
         robot_note = " (no real arm moves)" if self.cell.simulated else ""
@@ -285,8 +286,21 @@ class StartScreen(Screen[StartChoice]):
     def _resumed(self, resumed: Resumed) -> None:
         dismiss_when_on_top(self, resumed)  # the sampling screen says what was opened
 
+    def _resume_failed(self) -> None:
+        self._opening = None
+        self._show_session()
+
+    def _still_opening(self) -> bool:
+        """Whether a session is being resumed (then Continue and Check wait for it, and say so): resumed again, it
+        was refused as open in another fixwizard; left for a new session, it stayed open and locked."""
+        if self._opening is not None:
+            self.notify(f"Still opening the session {self._opening.name}: wait a moment.", severity="warning")
+        return self._opening is not None
+
     def _check(self) -> None:
         """Check a calibrated fixture (``CheckScreen``) with the chosen stored tip calibration: its tip and ball."""
+        if self._still_opening():
+            return
         choice = self._chosen_calibration()
         if choice is None:
             self.notify("Checking a fixture needs a stored tip calibration: choose one under Tip (or calibrate the "
@@ -304,9 +318,14 @@ class StartScreen(Screen[StartChoice]):
         in_thread(self, lambda: checkable_reports(cell.reports_dir), open_check)  # off the event loop: ~10 ms a report
 
     def _continue(self) -> None:
+        if self._still_opening():
+            return
         session_value = str(self.query_one("#session", Select).value) if self._sessions else NEW
         if session_value != NEW:
-            in_thread(self, lambda: self._resume(Path(session_value)), self._resumed)
+            path = self._opening = Path(session_value)
+            self.query_one("#session-info", Static).update(
+                f"Opening the session {path.name}: loading its fixture and tip calibration...")
+            in_thread(self, lambda: self._resume(path), self._resumed, lambda _: self._resume_failed())
             return
         if self.fixture is None or self._loaded != self._selected_fixture():
             self.notify("Choose a fixture that loads first (see the message under Fixture).", severity="warning")
