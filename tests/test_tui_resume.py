@@ -220,6 +220,24 @@ def test_the_start_screen_resume_says_which_session_it_opened(tmp_path):
     asyncio.run(run())
 
 
+def test_while_resume_opens_the_session_the_terminal_says_so_with_the_status_line_and_stop(tmp_path):
+    """``fixwizard --resume`` showed a blank terminal while it loaded the session's mesh: 8 s for 330 000 faces, no
+    words, no status line, no STOP key in view. The screen under the session's steps now says what it is doing."""
+    path = recorded_session(tmp_path, taps=2)
+
+    async def run():
+        app = FixwizardApp(simulated_cell(3, pace_s=0.0, folder=tmp_path), str(path))
+        async with app.run_test(size=SIZE) as pilot:
+            await until(pilot, lambda: "Resumed" in sampling_note(app))
+            underneath = app.screen_stack[0]  # what the terminal shows until the sampling screen comes
+            await pilot.pause()
+            lines = [strip.text for strip in underneath._compositor.render_strips()]
+            assert lines[0].startswith(" SIMULATED  demo cell (seed 3) |") and lines[0].rstrip().endswith("F12 STOP")
+            assert "Opening the session to resume: loading its fixture and tip calibration..." in "\n".join(lines)
+            assert lines[-1].startswith("F12 STOP")
+    asyncio.run(run())
+
+
 def test_continue_pressed_again_while_the_session_opens_opens_it_once(tmp_path):
     """Continue pressed a second time before the resume was back (a large mesh takes seconds to load, with nothing
     to show for it) resumed the session again: "could not resume ...: the session ... is open in another fixwizard"

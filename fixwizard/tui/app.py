@@ -18,7 +18,7 @@ from textual.app import App
 from textual.dom import DOMNode
 from textual.reactive import var
 from textual.screen import ModalScreen, Screen
-from textual.widgets import Footer
+from textual.widgets import Footer, Static
 from textual.worker import WorkerFailed
 
 from fixwizard.errors import FixwizardError
@@ -46,6 +46,7 @@ T = TypeVar("T")
 STATUS_INTERVAL_S = 0.5
 REARM_QUESTION = "Re-arm the robot?"
 CSS_FILE = Path(__file__).with_name("wizard.tcss")  # package data: every screen's look
+OPENING = "Opening the session to resume: loading its fixture and tip calibration..."
 
 
 class FixwizardApp(App[None]):
@@ -80,6 +81,9 @@ class FixwizardApp(App[None]):
 
     def on_mount(self) -> None:
         self.screen_change_signal.subscribe(self, self._frame_screen)
+        if self.resume is not None:  # the session's mesh can take seconds to load: not a blank terminal meanwhile
+            self.screen.mount(Static(OPENING, id="opening", markup=False))
+            self._frame_screen(self.screen)
         in_thread(self, self.cell.robot.connect)
         self.set_interval(STATUS_INTERVAL_S, self.refresh_robot_status)
         self._run_flow()
