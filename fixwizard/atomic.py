@@ -118,8 +118,6 @@ def _check_folder(folder: Path, fix: str) -> None:
     if not existing.is_dir():
         where = "not a folder" if existing == folder else f"so the folder {folder} cannot be made"
         raise InputError(f"{existing} is a file, {where}: {fix}")
-    if existing != folder and not os.access(existing, os.W_OK | os.X_OK):
-        raise InputError(f"cannot make the folder {folder}: no permission to write in {existing}: {fix}")
     what = f"write in the folder {folder}" if existing == folder else f"make the folder {folder} in {existing}"
     try:
         handle, probe = tempfile.mkstemp(prefix=f".fixwizard-probe.{os.getpid()}.", suffix=".tmp", dir=existing)

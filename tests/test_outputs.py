@@ -178,9 +178,12 @@ def test_a_disk_that_fills_during_the_write_is_named_with_the_file_and_keeps_not
     assert sorted(path.name for path in small_disk.iterdir()) == ["filler"]
 
 
-def test_a_read_only_disk_is_named_as_such(demo, capsys, small_disk):
+@pytest.mark.parametrize("report", ["report.yaml", "new/report.yaml"])
+def test_a_read_only_disk_is_named_as_such(demo, capsys, small_disk, report):
+    """In a folder still to be made, the read-only disk was called "no permission to write in ..."."""
     subprocess.run(["mount", "-o", "remount,ro", str(small_disk)], check=True)
-    refused(capsys, solve(demo, "-o", str(small_disk / "report.yaml")), "read-only disk")
+    err = refused(capsys, solve(demo, "-o", str(small_disk / report)), f"{small_disk} is on a read-only disk")
+    assert "permission" not in err
 
 
 def test_points_that_are_no_file_need_an_output_path(demo, capsys):
