@@ -2,6 +2,7 @@
 it opened; every refusal is explained on screen and leaves the operator on the start screen."""
 
 import asyncio
+import dataclasses
 import json
 import os
 import re
@@ -15,13 +16,13 @@ import numpy as np
 import pytest
 from textual.widgets import Static
 
-from fixwizard.calibration.store import load_calibration
+from fixwizard.calibration.store import load_calibration, save_calibration
 from fixwizard.demo import demo_fixture
 from fixwizard.tui.app import FixwizardApp
 from fixwizard.tui.cell import SavedCalibration
 from fixwizard.tui.launch import simulated_cell
 from fixwizard.tui.start.screen import NEW, StartScreen
-from fixwizard.tui.start.sessions import start_session
+from fixwizard.tui.start.sessions import calibration_changes, start_session
 from fixwizard.tui.widgets.errors import ErrorModal
 from fixwizard.workflow.session import SamplingSession
 from pilot_wait import until
@@ -100,6 +101,14 @@ def damaged_calibration(path: Path) -> str:
     return str(path)
 
 
+def recalibrated_with_another_ball(path: Path) -> str:
+    """The tip calibration the session names written again (``calibrate-tip -o`` the same file) for a 6 mm ball:
+    the session's taps were made with the 3 mm one, and the solve would have used 6 mm for them."""
+    calibration_path = path.parents[1] / "calibrations" / "example_matlab_logo.yaml"
+    save_calibration(dataclasses.replace(load_calibration(calibration_path), ball_diameter_m=0.006), calibration_path)
+    return str(path)
+
+
 def calibration_missing_a_step(path: Path) -> str:
     """A calibration that parses but lacks a step's figures (its message ends with a full stop)."""
     calibration = path.parents[1] / "calibrations" / "example_matlab_logo.yaml"
@@ -159,6 +168,8 @@ def no_unfinished_session(path: Path) -> str:
     (deleted_calibration, "example_matlab_logo.yaml"),
     (damaged_calibration, "example_matlab_logo.yaml"),
     (calibration_missing_a_step, "'steps.pivot' is missing"),
+    (recalibrated_with_another_ball, "the tip calibration example_matlab_logo.yaml changed since the session "
+                                     "started (ball 6.0 mm, the session's taps: 3.0 mm)"),
     (not_a_number_in_a_tap, "line 3 of the session"),
     (deeply_nested_line, "line 3 of the session"),
     (header_naming_no_fixture, "was not started by the wizard"),
@@ -236,6 +247,18 @@ def test_while_resume_opens_the_session_the_terminal_says_so_with_the_status_lin
             assert "Opening the session to resume: loading its fixture and tip calibration..." in "\n".join(lines)
             assert lines[-1].startswith("F12 STOP")
     asyncio.run(run())
+
+
+def test_a_tip_calibration_changed_since_the_session_started_is_told_by_each_figure_its_taps_depend_on():
+    calibration = load_calibration(REPO / "calibrations" / "example_matlab_logo.yaml")
+    tip_info = {"ball_diameter_m": calibration.ball_diameter_m, "sample_bound_m": calibration.sample_bound_m,
+                "tcp_p_tip_m": calibration.tcp_p_tip_m.tolist()}
+    assert calibration_changes(tip_info, calibration) == []
+    moved = dataclasses.replace(calibration, tcp_p_tip_m=calibration.tcp_p_tip_m + [0.0, 0.0, 0.0005],
+                                sample_bound_m=0.001)
+    assert calibration_changes(tip_info, moved) == ["sample bound 1.0 mm, the session's taps: 0.8 mm",
+                                                    "the tip 0.50 mm from where the session's taps had it"]
+    assert calibration_changes({"ball_diameter_m": "3 mm", "tcp_p_tip_m": [0.0, 0.05]}, moved) == []  # not held
 
 
 def test_continue_pressed_again_while_the_session_opens_opens_it_once(tmp_path):

@@ -6,8 +6,10 @@ import itertools
 from datetime import datetime
 from pathlib import Path
 
+import numpy as np
+
 from fixwizard.calibration.errors import CalibrationFileError
-from fixwizard.calibration.store import load_calibration
+from fixwizard.calibration.store import TipCalibration, load_calibration
 from fixwizard.errors import FixwizardError
 from fixwizard.fixture import Fixture, load_fixture
 from fixwizard.tui.cell import Cell, Resumed, Sampling, SavedCalibration
@@ -67,11 +69,39 @@ def resume_session(cell: Cell, path: Path) -> Resumed:
         except CalibrationFileError as error:
             raise SessionError(f"{str(error).rstrip('.')}. The session was recorded with that tip calibration: put "
                                "it back, or start a new session") from error
+        changes = calibration_changes(tip_info, calibration)
+        if changes:
+            raise SessionError(f"the tip calibration {calibration_path.name} changed since the session started "
+                               f"({'; '.join(changes)}): its taps were made with the one before. Put that one back, "
+                               "or start a new session")
     except BaseException:
         session.release()
         raise
     return Resumed(Sampling(session, fixture, SavedCalibration(calibration, calibration_path)),
                    resumed_text(session, fixture.path, calibration_path))
+
+
+def calibration_changes(tip_info: dict, calibration: TipCalibration) -> list[str]:
+    """How ``calibration`` differs from the tip calibration a session header's ``tip_info`` holds (ball diameter,
+    tip position, sample bound), in words; nothing for a value the header does not hold."""
+    changes = []
+    for key, words in (("ball_diameter_m", "ball"), ("sample_bound_m", "sample bound")):
+        now, then = float(getattr(calibration, key)), _recorded(tip_info.get(key), ())
+        if then is not None and not np.isclose(now, then, rtol=1e-9, atol=0.0):
+            changes.append(f"{words} {now * 1e3:.1f} mm, the session's taps: {float(then) * 1e3:.1f} mm")
+    tip_then = _recorded(tip_info.get("tcp_p_tip_m"), (3,))
+    if tip_then is not None and (moved_m := float(np.linalg.norm(calibration.tcp_p_tip_m - tip_then))) > 1e-9:
+        changes.append(f"the tip {moved_m * 1e3:.2f} mm from where the session's taps had it")
+    return changes
+
+
+def _recorded(value: object, shape: tuple[int, ...]) -> np.ndarray | None:
+    """A header's value as finite numbers of ``shape`` (m), or None when it holds no such value."""
+    try:
+        array = np.asarray(value, float)
+    except (TypeError, ValueError):
+        return None
+    return array if array.shape == shape and np.isfinite(array).all() else None
 
 
 def resumed_text(session: SamplingSession, mesh: Path, calibration_path: Path) -> str:
