@@ -200,6 +200,8 @@ class Journal:
             found = os.stat(self.path)
         except FileNotFoundError:
             found = None
+        except OSError:  # its folder may not be searched now (its permissions changed): the file open here is written
+            return
         if found is not None and (found.st_dev, found.st_ino) == (held.st_dev, held.st_ino) and \
                 held.st_size == len(self._saved):
             return

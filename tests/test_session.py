@@ -386,6 +386,26 @@ def test_a_journal_replaced_while_open_is_not_written_over_and_keeps_every_saved
         assert [tap.id for tap in resumed.taps] == [1, 2]
 
 
+def test_a_journal_whose_folder_may_no_longer_be_searched_is_written_on(tmp_path, monkeypatch):
+    """The folder's permissions changed under the wizard (root runs the tests, so the refusal is the OS's answer as
+    a user gets it): the journal open here is still in it, and the tap is saved there rather than refused."""
+    session = new_session(tmp_path)
+    session.record_tap(pose(0))
+    real_stat = os.stat
+
+    def refusing_stat(name, *args, **kwargs):
+        if Path(name) == session.path:
+            raise PermissionError(errno.EACCES, "Permission denied", str(name))
+        return real_stat(name, *args, **kwargs)
+
+    monkeypatch.setattr(os, "stat", refusing_stat)
+    assert session.record_tap(pose(1)).id == 2
+    monkeypatch.undo()
+    session.release()
+    with SamplingSession.open(session.path) as resumed:
+        assert [tap.id for tap in resumed.taps] == [1, 2]
+
+
 def test_a_journal_copied_over_while_open_is_not_written_to_and_keeps_every_saved_tap(tmp_path):
     """Another session copied over the journal (the same file, new content): the next tap was appended to the other
     session's taps, and the ones before it were gone."""
