@@ -18,7 +18,7 @@ from textual.app import App
 from textual.dom import DOMNode
 from textual.reactive import var
 from textual.screen import ModalScreen, Screen
-from textual.widgets import Footer, Static
+from textual.widgets import Footer
 from textual.worker import WorkerFailed
 
 from fixwizard.errors import FixwizardError
@@ -37,6 +37,7 @@ from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.errors import ErrorModal, Recovery, ResumeRefused
 from fixwizard.tui.widgets.help import HelpScreen, help_text, keys_of
 from fixwizard.tui.widgets.key_footer import KeyFooter
+from fixwizard.tui.widgets.opening import Opening
 from fixwizard.tui.widgets.status import StatusBar
 from fixwizard.tui.widgets.too_small import TooSmall, too_small
 from fixwizard.tui.workers import ShownError, in_thread
@@ -46,7 +47,6 @@ T = TypeVar("T")
 STATUS_INTERVAL_S = 0.5
 REARM_QUESTION = "Re-arm the robot?"
 CSS_FILE = Path(__file__).with_name("wizard.tcss")  # package data: every screen's look
-OPENING = "Opening the session to resume: loading its fixture and tip calibration..."
 
 
 class FixwizardApp(App[None]):
@@ -79,10 +79,12 @@ class FixwizardApp(App[None]):
         self._reconnects = 0  # Reconnects the operator asked for: a lost link's error from before one is old news
         self._stops = 0  # STOP presses, so that a re-arm question asked before one re-arms nothing
 
+    def get_default_screen(self) -> Screen:
+        return Opening(resuming=self.resume is not None)
+
     def on_mount(self) -> None:
         self.screen_change_signal.subscribe(self, self._frame_screen)
         if self.resume is not None:  # the session's mesh can take seconds to load: not a blank terminal meanwhile
-            self.screen.mount(Static(OPENING, id="opening", markup=False))
             self._frame_screen(self.screen)
         in_thread(self, self.cell.robot.connect)
         self.set_interval(STATUS_INTERVAL_S, self.refresh_robot_status)
