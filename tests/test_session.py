@@ -246,6 +246,23 @@ def test_find_unfinished_lists_only_open_sessions(tmp_path):
         done.record_tap(pose(1))
 
 
+def test_the_start_screens_list_leaves_out_a_session_removed_between_reading_and_dating_it(tmp_path, monkeypatch):
+    """A clean-up deleting a session while the start screen lists them: it is left out, not a traceback."""
+    from fixwizard.tui.start import choices
+
+    for name in ("kept.jsonl", "removed.jsonl"):
+        with new_session(tmp_path, name) as session:
+            session.record_tap(pose(0))
+
+    def listed_then_removed(folder):
+        found = find_unfinished(folder)
+        (tmp_path / "removed.jsonl").unlink()
+        return found
+
+    monkeypatch.setattr(choices, "find_unfinished", listed_then_removed)
+    assert list(choices.session_choices(tmp_path)) == [tmp_path / "kept.jsonl"]
+
+
 def test_drop_removes_any_active_tap_by_journaling_it_and_survives_resume(tmp_path):
     with new_session(tmp_path) as session:
         for index in range(4):

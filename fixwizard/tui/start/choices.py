@@ -82,6 +82,12 @@ def describe_fixture(fixture: Fixture) -> str:
 
 
 def session_choices(sessions_dir: Path) -> dict[Path, datetime]:
-    """Unfinished sessions, newest first, with the time of their last change."""
-    changed = {path: datetime.fromtimestamp(path.stat().st_mtime) for path in find_unfinished(sessions_dir)}
+    """Unfinished sessions, newest first, with the time of their last change (one removed since it was read is
+    left out)."""
+    changed = {}
+    for path in find_unfinished(sessions_dir):
+        try:
+            changed[path] = datetime.fromtimestamp(path.stat().st_mtime)
+        except OSError:
+            continue
     return dict(sorted(changed.items(), key=lambda item: item[1], reverse=True))
