@@ -779,3 +779,31 @@ def test_two_wizards_starting_a_session_of_one_fixture_in_the_same_second_get_on
                                                    "demo_bracket-20261206-163000-2.jsonl"]
     first.release()
     second.release()
+
+
+def test_a_session_name_another_wizard_takes_between_the_look_and_the_creation_goes_to_the_next_name(
+        tmp_path, monkeypatch):
+    """Two wizards at the very same moment: both saw the name free, the second to create it was told to 'choose
+    another name' (it cannot: the name is the time). Here the other wizard creates it just before this one does."""
+    class Frozen(datetime.datetime):
+        @classmethod
+        def now(cls, tz=None):
+            return cls(2026, 12, 6, 16, 30, 0)
+
+    monkeypatch.setattr(start_sessions, "datetime", Frozen)
+    create = start_sessions.SamplingSession.create
+    others = []
+
+    def other_wizard_first(path, *args, **kwargs):
+        if not others:
+            others.append(create(path, *args, **kwargs))
+        return create(path, *args, **kwargs)
+
+    monkeypatch.setattr(start_sessions.SamplingSession, "create", other_wizard_first)
+    calibration_path = REPO / "calibrations" / "example_matlab_logo.yaml"
+    session = start_session(wizard(tmp_path), demo_fixture(),
+                            SavedCalibration(load_calibration(calibration_path), calibration_path))
+    assert [others[0].path.name, session.path.name] == ["demo_bracket-20261206-163000.jsonl",
+                                                        "demo_bracket-20261206-163000-2.jsonl"]
+    others[0].release()
+    session.release()

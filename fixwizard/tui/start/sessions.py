@@ -24,7 +24,8 @@ from fixwizard.workflow.session import (
 
 def start_session(cell: Cell, fixture: Fixture, tip: SavedCalibration) -> SamplingSession:
     """Create ``sessions_dir/<fixture>-<time>.jsonl`` for ``fixture`` and the tip calibration (``-2``, ``-3`` ... after
-    the time when another wizard on this folder started one in the same second)."""
+    the time when another wizard on this folder started one in the same second, also where it took the name
+    between this one looking at it and creating it)."""
     calibration = tip.calibration
     fixture_info = {"name": fixture.path.stem, "path": str(fixture.path.resolve()), "units": fixture.units,
                     "sha256": fixture.sha256}
@@ -32,9 +33,15 @@ def start_session(cell: Cell, fixture: Fixture, tip: SavedCalibration) -> Sampli
                 "tcp_p_tip_m": calibration.tcp_p_tip_m.tolist(), "ball_diameter_m": calibration.ball_diameter_m,
                 "sample_bound_m": calibration.sample_bound_m}
     stem = f"{fixture.path.stem}-{datetime.now():%Y%m%d-%H%M%S}"
-    path = next(path for path in (cell.sessions_dir / f"{stem}{'' if number == 1 else f'-{number}'}{SUFFIX}"
-                                  for number in itertools.count(1)) if not path.exists())
-    return SamplingSession.create(path, fixture_info, tip_info, robot=cell.robot_name)
+    names = (cell.sessions_dir / f"{stem}{'' if number == 1 else f'-{number}'}{SUFFIX}"
+             for number in itertools.count(1))
+    while True:
+        path = next(path for path in names if not path.exists())
+        try:
+            return SamplingSession.create(path, fixture_info, tip_info, robot=cell.robot_name)
+        except SessionError:
+            if not path.exists():  # not the name taken meanwhile by another wizard
+                raise
 
 
 def started_text(session: SamplingSession, tip: SavedCalibration, calibrated_now: bool) -> str:
