@@ -586,3 +586,26 @@ async def test_the_footer_dims_the_robot_keys_in_place_while_a_robot_call_runs(c
             screen.refresh_bindings()
             await pilot.pause()
             assert tap_key.has_class("-disabled") == busy and list(screen.query(FooterKey)) == shown
+
+
+@pytest.mark.slow
+async def test_after_an_undo_the_screen_shows_no_check_that_counted_the_undone_tap(context):
+    """A check that counted a tap now gone may be narrower than the taps left allow: the live line, the estimate in
+    the top view and the taps' distances under it go at once, not when the check of the taps left arrives (the line
+    said "Live check of 10 taps (checking 9...): unique so far. Guaranteed now: ..." meanwhile, and after an undo and
+    a new tap "Live check of 10 taps (looking closer...)" of taps that were no longer the ones tapped)."""
+    record_spread_taps(context, 10)
+    app = ScreenHost(lambda: context.sampling_screen())
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        await until(pilot, lambda: screen.live is not None and screen.live.tap_count == 10
+                    and screen.live.estimate_base_T_cad is not None)
+        await until(pilot, lambda: not screen.busy)
+        await pilot.press("u")
+        assert text_of(screen, "#live").startswith("Checking 9 taps: ")
+        assert screen.query_one("#top-view").has_class("-empty")
+        table = screen.query_one(DataTable)
+        assert [table.get_row_at(row)[4].plain for row in range(9)] == ["-"] * 9
+        await until(pilot, lambda: screen.live is not None)
+        assert screen.live.tap_count == 9
+        assert text_of(screen, "#live").startswith("Live check of 9 taps")

@@ -66,7 +66,8 @@ class LiveView:
     guaranteed bounds (None when inconsistent), the modes, the most likely cause when inconsistent (or, when
     undetermined, that no pose was found to explain every tap, if so), the estimate
     (as ``LiveCheck.estimate_base_T_cad``), each tap's distance (m, ``tap_surface_distances_m``) under it, a wrong
-    ball diameter the taps point to, and the solver's own figures (``workflow.details``)."""
+    ball diameter the taps point to, the solver's own figures (``workflow.details``) and the taps it checked (N, 3,
+    base frame, m)."""
 
     tap_count: int
     verdict: Status
@@ -78,6 +79,14 @@ class LiveView:
     distances_m: np.ndarray | None
     ball_mismatch: BallMismatch | None
     details: tuple[str, ...]
+    base_p_taps: np.ndarray
+
+    def is_of_first(self, base_p_taps: np.ndarray) -> bool:
+        """Whether it checked the first of these taps (N, 3, base frame, m), or all of them: what it says holds for
+        them. Not after an undo or a dropped tap: a check that counted a tap now gone may be narrower than the taps
+        left allow."""
+        count = len(self.base_p_taps)
+        return len(base_p_taps) >= count and np.array_equal(base_p_taps[:count], self.base_p_taps)
 
     @staticmethod
     def of(check: LiveCheck, fixture: Fixture) -> "LiveView":
@@ -89,7 +98,7 @@ class LiveView:
                         unexplained[0] if unexplained else cause,
                         estimate, None if estimate is None else tap_surface_distances_m(
                             fixture, solution.problem.base_p_taps, 2.0 * solution.problem.ball_radius_m, estimate),
-                        ball_mismatch(solution), tuple(details_lines(solution)))
+                        ball_mismatch(solution), tuple(details_lines(solution)), solution.problem.base_p_taps)
 
 
 def quick_check(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sample_bound_m: float,

@@ -426,6 +426,8 @@ class SamplingScreen(Screen[bool]):
     # --- display ---
 
     def _taps_changed(self) -> None:
+        if self.live is not None and not self.live.is_of_first(self.session.base_p_taps):
+            self.live, self._distances_mm = None, np.zeros(0)  # it counted a tap now gone: it no longer holds
         self._show_taps()
         self._start_live_check()
 
