@@ -87,6 +87,12 @@ def round_up(value: float, decimals: int) -> float:
     return rounded if rounded >= value else rounded + 1.0 / scale
 
 
+def rounded_up_text(value: float, decimals: int) -> str:
+    """A guaranteed figure for a screen: ``round_up`` to ``decimals`` decimals, written with them (0.449 as "0.5" to
+    one decimal, never "0.4", which the true pose may lie beyond)."""
+    return f"{round_up(value, decimals):.{decimals}f}"
+
+
 def _written_pose(base_T_cad: np.ndarray) -> tuple[list[float], list[float]]:
     """Position (m) and rotation vector (rad) of a pose as written."""
     return (_rounded(base_T_cad[:3, 3], POSITION_DECIMALS),

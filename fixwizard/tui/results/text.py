@@ -6,7 +6,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from fixwizard.geometry.se3 import format_ur_pose, rotation_angle_rad
-from fixwizard.report import robot_pose_text
+from fixwizard.report import robot_pose_text, rounded_up_text
 from fixwizard.solver.estimates import Bounds
 from fixwizard.solver.solve import Mode, Solution
 from fixwizard.workflow.advice import TapAdvice
@@ -40,8 +40,8 @@ def pose_lines(base_T_cad: np.ndarray, status: str) -> list[str]:
 
 
 def bounds_text(bounds: Bounds) -> str:
-    return (f"CAD origin within {bounds.position_m * 1e3:.2f} mm, rotation within "
-            f"{np.degrees(bounds.rotation_rad):.2f} deg")
+    return (f"CAD origin within {rounded_up_text(bounds.position_m * 1e3, 2)} mm, rotation within "
+            f"{rounded_up_text(np.degrees(bounds.rotation_rad), 2)} deg")
 
 
 def summary_lines(solution: Solution) -> list[str]:
@@ -53,7 +53,7 @@ def summary_lines(solution: Solution) -> list[str]:
              "Guaranteed: the true pose lies within these of the centre pose",
              f"  centre    {format_ur_pose(bounds.base_T_cad_center)}",
              f"  {bounds_text(bounds)}",
-             f"  any point of the fixture within {bounds.max_point_displacement_m * 1e3:.2f} mm"]
+             f"  any point of the fixture within {rounded_up_text(bounds.max_point_displacement_m * 1e3, 2)} mm"]
     if solution.intervals:
         lines.append("Likely: " + "; ".join(
             f"{interval.level:.0%} within {interval.position_m * 1e3:.2f} mm, "
@@ -65,7 +65,8 @@ def mode_line(number: int, mode: Mode) -> str:
     x, y, z = mode.base_T_cad[:3, 3] * 1e3
     angle = np.degrees(rotation_angle_rad(mode.base_T_cad[:3, :3]))
     return (f"  {number}. {mode.probability:6.1%}  x {round(x)} y {round(y)} z {round(z)} mm, turned {round(angle)} "
-            f"deg; within {mode.bounds.position_m * 1e3:.1f} mm, {np.degrees(mode.bounds.rotation_rad):.1f} deg")
+            f"deg; within {rounded_up_text(mode.bounds.position_m * 1e3, 1)} mm, "
+            f"{rounded_up_text(np.degrees(mode.bounds.rotation_rad), 1)} deg")
 
 
 def modes_lines(solution: Solution, advice: TapAdvice | None) -> list[str]:

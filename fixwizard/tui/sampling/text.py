@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fixwizard.report import rounded_up_text
 from fixwizard.solver.solve import MIN_TAPS
 from fixwizard.solver.verdict import probability_text
 from fixwizard.tui.start.choices import FixtureChoice
@@ -17,8 +18,9 @@ from fixwizard.workflow.live import LiveView
 def bounds_text(check: LiveView) -> str:
     bounds = check.bounds
     assert bounds is not None, "only a check that kept poses has bounds"
-    return (f"origin within {bounds.position_m * 1e3:.1f} mm, rotation within {np.degrees(bounds.rotation_rad):.1f} "
-            f"deg, any point within {bounds.max_point_displacement_m * 1e3:.1f} mm")
+    return (f"origin within {rounded_up_text(bounds.position_m * 1e3, 1)} mm, rotation within "
+            f"{rounded_up_text(np.degrees(bounds.rotation_rad), 1)} deg, any point within "
+            f"{rounded_up_text(bounds.max_point_displacement_m * 1e3, 1)} mm")
 
 
 def live_text(check: LiveView | None, tap_count: int, progress: str | None) -> str:

@@ -1,0 +1,30 @@
+"""The screens' guaranteed figures are rounded up, as the report's are: a bound shown smaller than the solver's would
+leave the true pose outside what the screen promises (0.449 mm said as "0.4 mm")."""
+
+import numpy as np
+
+from fixwizard.solver.estimates import Bounds
+from fixwizard.solver.solve import Mode
+from fixwizard.tui.results.text import bounds_text as results_bounds_text
+from fixwizard.tui.results.text import mode_line
+from fixwizard.tui.sampling.text import bounds_text as live_bounds_text
+from fixwizard.workflow.live import LiveView
+
+# each figure just above a rounding step, where rounding to the nearest goes down
+BOUNDS = Bounds(np.eye(4), position_m=0.0061401, rotation_rad=np.radians(6.3401), max_point_displacement_m=0.000449)
+
+
+def test_the_live_line_rounds_its_guaranteed_figures_up():
+    view = LiveView(9, "unique", True, BOUNDS, (), None, None, None, None, (), np.zeros((9, 3)))
+    assert live_bounds_text(view) == "origin within 6.2 mm, rotation within 6.4 deg, any point within 0.5 mm"
+
+
+def test_the_results_round_their_guaranteed_figures_up():
+    assert results_bounds_text(BOUNDS) == "CAD origin within 6.15 mm, rotation within 6.35 deg"
+    assert mode_line(1, Mode(0.6, np.eye(4), BOUNDS, 8)).endswith("; within 6.2 mm, 6.4 deg")
+
+
+def test_a_figure_already_on_a_step_stays_as_it_is():
+    on_step = Bounds(np.eye(4), position_m=0.0062, rotation_rad=np.radians(6.4), max_point_displacement_m=0.0005)
+    view = LiveView(9, "unique", True, on_step, (), None, None, None, None, (), np.zeros((9, 3)))
+    assert live_bounds_text(view) == "origin within 6.2 mm, rotation within 6.4 deg, any point within 0.5 mm"
