@@ -1,6 +1,6 @@
 """Randomized tapping sessions on symmetric fixtures through the live pipeline, as the solver process runs it: each
 check goes on from the last one the session got (the first look, the quick check or the refined one; a newer tap
-may cut the pipeline short), with taps added, undone, re-added and repeated.
+may cut the pipeline short), with taps added, undone, dropped, re-added and repeated.
 
 A symmetric fixture makes the guarantee checkable without a search of one's own: every symmetric copy of the true
 pose puts the surface exactly where the true pose does, so it explains the taps exactly as well. After every tap,
@@ -8,8 +8,8 @@ at every stage:
 
 1. every copy lies in the set's cells, within its bounds and within some mode's bounds (a miss is the worst bug);
 2. the verdict is never ``unique`` (the copies lie far apart) nor ``inconsistent``;
-3. after an undo of a tap the last search counted, the first look is that of the remaining taps from scratch
-   (nothing of the undone tap narrows it);
+3. after an undo or a drop of a tap the last search counted, the first look is that of the remaining taps from
+   scratch (nothing of the tap gone narrows it);
 4. the way above a suggested point keeps the ball ``hover.MARGIN_M`` clear of the surface at every copy.
 
 Taps are noisy up to the sample bound, most of them exactly at it along the face normal (the worst case), one or
@@ -34,6 +34,7 @@ from test_verdict_fuzz import contacts, hex_prism, outside
 RUNS = int(os.environ.get("FUZZ_RUNS", "1"))
 FIRST_SEED = int(os.environ.get("FUZZ_SEED", "0"))
 UNDO_SHARE = 0.2
+DROP_SHARE = 0.1  # a tap other than the last dropped (the results screen's drop of a suspect tap)
 CUT_SHORT_SHARE = 0.25  # checks a newer tap cuts short after their first stages
 
 
@@ -128,6 +129,9 @@ def session(seed: int) -> list[str]:
         if len(taps) > 3 and rng.random() < UNDO_SHARE:
             pool.insert(0, taps.pop())
             done = "undo"
+        elif len(taps) > 3 and rng.random() < DROP_SHARE:
+            pool.insert(0, taps.pop(int(rng.integers(len(taps) - 1))))
+            done = "drop"
         elif len(taps) > 3 and rng.random() < 0.1:
             taps.append(taps[-1])
             done = "repeat"
