@@ -344,3 +344,19 @@ def test_a_report_dated_in_the_future_is_said_so_not_given_a_negative_age(tmp_pa
             assert "-3.0" not in text_of(screen, "#check-report")
 
     asyncio.run(run())
+
+
+def test_the_reports_guaranteed_bounds_are_said_rounded_up(tmp_path, calibrated):
+    """The report's 1.2345 mm and 1.2345 deg were said as "within 1.2 mm and 1.2 deg", less than the report
+    guarantees."""
+    bounds = {**calibrated[0]["bounds"], "position_m": 0.0012345, "rotation_deg": 1.2345}
+    cell, tip = context_for(tmp_path, calibrated, bounds=bounds)
+
+    async def run():
+        app = check_host(cell, tip)
+        async with app.run_test(size=SIZE) as pilot:
+            screen = app.screen
+            await until(pilot, lambda: "demo_bracket-1.yaml: unique" in text_of(screen, "#check-report"))
+            assert "the fixture is within 1.3 mm and 1.3 deg of its pose" in text_of(screen, "#check-report")
+
+    asyncio.run(run())

@@ -157,7 +157,8 @@ class CheckScreen(Screen[None]):
         age = (dt.datetime.now(dt.UTC) - loaded.created).total_seconds()
         self.query_one("#check-report", Static).update(
             f"Report {loaded.path.name}: {loaded.status}, {age_words(age)}; the fixture is within "
-            f"{loaded.position_bound_m * 1e3:.1f} mm and {loaded.rotation_bound_deg or 0.0:.1f} deg of its pose.")
+            f"{report.rounded_up_text(loaded.position_bound_m * 1e3, 1)} mm and "
+            f"{report.rounded_up_text(loaded.rotation_bound_deg or 0.0, 1)} deg of its pose.")
         self.query_one("#check-suggest", Static).update("Loading the fixture's mesh...")
         self._show_taps()
         self._show_verdict()
