@@ -1,6 +1,7 @@
 """A report's age as `verify` states it: a report dated in the future is said to be so, with the clocks to check,
 never a negative age."""
 
+import dataclasses
 from pathlib import Path
 
 from fixwizard import report
@@ -31,5 +32,12 @@ def test_the_bounds_are_said_to_be_about_their_centre_not_the_pose():
     and 5.36 deg (pose.guaranteed)."""
     loaded = report.load(EXAMPLE)
     (line,) = report_lines(loaded, 60.0)
-    assert (f"guaranteed set within {loaded.position_bound_m * 1e3:.2f} mm and {loaded.rotation_bound_deg:.2f} deg of "
-            "its centre (bounds.center)") in line
+    assert (loaded.position_bound_m, loaded.rotation_bound_deg) == (0.0048154, 4.29023)  # bounds:, rounded up
+    assert "guaranteed set within 4.82 mm and 4.30 deg of its centre (bounds.center)" in line
+
+
+def test_the_guaranteed_figures_are_said_rounded_up():
+    """A report's 1.2341 mm and 1.2341 deg were said as 'within 1.23 mm and 1.23 deg', less than it guarantees."""
+    loaded = dataclasses.replace(report.load(EXAMPLE), position_bound_m=0.0012341, rotation_bound_deg=1.2341)
+    (line,) = report_lines(loaded, 60.0)
+    assert "guaranteed set within 1.24 mm and 1.24 deg of its centre (bounds.center)" in line

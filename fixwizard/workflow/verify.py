@@ -315,8 +315,8 @@ def report_lines(loaded: report.Report, now_age_s: float) -> list[str]:
     simulated = "SIMULATED " if loaded.simulated else ""
     region = region_of(loaded)
     return [(f"{simulated}report {loaded.path} of '{loaded.name}': {loaded.status}, {age_words(now_age_s)}, "
-             f"guaranteed set within {region.position_m * 1e3:.2f} mm and {math.degrees(region.rotation_rad):.2f} "
-             "deg of its centre (bounds.center)")]
+             f"guaranteed set within {report.rounded_up_text(region.position_m * 1e3, 2)} mm and "
+             f"{report.rounded_up_text(math.degrees(region.rotation_rad), 2)} deg of its centre (bounds.center)")]
 
 
 def age_words(now_age_s: float) -> str:
