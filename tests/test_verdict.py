@@ -15,8 +15,10 @@ from fixwizard.solver.verdict import (
     MIN_INTERVAL_SAMPLES,
     PINNED_FRACTION,
     PINNED_ROTATION_RAD,
+    Openness,
     probability_text,
     status_of,
+    undetermined_message,
 )
 from fixwizard.synthetic import touching_ball_centres
 from shapes import as_fixture
@@ -240,3 +242,13 @@ def test_the_modes_of_a_set_not_pinned_down_are_weighed_from_one_start_each(plat
 def test_a_mode_s_probability_is_never_said_as_0_or_100_percent(probability, said):
     """A second mode of probability 3e-13 read "0 % probable" and the first "100 %": neither is proven."""
     assert probability_text(probability) == said
+
+
+def test_how_far_an_undetermined_set_spreads_is_said_rounded_up():
+    """The poses' spread is a bound ("up to"): 12.4 mm was said as "up to 12 mm (pinned down means under 12 mm)",
+    as if the set were as good as pinned down, and 28.4 deg as "up to 28"."""
+    bounds = Bounds(np.eye(4), 0.0100, np.radians(28.4), 0.0124)
+    why = Openness(False, 0.001, 8, False, ["+x", "+y", "+z"], [])
+    said = undetermined_message(why, bounds, 0.0492, 1e7)
+    assert said.startswith("The taps do not pin the pose down yet: the poses that explain them differ by up to 29 deg "
+                           "and move fixture points by up to 13 mm (pinned down means under 12 mm")

@@ -23,6 +23,7 @@ Intervals need enough effective likelihood samples (Kish's ``1 / sum w^2``): bel
 ``MIN_INTERVAL_SAMPLES`` a quantile is decided by a handful of samples, so no interval is given.
 """
 
+import math
 from dataclasses import dataclass
 from typing import Literal
 
@@ -115,8 +116,8 @@ def openness(fixture: Fixture, base_p_taps: np.ndarray, sample_bound_m: float, c
 def undetermined_message(why: Openness, bounds: Bounds, fixture_radius_m: float, max_cells: float) -> str:
     """The operator's message for an undetermined set: how far it is from pinned down, why, and what to do."""
     lines = [f"The taps do not pin the pose down yet: the poses that explain them differ by up to "
-             f"{np.degrees(bounds.rotation_rad):.0f} deg and move fixture points by up to "
-             f"{bounds.max_point_displacement_m * 1e3:.0f} mm (pinned down means under "
+             f"{math.ceil(np.degrees(bounds.rotation_rad))} deg and move fixture points by up to "
+             f"{math.ceil(bounds.max_point_displacement_m * 1e3)} mm (pinned down means under "
              f"{PINNED_FRACTION * fixture_radius_m * 1e3:.0f} mm, a quarter of the fixture's radius, and turns "
              f"under {np.degrees(PINNED_ROTATION_RAD):.1f} deg)."]
     todo = []
