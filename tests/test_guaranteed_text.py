@@ -4,10 +4,11 @@ leave the true pose outside what the screen promises (0.449 mm said as "0.4 mm")
 import numpy as np
 
 from fixwizard.solver.estimates import Bounds
-from fixwizard.solver.solve import Mode
+from fixwizard.solver.solve import Mode, SearchStats, Solution
 from fixwizard.tui.results.text import bounds_text as results_bounds_text
 from fixwizard.tui.results.text import mode_line
 from fixwizard.tui.sampling.text import bounds_text as live_bounds_text
+from fixwizard.workflow.details import details_lines
 from fixwizard.workflow.live import LiveView
 
 # each figure just above a rounding step, where rounding to the nearest goes down
@@ -28,3 +29,11 @@ def test_a_figure_already_on_a_step_stays_as_it_is():
     on_step = Bounds(np.eye(4), position_m=0.0062, rotation_rad=np.radians(6.4), max_point_displacement_m=0.0005)
     view = LiveView(9, "unique", True, on_step, (), None, None, None, None, (), np.zeros((9, 3)))
     assert live_bounds_text(view) == "origin within 6.2 mm, rotation within 6.4 deg, any point within 0.5 mm"
+
+
+def test_the_details_view_rounds_the_solvers_guaranteed_figures_up():
+    solution = Solution("unique", np.eye(4), BOUNDS, [], [Mode(1.0, np.eye(4), BOUNDS, 8)], [], None,
+                        SearchStats(8, 3, 2, 1.0, 1e6), None, None, np.eye(4))  # type: ignore[arg-type]
+    lines = details_lines(solution)
+    assert "Mode 1: probability 100.0%, within 6.15 mm, 6.35 deg" in lines
+    assert "Bounds: position 6.141 mm, rotation 6.341 deg, any point 0.449 mm." in lines

@@ -3,6 +3,7 @@ degrees)."""
 
 import numpy as np
 
+from fixwizard.report import rounded_up_text
 from fixwizard.solver.solve import Solution
 
 
@@ -13,15 +14,15 @@ def details_lines(solution: Solution) -> list[str]:
              f"Search: {stats.cells:,} cells survive of a budget of {stats.max_cells:,.0f} (rotation level "
              f"{stats.rotation_level}, position level {stats.position_level}), {stats.elapsed_s:.1f} s.",
              f"Effective likelihood samples: {solution.effective_samples:,.0f}.",
-             *(f"Mode {number}: probability {mode.probability:.1%}, within {mode.bounds.position_m * 1e3:.2f} mm, "
-               f"{np.degrees(mode.bounds.rotation_rad):.2f} deg"
+             *(f"Mode {number}: probability {mode.probability:.1%}, within "
+               f"{rounded_up_text(mode.bounds.position_m * 1e3, 2)} mm, "
+               f"{rounded_up_text(np.degrees(mode.bounds.rotation_rad), 2)} deg"
                for number, mode in enumerate(solution.modes, start=1))]
     if solution.bounds is not None:
         bounds = solution.bounds
-        lines.append(f"Bounds: position {bounds.position_m * 1e3:.3f} mm, rotation "
-                     f"{np.degrees(bounds.rotation_rad):.3f} deg, "
-                     f"any point {bounds.max_point_displacement_m * 1e3:.3f} "
-                     "mm.")
+        lines.append(f"Bounds: position {rounded_up_text(bounds.position_m * 1e3, 3)} mm, rotation "
+                     f"{rounded_up_text(np.degrees(bounds.rotation_rad), 3)} deg, "
+                     f"any point {rounded_up_text(bounds.max_point_displacement_m * 1e3, 3)} mm.")
     diagnosis = solution.diagnosis
     if diagnosis is not None:
         if diagnosis.smallest_bound_m is not None:

@@ -297,7 +297,8 @@ def _unique_consistent_line(result: VerifyResult, taps: str) -> str:
                 f"if the fixture cannot have moved so, or {tap_there} ({RIGID_MOTIONS} or more taps on faces facing "
                 "different ways see every move).")
     assert missable.slide_m is not None and missable.turn_rad is not None
-    within = (f"to first order (small moves) they put every point of the fixture within {point_m * 1e3:.2f} mm of "
+    within = (f"to first order (small moves) they put every point of the fixture within "
+              f"{report.rounded_up_text(point_m * 1e3, 2)} mm of "
               f"the report's pose")
     if point_m <= allowed_m:
         return (f"{said}, and {within}, no more than the {allowed_m * 1e3:.2f} mm the report guarantees. Keep using "
@@ -306,7 +307,7 @@ def _unique_consistent_line(result: VerifyResult, taps: str) -> str:
             else f"{missable.slide_m * 1e3:.2f} mm")
     return (f"{said}, but {within} only, more than the {allowed_m * 1e3:.2f} mm the report guarantees; they see "
             f"{move_words(missable)} least (up to {size} would not show), so the report's pose may be off by up to "
-            f"{point_m * 1e3:.2f} mm: {tap_there}.")
+            f"{report.rounded_up_text(point_m * 1e3, 2)} mm: {tap_there}.")
 
 
 def report_lines(loaded: report.Report, now_age_s: float) -> list[str]:
