@@ -37,3 +37,19 @@ def test_the_details_view_rounds_the_solvers_guaranteed_figures_up():
     lines = details_lines(solution)
     assert "Mode 1: probability 100.0%, within 6.15 mm, 6.35 deg" in lines
     assert "Bounds: position 6.141 mm, rotation 6.341 deg, any point 0.449 mm." in lines
+
+
+def test_verify_says_both_of_its_figures_rounded_up_so_keep_using_never_reads_as_a_larger_figure():
+    """3.2201 mm seen against 3.2210 mm guaranteed: to the nearest that read "within 3.22 mm ... no more than the
+    3.22 mm" at best, and rounding only the first up "within 3.23 mm ... no more than the 3.22 mm"."""
+    from types import SimpleNamespace
+
+    from fixwizard.workflow.missable_move import MissableMove
+    from fixwizard.workflow.verify import _unique_consistent_line
+
+    missable = MissableMove(0.0032201 - 0.05 * 1e-9, 1e-9, np.array([1.0, 0, 0, 0, 0, 0]), np.zeros(3), 0.05)
+    guarantee = SimpleNamespace(max_point_displacement_m=0.003221)
+    result = SimpleNamespace(missable=missable, seeing_point=SimpleNamespace(where="there"),
+                             report=SimpleNamespace(pose_to_use=lambda: (np.eye(4), guarantee)))
+    line = _unique_consistent_line(result, "7 taps")  # type: ignore[arg-type]
+    assert "within 3.23 mm of the report's pose, no more than the 3.23 mm the report guarantees. Keep using" in line

@@ -298,15 +298,14 @@ def _unique_consistent_line(result: VerifyResult, taps: str) -> str:
                 "different ways see every move).")
     assert missable.slide_m is not None and missable.turn_rad is not None
     within = (f"to first order (small moves) they put every point of the fixture within "
-              f"{report.rounded_up_text(point_m * 1e3, 2)} mm of "
-              f"the report's pose")
+              f"{report.rounded_up_text(point_m * 1e3, 2)} mm of the report's pose")
+    guaranteed = f"the {report.rounded_up_text(allowed_m * 1e3, 2)} mm the report guarantees"
     if point_m <= allowed_m:
-        return (f"{said}, and {within}, no more than the {allowed_m * 1e3:.2f} mm the report guarantees. Keep using "
-                "the report's pose.")
+        return f"{said}, and {within}, no more than {guaranteed}. Keep using the report's pose."
     size = (f"{math.degrees(missable.turn_rad):.2f} deg" if missable.mostly_turn
             else f"{missable.slide_m * 1e3:.2f} mm")
-    return (f"{said}, but {within} only, more than the {allowed_m * 1e3:.2f} mm the report guarantees; they see "
-            f"{move_words(missable)} least (up to {size} would not show), so the report's pose may be off by up to "
+    return (f"{said}, but {within} only, more than {guaranteed}; they see {move_words(missable)} least (up to {size} "
+            "would not show), so the report's pose may be off by up to "
             f"{report.rounded_up_text(point_m * 1e3, 2)} mm: {tap_there}.")
 
 
