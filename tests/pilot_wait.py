@@ -2,7 +2,9 @@
 
 from collections.abc import Callable
 
+from textual.app import App
 from textual.pilot import Pilot
+from textual.screen import Screen
 
 TIMEOUT_S = 60.0
 
@@ -22,3 +24,9 @@ def shown(pilot: Pilot) -> str:
     screens = " > ".join(type(screen).__name__ for screen in app.screen_stack)
     notes = [str(note.message) for note in list(app._notifications)[-3:]]
     return f"screens {screens}; last notifications {notes}"
+
+
+def dialog_shown(app: App, kind: type[Screen]) -> bool:
+    """The top screen is a ``kind`` dialog with its message mounted (the message sits in a scroll, which mounts its
+    content after the screen is pushed and the title is in)."""
+    return isinstance(app.screen, kind) and bool(app.screen.query("#dialog-message"))

@@ -33,7 +33,7 @@ from fixwizard.tui.tip_calibration.result import CalibrationResultScreen
 from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.errors import ErrorModal
 from fixwizard.tui.widgets.status import StatusBar
-from pilot_wait import until
+from pilot_wait import dialog_shown, until
 from tui_cell import sampling_of, start_fixture
 
 SEED = 3
@@ -121,7 +121,7 @@ async def at_the_automatic_taps(tmp_path: Path, pace_s: float = 0.0) -> AsyncIte
 async def rearm(pilot: Pilot) -> None:
     """Re-arm after a STOP: the key, then yes in its confirmation."""
     await pilot.press(keys.REARM.keys)
-    await until(pilot, lambda: isinstance(pilot.app.screen, Confirm))
+    await until(pilot, lambda: dialog_shown(pilot.app, Confirm))
     await pilot.press("y")
     await until(pilot, lambda: not pilot.app.stopped)
 
@@ -219,7 +219,7 @@ def test_a_typed_mesh_path_that_does_not_exist_is_refused_and_the_fixture_stays(
             meshes = app.screen.query_one("#fixture", Select).query_one(OptionList)
             listed = meshes.option_count
             await pilot.press("tab", "tab", *typed, "enter")
-            await until(pilot, lambda: isinstance(app.screen, ErrorModal) and bool(app.screen.query("#dialog-message")))
+            await until(pilot, lambda: dialog_shown(app, ErrorModal))
             assert text_of(app, "#dialog-message") == (f"There is no file '{typed}': check the path and type it "
                                                        "again, or choose a mesh in the list")
             await press_button(pilot, "#ok")
@@ -275,7 +275,7 @@ def test_redo_from_the_pivot_asks_before_dropping_the_calibration_taps(tmp_path)
             await until(pilot, lambda: isinstance(app.screen, CalibrationResultScreen) and not app.screen.busy)
             result = app.screen
             await press_button(pilot, "#redo")
-            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await until(pilot, lambda: dialog_shown(app, Confirm))
             message = text_of(app, "#dialog-message")
             assert message.startswith(f"Redo drops the {app.cell.hands.pivot_count} pivot poses, the 3 table points "
                                       "and the 56 automatic taps")
@@ -283,7 +283,7 @@ def test_redo_from_the_pivot_asks_before_dropping_the_calibration_taps(tmp_path)
             await until(pilot, lambda: app.screen is result)
             assert recorded(result.workflow) == {"table": 16, "tilted": 40}
             await press_button(pilot, "#redo")
-            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await until(pilot, lambda: dialog_shown(app, Confirm))
             await pilot.press("y")
             await until(pilot, lambda: isinstance(app.screen, PivotScreen))
             assert len(app.screen.workflow.poses("pivot")) == 0
@@ -335,7 +335,7 @@ def test_a_protective_stop_during_a_tap_is_explained_and_unlocking_recovers(tmp_
             await until(pilot, lambda: isinstance(app.screen, TablePointsScreen) and not app.screen.busy)
             context.robot.inject_fault("protective_stop_during_tap")
             await pilot.press("m")
-            await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+            await until(pilot, lambda: dialog_shown(app, ErrorModal))
             message = text_of(app, "#dialog-message")
             assert message.startswith("Table point A: the robot made a protective stop during the tap: unlock")
             assert "Traceback" not in screen_text(app)
@@ -390,7 +390,7 @@ def test_a_protective_stop_during_the_automatic_taps_says_to_re_arm_before_going
             screen = app.screen
             context.robot.inject_fault("protective_stop_during_tap")
             await pilot.press("g")
-            await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+            await until(pilot, lambda: dialog_shown(app, ErrorModal))
             state = str(screen.query_one("#auto-state", Static).render())
             assert state.startswith("Stopped: ") and state.endswith(
                 "Once the cell is checked and clear, re-arm (Ctrl+R), then press g to continue.")
@@ -434,7 +434,7 @@ def test_the_note_after_a_reconnect_at_the_automatic_taps_offers_no_freedrive(tm
         async with at_the_automatic_taps(tmp_path) as (context, app, pilot):
             context.robot.inject_fault("connection_loss")
             await pilot.press("g")
-            await until(pilot, lambda: isinstance(app.screen, ErrorModal) and bool(app.screen.query("#reconnect")))
+            await until(pilot, lambda: dialog_shown(app, ErrorModal) and bool(app.screen.query("#reconnect")))
             await press_button(pilot, "#reconnect")
             await until(pilot, lambda: any("Connected to the robot again" in str(note.message)
                                            for note in app._notifications))
@@ -463,7 +463,7 @@ def test_a_lost_link_the_status_saw_before_the_operator_reconnected_is_not_repor
             robot.base_T_tcp = answered_late_when_lost
             robot.inject_fault("connection_loss")
             await pilot.press("g")
-            await until(pilot, lambda: isinstance(app.screen, ErrorModal) and bool(app.screen.query("#reconnect")))
+            await until(pilot, lambda: dialog_shown(app, ErrorModal) and bool(app.screen.query("#reconnect")))
             await until(pilot, asked.is_set)  # the status saw the link go: its question is on its way
             await press_button(pilot, "#reconnect")
             await until(pilot, lambda: any("Connected to the robot again" in str(note.message)
@@ -542,7 +542,7 @@ def test_quitting_during_the_automatic_taps_stops_them_after_the_current_tap(tmp
             await pilot.press("g")
             await until(pilot, lambda: recorded(screen.workflow)["table"] >= 1)
             await pilot.press("ctrl+q")
-            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await until(pilot, lambda: dialog_shown(app, Confirm))
             await pilot.press("y")
         return screen.workflow
 
@@ -630,7 +630,7 @@ def test_an_unreachable_ur_arm_is_explained_and_nothing_says_simulated(tmp_path)
         context = ur_cell("ur-arm.invalid", folder=tmp_path)
         app = FixwizardApp(context)
         async with app.run_test(size=SIZE) as pilot:
-            await until(pilot, lambda: isinstance(app.screen, ErrorModal) and bool(app.screen.query("#reconnect")))
+            await until(pilot, lambda: dialog_shown(app, ErrorModal) and bool(app.screen.query("#reconnect")))
             message = text_of(app, "#dialog-message")
             assert message.startswith("Cannot connect to the robot at ur-arm.invalid: port 29999 does not accept")
             assert app.screen.query("#reconnect") and not app.screen.query("#unlock")
@@ -639,7 +639,7 @@ def test_an_unreachable_ur_arm_is_explained_and_nothing_says_simulated(tmp_path)
             assert "UR arm at ur-arm.invalid | " in str(app.screen.query_one(StatusBar).render())
             assert " DISCONNECTED " in str(app.screen.query_one(StatusBar).render())
             await press_button(pilot, "#continue")
-            await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+            await until(pilot, lambda: dialog_shown(app, ErrorModal))
             await press_button(pilot, "#ok")
             await until(pilot, lambda: isinstance(app.screen, PivotScreen))
             assert "SIMULATED" not in screen_text(app) + str(app.screen.query_one(StatusBar).render())
@@ -655,7 +655,7 @@ def test_the_start_screen_switches_to_a_ur_arm_and_back_to_the_simulated_cell(tm
             await at_start(pilot)
             app.screen.query_one("#robot-host", Input).focus()
             await pilot.press(*"127.0.0.3", "enter")  # nothing listens there
-            await until(pilot, lambda: isinstance(app.screen, ErrorModal) and bool(app.screen.query("#dialog-message")))
+            await until(pilot, lambda: dialog_shown(app, ErrorModal))
             assert text_of(app, "#dialog-message").startswith("Cannot connect to the robot at 127.0.0.3: port 29999")
             await press_button(pilot, "#ok")
             await until(pilot, lambda: isinstance(app.screen, StartScreen))
@@ -698,7 +698,7 @@ def test_a_session_that_cannot_be_started_is_explained_before_the_start_screen_r
             await at_start(pilot)
             await choose(pilot, "#calibration", str(tmp_path / "calibrations" / "example_matlab_logo.yaml"))
             await press_button(pilot, "#continue")
-            await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+            await until(pilot, lambda: dialog_shown(app, ErrorModal))
             message = str(app.screen.query_one("#dialog-message").render())
             assert message.startswith("Cannot start the session ") and "sessions is a file, not a folder" in message
             await pilot.press("enter")
@@ -743,7 +743,7 @@ def test_a_typed_robot_address_that_is_none_is_refused_and_the_robot_stays(tmp_p
             before = app.cell.robot_name
             app.screen.query_one("#robot-host", Input).focus()
             await pilot.press(*typed, "enter")
-            await until(pilot, lambda: isinstance(app.screen, ErrorModal) and bool(app.screen.query("#dialog-message")))
+            await until(pilot, lambda: dialog_shown(app, ErrorModal))
             assert "is not the address of a robot: type its IP address (e.g. 192.168.0.10)" in \
                 text_of(app, "#dialog-message")
             await press_button(pilot, "#ok")

@@ -13,7 +13,7 @@ from fixwizard.tui.tip_calibration.auto import AutoTapsScreen
 from fixwizard.tui.tip_calibration.hands import PivotScreen, TablePointsScreen
 from fixwizard.tui.tip_calibration.result import CalibrationResultScreen
 from fixwizard.tui.widgets.errors import ErrorModal
-from pilot_wait import until
+from pilot_wait import dialog_shown, until
 from test_tui_app import at_the_automatic_taps
 from test_tui_keys import assert_in_view, open_help
 from test_tui_small_terminal import TMUX_SIZE
@@ -36,7 +36,7 @@ async def back_to_the_pivot_and_on(pilot) -> None:
     await press_when_ready(pilot, "n")
     await until(pilot, lambda: isinstance(app.screen, AutoTapsScreen))
     await pilot.press("g")
-    await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+    await until(pilot, lambda: dialog_shown(app, ErrorModal))
     assert "away from the table corner of A, B and C" in str(app.screen.error)
     await pilot.press("escape")
     await until(pilot, lambda: isinstance(app.screen, AutoTapsScreen))

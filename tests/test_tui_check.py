@@ -25,7 +25,7 @@ from fixwizard.tui.start.screen import StartScreen
 from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF
 from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.errors import error_message
-from pilot_wait import until
+from pilot_wait import dialog_shown, until
 from tui_cell import SAMPLE_BOUND_M, ScreenHost, spread_taps, start_fixture, truth_calibration
 
 SIZE = (80, 24)
@@ -279,13 +279,13 @@ def test_esc_asks_before_leaving_taps_that_are_not_checked(tmp_path, calibrated)
             screen = app.screen
             await tap_suggested(pilot, screen, 1)
             await pilot.press("escape")
-            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await until(pilot, lambda: dialog_shown(app, Confirm))
             assert text_of(app.screen, "#dialog-message").startswith("The 1 tap of this check is not checked yet")
             await pilot.press("n")
             await until(pilot, lambda: app.screen is screen)
             assert len(screen._taps()) == 1 and app.results == []
             await pilot.press("escape")
-            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await until(pilot, lambda: dialog_shown(app, Confirm))
             await pilot.press("y")
             await until(pilot, lambda: app.results == [None])
 

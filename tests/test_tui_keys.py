@@ -33,7 +33,7 @@ from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.dialog import Dialog
 from fixwizard.tui.widgets.help import HelpScreen
 from fixwizard.tui.widgets.too_small import TooSmall
-from pilot_wait import until
+from pilot_wait import dialog_shown, until
 from test_tui_app import (
     REPO,
     SIZE,
@@ -193,7 +193,7 @@ def test_stop_shows_stopped_refuses_motion_until_a_confirmed_rearm(tmp_path):
             assert any("STOPPED: the robot does not move until you re-arm" in str(note.message)
                        for note in app._notifications)
             await pilot.press("ctrl+r")
-            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await until(pilot, lambda: dialog_shown(app, Confirm))
             await pilot.press("n")  # not yet
             await until(pilot, lambda: isinstance(app.screen, PivotScreen))
             assert app.stopped and app.cell.robot.status().mode == "idle"  # the STOP ended freedrive
@@ -221,7 +221,7 @@ def test_re_arm_pressed_twice_asks_once_and_a_stop_meanwhile_takes_the_question_
             await pilot.press("f12")
             await until(pilot, lambda: app.stopped)
             await pilot.press("ctrl+r", "ctrl+r")
-            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await until(pilot, lambda: dialog_shown(app, Confirm))
             await pilot.pause()
             assert questions(app) == ["Re-arm the robot?"]
             await pilot.press("f12")
@@ -234,7 +234,7 @@ def test_re_arm_pressed_twice_asks_once_and_a_stop_meanwhile_takes_the_question_
             await pilot.press("g")
             await until(pilot, lambda: app.motion_running())
             await pilot.press("ctrl+q", "ctrl+q")
-            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await until(pilot, lambda: dialog_shown(app, Confirm))
             await pilot.pause()
             assert questions(app) == ["Quit while the robot moves?"]
             await pilot.press("n")
@@ -253,13 +253,13 @@ def test_a_yes_to_a_re_arm_question_asked_before_a_stop_under_the_help_re_arms_n
             await pilot.press("f12")
             await until(pilot, lambda: app.stopped)
             await pilot.press("ctrl+r")
-            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await until(pilot, lambda: dialog_shown(app, Confirm))
             await pilot.press("question_mark")  # the help over the question (a modal screen cuts the app's keys off)
             await until(pilot, lambda: isinstance(app.screen, HelpScreen))
             assert "Answer the question" in str(app.screen.query_one("#help-text", Static).render())
             await pilot.press("f12")
             await pilot.press("escape")
-            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await until(pilot, lambda: dialog_shown(app, Confirm))
             await pilot.press("y")
             await until(pilot, lambda: not isinstance(app.screen, Confirm))
             await pilot.pause()
@@ -321,7 +321,7 @@ def test_quitting_while_the_robot_moves_asks_first(tmp_path, cancel):
             await pilot.press("g")
             await until(pilot, lambda: app.motion_running())
             await pilot.press("ctrl+q")
-            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await until(pilot, lambda: dialog_shown(app, Confirm))
             assert "Stop and quit (y)" in str(app.screen.query_one("#yes").label)
             await pilot.press(cancel)
             await until(pilot, lambda: isinstance(app.screen, AutoTapsScreen))
@@ -344,14 +344,14 @@ def test_esc_on_the_pivot_asks_before_dropping_the_captured_poses(tmp_path, stay
             await pilot.press("m")
             await until(pilot, lambda: len(pivot.workflow.poses("pivot")) == 1 and not pivot.busy)
             await pilot.press("escape")
-            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await until(pilot, lambda: dialog_shown(app, Confirm))
             assert "drops the 1 captured pose;" in str(app.screen.query_one("#dialog-message").render())
             await pilot.press(stay)
             await until(pilot, lambda: app.screen is pivot)
             await pilot.pause(0.3)
             assert app.screen is pivot and len(pivot.workflow.poses("pivot")) == 1  # one screen closed, not two
             await pilot.press("escape")
-            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await until(pilot, lambda: dialog_shown(app, Confirm))
             await (pilot.click(drop) if drop.startswith("#") else pilot.press(drop))
             await until(pilot, lambda: isinstance(app.screen, StartScreen))
             await pilot.pause(0.3)
@@ -411,7 +411,7 @@ def test_leaving_sampling_asks_and_lands_on_the_start_screen_with_that_session_t
             assert str(app.screen.query_one("#note", Static).render()) == (
                 f"Tip calibration tip.yaml. New session {session_path.name}: every tap is saved there as you go.")
             await pilot.press("escape")
-            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await until(pilot, lambda: dialog_shown(app, Confirm))
             await pilot.press("y")
             await until(pilot, lambda: isinstance(app.screen, StartScreen) and bool(app.screen.query("#session")))
             assert app.screen.query_one("#session", Select).value == str(session_path)

@@ -20,7 +20,7 @@ from fixwizard.tui.solve.screen import SolveScreen
 from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.key_footer import KeyFooter
 from fixwizard.tui.widgets.status import StatusBar
-from pilot_wait import until
+from pilot_wait import dialog_shown, until
 from tui_cell import (
     PausedSolver,
     ScreenHost,
@@ -201,7 +201,7 @@ async def test_a_report_path_naming_a_file_asks_before_replacing_it(tapped, tmp_
             await pilot.press("enter")
 
         await write_to(str(other))
-        await until(pilot, lambda: isinstance(app.screen, Confirm))
+        await until(pilot, lambda: dialog_shown(app, Confirm))
         await pilot.press("n")
         await until(pilot, lambda: app.screen is results)
         assert other.read_text() == "another fixture's report" and results.written is None
@@ -212,7 +212,7 @@ async def test_a_report_path_naming_a_file_asks_before_replacing_it(tapped, tmp_
         await pilot.press("w")
         assert app.screen is results and text_of(results, "#written").startswith("Report written to")
         await write_to(str(other))
-        await until(pilot, lambda: isinstance(app.screen, Confirm))
+        await until(pilot, lambda: dialog_shown(app, Confirm))
         await pilot.press("y")
         await until(pilot, lambda: app.screen is results and results.written == other)
         assert report.load(other).status == tapped.solution.status

@@ -28,7 +28,7 @@ from fixwizard.tui.widgets.help import help_text, keys_of
 from fixwizard.tui.widgets.key_footer import KeyFooter
 from fixwizard.tui.widgets.status import StatusBar
 from fixwizard.workflow.session import SamplingSession
-from pilot_wait import until
+from pilot_wait import dialog_shown, until
 from tui_cell import sampling_of, start_fixture
 
 SIZE = (80, 24)
@@ -186,7 +186,7 @@ def test_every_refused_resume_is_explained_on_the_start_screen(tmp_path, spoil, 
         context = simulated_cell(3, pace_s=0.0, folder=tmp_path)
         app = FixwizardApp(context, requested)
         async with app.run_test(size=SIZE, notifications=True) as pilot:
-            await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+            await until(pilot, lambda: dialog_shown(app, ErrorModal))
             assert str(app.screen.query_one("#dialog-title", Static).render()).strip() == "Cannot resume the session"
             message = str(app.screen.query_one("#dialog-message", Static).render())
             assert message.startswith("Could not resume ") and reason in message
@@ -207,7 +207,7 @@ def test_a_session_open_in_another_wizard_is_refused_with_the_reason(tmp_path):
         context = simulated_cell(3, pace_s=0.0, folder=tmp_path)
         app = FixwizardApp(context, str(path))
         async with app.run_test(size=SIZE, notifications=True) as pilot:
-            await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+            await until(pilot, lambda: dialog_shown(app, ErrorModal))
             message = str(app.screen.query_one("#dialog-message", Static).render())
             assert "is open in another fixwizard; close that one first" in message
             await pilot.press("escape")
@@ -304,12 +304,12 @@ def test_after_a_refused_resume_on_the_start_screen_continue_works_again(tmp_pat
             start.query_one("#session").value = str(path)
             await pilot.pause()
             start.query_one("#continue").press()
-            await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+            await until(pilot, lambda: dialog_shown(app, ErrorModal))
             await pilot.press("escape")
             await until(pilot, lambda: app.screen is start)
             assert "Last change" in str(start.query_one("#session-info", Static).render())
             start.query_one("#continue").press()  # the same session again: refused again, not "still opening"
-            await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+            await until(pilot, lambda: dialog_shown(app, ErrorModal))
             assert "is damaged (checksum or JSON)" in str(app.screen.query_one("#dialog-message", Static).render())
             assert not any("Still opening" in str(note.message) for note in app._notifications)
     asyncio.run(run())

@@ -27,7 +27,7 @@ from fixwizard.workflow.advice import TapAdvice
 from fixwizard.workflow.hover import HoverPlan
 from fixwizard.workflow.live import LiveView, quick_check
 from fixwizard.workflow.solver_process import NextTap
-from pilot_wait import until
+from pilot_wait import dialog_shown, until
 from tui_cell import ScreenHost, cell_of, record_spread_taps, wizard_context
 
 pytestmark = pytest.mark.asyncio
@@ -166,12 +166,12 @@ async def test_a_tap_that_finds_the_link_down_offers_reconnect_also_after_its_di
         cell_of(context).inject_fault("connection_loss")
         for _ in range(2):  # the first tap loses the link, the second finds it lost
             await tap(pilot, screen, "mt")
-            await until(pilot, lambda: isinstance(app.screen, ErrorModal) and bool(app.screen.query("#reconnect")),
+            await until(pilot, lambda: dialog_shown(app, ErrorModal) and bool(app.screen.query("#reconnect")),
                         timeout_s=10)
             await pilot.press("enter")  # OK
             await until(pilot, lambda: app.screen is screen)
         await tap(pilot, screen, "t")
-        await until(pilot, lambda: isinstance(app.screen, ErrorModal) and bool(app.screen.query("#reconnect")),
+        await until(pilot, lambda: dialog_shown(app, ErrorModal) and bool(app.screen.query("#reconnect")),
                     timeout_s=10)
         app.screen.query_one("#reconnect", Button).focus()
         await pilot.press("enter")
@@ -205,7 +205,7 @@ async def test_leaving_turns_freedrive_off_and_keeps_the_session_open(context):
     async with app.run_test(size=SIZE) as pilot:
         await tap(pilot, app.screen)
         await pilot.press("escape")
-        await until(pilot, lambda: isinstance(app.screen, Confirm))
+        await until(pilot, lambda: dialog_shown(app, Confirm))
         assert "stays saved; it is selected there to resume" in str(app.screen.query_one("#dialog-message").render())
         await pilot.press("y")
         await until(pilot, lambda: app.results == [False])
@@ -238,14 +238,14 @@ async def test_once_the_pose_is_pinned_down_the_screen_suggests_a_tap_and_moves_
         assert "Press g to go above it" in text_of(screen, "#guide")
         before = cell.base_T_tcp()
         await pilot.press("g")
-        await until(pilot, lambda: isinstance(app.screen, ConfirmMove))
+        await until(pilot, lambda: dialog_shown(app, ConfirmMove))
         await pilot.press("enter")  # the focused button is Cancel
         await until(pilot, lambda: app.screen is screen)
         assert text_of(screen, "#note").startswith("Not moved. Press g to move above the suggested point")
         np.testing.assert_allclose(cell.base_T_tcp()[:3, 3], before[:3, 3], atol=1e-3)  # cancelled: no motion
         target = screen.advice.base_p_point_m
         await pilot.press("g")
-        await until(pilot, lambda: isinstance(app.screen, ConfirmMove))
+        await until(pilot, lambda: dialog_shown(app, ConfirmMove))
         await pilot.press("y")
         await until(pilot, lambda: app.screen is screen and not screen.busy)
         assert "hovers above the suggested point" in text_of(screen, "#note")
@@ -281,7 +281,7 @@ async def test_a_stop_between_the_moves_above_a_point_lets_no_further_move_start
 
         cell.move_linear = stopped_after_the_first
         await pilot.press("g")
-        await until(pilot, lambda: isinstance(app.screen, ConfirmMove))
+        await until(pilot, lambda: dialog_shown(app, ConfirmMove))
         await pilot.press("y")
         await until(pilot, lambda: app.screen is screen and not screen.busy and "stopped on request"
                     in text_of(screen, "#problem"))
@@ -340,7 +340,7 @@ async def tap_or_move_above_a_point(pilot, context, motion: str) -> None:
     screen.advice = advice
     screen.hover_plan = HoverPlan(advice, 0.01, point + [0.0, 0.0, 0.01], point[2] + 0.02)
     await pilot.press("g")
-    await until(pilot, lambda: isinstance(app.screen, ConfirmMove))
+    await until(pilot, lambda: dialog_shown(app, ConfirmMove))
     await pilot.press("y")
 
 
@@ -492,7 +492,7 @@ async def test_which_fixture_checks_the_taps_against_every_offered_mesh(context,
             await tap(pilot, screen)
         await until(pilot, lambda: not screen.live_running, timeout_s=120)  # identify has its time limit alone
         await pilot.press("i")
-        await until(pilot, lambda: isinstance(app.screen, Dialog) and bool(app.screen.query("#dialog-message")),
+        await until(pilot, lambda: dialog_shown(app, Dialog),
                     timeout_s=120)
         text = str(app.screen.query_one("#dialog-message", Static).content)
         bracket_mark = " (the chosen one)" if chosen == "bracket" else ""
@@ -519,7 +519,7 @@ async def test_the_live_check_says_the_ball_diameter_is_wrong_when_the_taps_fit_
                         f"{fitted_mm:.1f} mm, the tip calibration says 6.0 mm: check the ball (measure it) and "
                         "calibrate the tip again with its diameter. The taps themselves are probably fine.")
         await pilot.press("o")
-        await until(pilot, lambda: isinstance(app.screen, Dialog) and bool(app.screen.query("#dialog-message")))
+        await until(pilot, lambda: dialog_shown(app, Dialog))
         details = str(app.screen.query_one("#dialog-message", Static).content)
         assert details.startswith("12 taps; bounds from a quick hull refinement.\nSolver status: inconsistent.")
         assert f"Ball diameter fitted with the pose: {fitted_mm:.2f} mm." in details

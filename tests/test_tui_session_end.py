@@ -22,7 +22,7 @@ from fixwizard.tui.start.screen import StartScreen
 from fixwizard.tui.start.sessions import start_session
 from fixwizard.tui.widgets.errors import ErrorModal
 from fixwizard.workflow.session import KIND
-from pilot_wait import until
+from pilot_wait import dialog_shown, until
 from tui_cell import truth_calibration
 
 SIZE = (80, 24)
@@ -79,7 +79,7 @@ def test_a_session_whose_end_the_full_disk_refused_stays_resumable_in_the_same_w
             assert app.screen.written is not None and app.screen.written.is_file()
             filler = fill_disk(small_disk)
             await pilot.press("q")
-            await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+            await until(pilot, lambda: dialog_shown(app, ErrorModal))
             message = str(app.screen.query_one("#dialog-message", Static).render())
             assert "the disk is full" in message and "This end of the session was not saved" in message
             assert "stays unfinished: it is selected on the start screen to resume" in message

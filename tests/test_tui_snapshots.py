@@ -13,7 +13,7 @@ from fixwizard.tui.tip_calibration.hands import PivotScreen, TablePointsScreen
 from fixwizard.tui.tip_calibration.result import CalibrationResultScreen
 from fixwizard.tui.widgets.errors import ErrorModal
 from fixwizard.tui.widgets.help import HelpScreen
-from pilot_wait import until
+from pilot_wait import dialog_shown, until
 from test_tui_app import SIZE, at_start, calibrate_by_hand, press_button, wizard
 
 pytestmark = pytest.mark.slow  # screens driven to a state and rendered, 5-10 s each
@@ -94,7 +94,7 @@ def test_protective_stop_message(snap_compare, tmp_path):
         await until(pilot, lambda: isinstance(pilot.app.screen, TablePointsScreen) and not pilot.app.screen.busy)
         pilot.app.cell.robot.inject_fault("protective_stop_during_tap")
         await pilot.press("m")
-        await until(pilot, lambda: isinstance(pilot.app.screen, ErrorModal))
+        await until(pilot, lambda: dialog_shown(pilot.app, ErrorModal))
         await until(pilot, lambda: pilot.app.robot_status.protective_stop)
         await pilot.pause()
 

@@ -20,7 +20,7 @@ from fixwizard.tui.cell import Cell
 from fixwizard.tui.sampling.screen import SamplingScreen
 from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF
 from fixwizard.tui.widgets.errors import ErrorModal
-from pilot_wait import until
+from pilot_wait import dialog_shown, until
 from test_tui_app import SIZE, at_start, pivot_by_hand, wizard
 from tui_cell import wizard_context
 
@@ -96,7 +96,7 @@ def test_a_table_point_tap_asked_for_before_a_stop_does_not_start_after_it(tmp_p
             app, table = pilot.app, pilot.app.screen
             held = await stop_as_freedrive_turns_off(pilot, key, context.robot)
             assert held.taps_started == 0 and len(table.workflow.poses("table_coarse")) == 0
-            await until(pilot, lambda: isinstance(app.screen, ErrorModal) and bool(app.screen.query("#dialog-message")))
+            await until(pilot, lambda: dialog_shown(app, ErrorModal))
             assert str(app.screen.query_one("#dialog-message", Static).render()).startswith(
                 "The tap was stopped on request; nothing was recorded from it")
     asyncio.run(run())
@@ -132,7 +132,7 @@ def test_a_stop_landing_between_the_look_at_stop_and_the_table_tap_keeps_the_tap
             app, table = pilot.app, pilot.app.screen
             raised = stop_pressed_as_the_tap_leaves(app, context.robot)
             await pilot.press("t")
-            await until(pilot, lambda: isinstance(app.screen, ErrorModal) and bool(app.screen.query("#dialog-message")))
+            await until(pilot, lambda: dialog_shown(app, ErrorModal))
             assert app.stopped and len(table.workflow.poses("table_coarse")) == 0
             assert [type(error) for error in raised] == [MotionStopped]
             assert str(app.screen.query_one("#dialog-message", Static).render()).startswith(

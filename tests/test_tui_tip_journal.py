@@ -25,7 +25,7 @@ from fixwizard.tui.tip_calibration.result import CalibrationResultScreen
 from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.errors import ErrorModal
 from fixwizard.workflow.calibration_journal import find_unfinished_calibrations
-from pilot_wait import until
+from pilot_wait import dialog_shown, until
 from test_tui_app import stop_and_rearm
 from test_tui_keys import assert_in_view, open_help
 from tui_cell import start_fixture
@@ -103,7 +103,7 @@ def test_a_calibration_left_during_the_automatic_taps_continues_where_it_stopped
                          for step in ("table", "tilted")) == done
             auto = app.screen
             await pilot.press("g")  # the arm is elsewhere (the new cell's home pose): it does not move
-            await until(pilot, lambda: isinstance(app.screen, ErrorModal))
+            await until(pilot, lambda: dialog_shown(app, ErrorModal))
             shown = "\n".join(str(widget.render()) for widget in app.screen.query(Static))
             assert "mm away from the table corner of A, B and C" in shown and "did not move" in shown
             await pilot.press("escape")
@@ -135,7 +135,7 @@ def test_a_redo_drops_the_poses_for_good_and_back_from_the_pivot_gives_the_calib
             (journal,) = offered()
             assert journal.counts["tilted"] == 40
             app.screen.query_one("#redo", Button).press()
-            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await until(pilot, lambda: dialog_shown(app, Confirm))
             await pilot.press("y")
             await until(pilot, lambda: isinstance(app.screen, PivotScreen) and app.screen.is_mounted)
             assert "Poses captured: 0" in str(app.screen.query_one("#pivot-state", Static).render())
@@ -145,7 +145,7 @@ def test_a_redo_drops_the_poses_for_good_and_back_from_the_pivot_gives_the_calib
                 await press_when_ready(pilot, "m")
             assert len(offered()) == 1
             await pilot.press("escape")
-            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await until(pilot, lambda: dialog_shown(app, Confirm))
             await pilot.press("y")
             await until(pilot, lambda: isinstance(app.screen, StartScreen))
             await until(pilot, lambda: offered() == [])

@@ -18,7 +18,7 @@ from fixwizard.tui import keys
 from fixwizard.tui.app import FixwizardApp
 from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.errors import ErrorModal
-from pilot_wait import until
+from pilot_wait import dialog_shown, until
 from tui_cell import sampling_of, wizard_context
 from ur_loopback import TIP_OFFSET_M, flange_above_surface, private_loopback_host
 
@@ -92,7 +92,7 @@ def test_sampling_on_a_ur_arm_taps_stops_rearms_and_reconnects(wizard, controlle
             assert arm_stands(controller) and len(controller.programs()) == programs
 
             await pilot.press(keys.REARM.keys)
-            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            await until(pilot, lambda: dialog_shown(app, Confirm))
             await pilot.press("y")
             await until(pilot, lambda: not app.stopped)
             await until(pilot, lambda: not screen.busy)
@@ -105,7 +105,7 @@ def test_sampling_on_a_ur_arm_taps_stops_rearms_and_reconnects(wizard, controlle
             await pilot.press(TAP_KEY)  # 30 mm to the surface at 10 mm/s: the link dies on the way
             await until(pilot, lambda: app.robot_status is not None and app.robot_status.mode == "moving", 10.0)
             os.kill(robot.link_pid, signal.SIGKILL)  # a native crash in ur_rtde
-            await until(pilot, lambda: isinstance(app.screen, ErrorModal) and bool(app.screen.query("#reconnect")),
+            await until(pilot, lambda: dialog_shown(app, ErrorModal) and bool(app.screen.query("#reconnect")),
                         15.0)
             shown_at = controller.flange_pose()  # nothing moves once the error is shown
             assert arm_stands(controller) and np.allclose(controller.flange_pose(), shown_at, atol=1e-9)
@@ -139,7 +139,7 @@ def test_a_link_lost_while_the_operator_guides_the_arm_is_announced_with_reconne
                         and not screen.busy and controller.in_freedrive())
             await until(pilot, lambda: app.robot_status is not None and app.robot_status.connected)
             os.kill(wizard.robot.link_pid, signal.SIGKILL)
-            await until(pilot, lambda: isinstance(app.screen, ErrorModal) and bool(app.screen.query("#reconnect")),
+            await until(pilot, lambda: dialog_shown(app, ErrorModal) and bool(app.screen.query("#reconnect")),
                         15.0)
             assert not controller.program_running() and not controller.in_freedrive()
             assert "watchdog stopped the arm" in screen_text(app)
