@@ -12,6 +12,7 @@ import pytest
 import trimesh
 
 from fixwizard.geometry.mesh_distance import (
+    LEAF_TRIANGLES,
     STACK_DEPTH,
     MeshDistance,
     row_normal,
@@ -244,6 +245,33 @@ def test_a_mesh_graded_towards_a_point_gets_a_hierarchy_the_traversals_can_hold(
     assert np.all(low <= truth + 1e-12) and np.all(truth <= high + 1e-12)
     first, crossings = distance.rays(points, np.array([0.0, 0.0, -1.0]))
     assert np.all(crossings <= 1) and np.all(np.isinf(first) == (crossings == 0))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_every_node_of_the_hierarchy_boxes_exactly_its_own_triangles(seed):
+    """Whatever the triangles (coincident centres, a grid, slivers, one triangle): ``order`` holds each triangle
+    once, each inner node's range is its two children's, back to back, each leaf holds at most LEAF_TRIANGLES, and
+    each node's box is the smallest box around its triangles (a traversal prunes by it, so a box that missed one
+    could prune the nearest triangle away)."""
+    rng = np.random.default_rng(seed)
+    count = int(rng.choice([1, 2, 5, 300, 4000]))
+    vertices = rng.normal(size=(3 * count, 3)) * rng.uniform(1e-4, 1.0, 3)
+    if seed % 2:
+        vertices = np.round(vertices, 1)  # many triangles with the same centre along an axis, or everywhere
+    faces = rng.permutation(3 * count).reshape(count, 3)
+    node_low, node_high, children, ranges, order = MeshDistance(vertices, faces).hierarchy
+    assert np.array_equal(np.sort(order), np.arange(count))
+    corners = vertices[faces[order]]
+    for node in range(len(children)):
+        start, stop = ranges[node]
+        assert np.array_equal(node_low[node], corners[start:stop].min(axis=(0, 1)))
+        assert np.array_equal(node_high[node], corners[start:stop].max(axis=(0, 1)))
+        first, second = children[node]
+        if first < 0:
+            assert 1 <= stop - start <= LEAF_TRIANGLES or count == 0
+        else:
+            assert ranges[first, 0] == start and ranges[first, 1] == ranges[second, 0] and ranges[second, 1] == stop
+            assert ranges[first, 1] > start and ranges[second, 0] < stop
 
 
 def test_a_hint_face_only_speeds_the_search_up():

@@ -303,31 +303,51 @@ def _triangle_rows(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(nogil=True, cache=True)
-def _best_split(lows: np.ndarray, highs: np.ndarray, members: np.ndarray) -> int:
-    """Where to split members (sorted along an axis) so that the children's box surfaces times their triangle
-    counts are smallest (the surface-area heuristic)."""
-    count = len(members)
-    prefix = np.empty(count)
-    low = np.full(3, np.inf)
-    high = np.full(3, -np.inf)
+def _best_split(boxes: np.ndarray, start: int, stop: int, prefix: np.ndarray) -> int:
+    """Where to split rows ``start:stop`` of ``boxes`` (low xyz, high xyz per row, sorted along an axis) so that the
+    children's box surfaces times their triangle counts are smallest (the surface-area heuristic); ``prefix`` is
+    scratch space of at least ``stop - start``."""
+    count = stop - start
+    low0 = low1 = low2 = np.inf
+    high0 = high1 = high2 = -np.inf
     for index in range(count):
-        for axis in range(3):
-            low[axis] = min(low[axis], lows[members[index], axis])
-            high[axis] = max(high[axis], highs[members[index], axis])
-        e0, e1, e2 = high[0] - low[0], high[1] - low[1], high[2] - low[2]
+        row = start + index
+        low0, low1, low2 = min(low0, boxes[row, 0]), min(low1, boxes[row, 1]), min(low2, boxes[row, 2])
+        high0, high1, high2 = max(high0, boxes[row, 3]), max(high1, boxes[row, 4]), max(high2, boxes[row, 5])
+        e0, e1, e2 = high0 - low0, high1 - low1, high2 - low2
         prefix[index] = (e0 * e1 + e1 * e2 + e2 * e0) * (index + 1)
-    low[:] = np.inf
-    high[:] = -np.inf
+    low0 = low1 = low2 = np.inf
+    high0 = high1 = high2 = -np.inf
     best, best_cost = count // 2, np.inf
     for index in range(count - 1, 0, -1):
-        for axis in range(3):
-            low[axis] = min(low[axis], lows[members[index], axis])
-            high[axis] = max(high[axis], highs[members[index], axis])
-        e0, e1, e2 = high[0] - low[0], high[1] - low[1], high[2] - low[2]
+        row = start + index
+        low0, low1, low2 = min(low0, boxes[row, 0]), min(low1, boxes[row, 1]), min(low2, boxes[row, 2])
+        high0, high1, high2 = max(high0, boxes[row, 3]), max(high1, boxes[row, 4]), max(high2, boxes[row, 5])
+        e0, e1, e2 = high0 - low0, high1 - low1, high2 - low2
         cost = prefix[index - 1] + (e0 * e1 + e1 * e2 + e2 * e0) * (count - index)
         if cost < best_cost:
             best, best_cost = index, cost
     return best
+
+
+@numba.njit(nogil=True, cache=True)
+def _sort_rows(boxes: np.ndarray, order: np.ndarray, start: int, stop: int, axis: int, keys: np.ndarray,
+               spare: np.ndarray, spare_order: np.ndarray) -> None:
+    """Sort rows ``start:stop`` of ``boxes`` and ``order`` by their box centre along ``axis`` (stable: ties keep
+    their order); ``keys``, ``spare`` and ``spare_order`` are scratch space."""
+    count = stop - start
+    for index in range(count):
+        keys[index] = 0.5 * (boxes[start + index, axis] + boxes[start + index, axis + 3])
+    permutation = np.argsort(keys[:count], kind="mergesort")
+    for index in range(count):
+        source = start + permutation[index]
+        spare_order[index] = order[source]
+        for column in range(6):
+            spare[index, column] = boxes[source, column]
+    for index in range(count):
+        order[start + index] = spare_order[index]
+        for column in range(6):
+            boxes[start + index, column] = spare[index, column]
 
 
 @numba.njit(nogil=True, cache=True)
@@ -336,10 +356,16 @@ def _build_hierarchy(lows: np.ndarray, highs: np.ndarray) -> Arrays:
     where the surface-area heuristic says (at its median from level ``SAH_DEPTH`` on, so that no traversal's
     ``STACK_DEPTH`` is overrun), at most ``LEAF_TRIANGLES`` per leaf. Returns the nodes' boxes (low,
     high), each inner node's two children (-1 for a leaf), each node's range in ``order``, and ``order`` (the
-    triangles, leaf by leaf)."""
+    triangles, leaf by leaf). The triangles' boxes are kept in ``order``'s order as it is built, so that every
+    pass over a node's members reads them in sequence (they lie scattered over the mesh's memory otherwise)."""
     count = len(lows)
     order = np.arange(count)
-    centres = 0.5 * (lows + highs)
+    boxes = np.empty((count, 6))
+    boxes[:, :3] = lows
+    boxes[:, 3:] = highs
+    keys, prefix = np.empty(count), np.empty(count)
+    spare, spare_order = np.empty((count, 6)), np.empty(count, np.int64)
+    centre_low, centre_high = np.empty(3), np.empty(3)
     capacity = 2 * count + 1
     node_low = np.empty((capacity, 3))
     node_high = np.empty((capacity, 3))
@@ -351,18 +377,20 @@ def _build_hierarchy(lows: np.ndarray, highs: np.ndarray) -> Arrays:
     while depth > 0:
         depth -= 1
         node, start, stop, level = stack[depth, 0], stack[depth, 1], stack[depth, 2], stack[depth, 3]
-        members = order[start:stop]
-        spread = np.empty(3)
-        for axis in range(3):
-            node_low[node, axis] = np.min(lows[members, axis])
-            node_high[node, axis] = np.max(highs[members, axis])
-            spread[axis] = np.max(centres[members, axis]) - np.min(centres[members, axis])
+        node_low[node], node_high[node] = np.inf, -np.inf
+        centre_low[:], centre_high[:] = np.inf, -np.inf
+        for row in range(start, stop):
+            for axis in range(3):
+                node_low[node, axis] = min(node_low[node, axis], boxes[row, axis])
+                node_high[node, axis] = max(node_high[node, axis], boxes[row, axis + 3])
+                centre = 0.5 * (boxes[row, axis] + boxes[row, axis + 3])
+                centre_low[axis] = min(centre_low[axis], centre)
+                centre_high[axis] = max(centre_high[axis], centre)
         ranges[node, 0], ranges[node, 1] = start, stop
         if stop - start <= LEAF_TRIANGLES:
             continue
-        members = members[np.argsort(centres[members, np.argmax(spread)], kind="mergesort")]
-        order[start:stop] = members
-        middle = start + (_best_split(lows, highs, members) if level < SAH_DEPTH else (stop - start) // 2)
+        _sort_rows(boxes, order, start, stop, int(np.argmax(centre_high - centre_low)), keys, spare, spare_order)
+        middle = start + (_best_split(boxes, start, stop, prefix) if level < SAH_DEPTH else (stop - start) // 2)
         children[node, 0], children[node, 1] = nodes, nodes + 1
         stack[depth, 0], stack[depth, 1], stack[depth, 2], stack[depth, 3] = nodes, start, middle, level + 1
         stack[depth + 1, 0], stack[depth + 1, 1], stack[depth + 1, 2] = nodes + 1, middle, stop
