@@ -32,7 +32,14 @@ from fixwizard.mesh_format import (
     content_format,
     unreadable_line_message,
 )
-from fixwizard.mesh_hygiene import ZIP_SHARE, clean_mesh, refuse_far_vertices, refuse_non_finite, reliable_normals
+from fixwizard.mesh_hygiene import (
+    ZIP_SHARE,
+    clean_mesh,
+    refuse_far_vertices,
+    refuse_non_finite,
+    reliable_normals,
+    used_vertices,
+)
 from fixwizard.obj_lines import (
     corner_before_first_vertex,
     face_triangles,
@@ -425,16 +432,43 @@ def _identical_vertices_merged(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     face its own corners; an OBJ splits a vertex at its texture seams), in the order they first appear. Exact, so the
     surface stays the file's: trimesh's ``process`` also merged vertices up to 1e-8 of the file's unit apart (17 nm
     of a mesh in metres), which moved the surface by an amount no bound carried; vertices written apart by rounding
-    are closed by ``mesh_hygiene``, which bounds how far that moves the surface."""
+    are closed by ``mesh_hygiene``, which bounds how far that moves the surface. The faces' indices are in range
+    (``_refuse_missing_corners``) and the coordinates finite (``refuse_non_finite``)."""
     vertices, faces = np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64)
-    used = np.unique(faces)
-    _, first, inverse = np.unique(vertices[used], axis=0, return_index=True, return_inverse=True)
+    used = used_vertices(faces, len(vertices))
+    first, rank = _first_of_each_point(vertices[used])
+    index = np.full(len(vertices), -1, np.int64)
+    index[used] = rank
+    return trimesh.Trimesh(vertices[used[first]], index[faces], process=False)
+
+
+def _first_of_each_point(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For finite points ``(N, 3)``: where each distinct point first occurs, in order of appearance, and each point's
+    number among them. Points are the same when their coordinates are equal as numbers (0.0 and -0.0 too: an ASCII
+    export writes both). The points are sorted by one 64-bit key of their coordinates' bits, several times faster
+    than sorting rows of three (np.unique by rows took 6-10 s for the 3.9 million corners of a 1.3-million-triangle
+    STL); where two different points share a key, the rows themselves are sorted instead."""
+    bits = np.ascontiguousarray(points + 0.0).view(np.uint64)  # + 0.0 turns -0.0 into 0.0
+    _, first, inverse = np.unique(_point_keys(bits), return_index=True, return_inverse=True)
+    if not np.array_equal(bits[first[inverse]], bits):
+        _, first, inverse = np.unique(bits, axis=0, return_index=True, return_inverse=True)
     order = np.argsort(first)
     rank = np.empty_like(order)
     rank[order] = np.arange(len(order))
-    index = np.full(len(vertices), -1, np.int64)
-    index[used] = rank[inverse.ravel()]
-    return trimesh.Trimesh(vertices[used[first[order]]], index[faces], process=False)
+    return first[order], rank[inverse.ravel()]
+
+
+def _point_keys(bits: np.ndarray) -> np.ndarray:
+    """One 64-bit key per row of three 64-bit words: each word mixed with the ones after it by SplitMix64's
+    finalizer, whose shifts carry every bit into every other (a multiplication alone only carries bits upwards, and
+    coordinates read from float32 files share their low 29 bits)."""
+    key = np.zeros(len(bits), np.uint64)
+    for column in range(bits.shape[1] - 1, -1, -1):
+        key = bits[:, column] ^ key
+        key = (key ^ (key >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        key = (key ^ (key >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        key = key ^ (key >> np.uint64(31))
+    return key
 
 
 def _plausible(size_m: float) -> bool:

@@ -10,6 +10,7 @@ import pytest
 import trimesh
 from scipy.spatial.transform import Rotation
 
+from fixwizard import fixture as fixture_module
 from fixwizard.errors import MeshError, MeshUnitsError
 from fixwizard.fixture import load_fixture
 from fixwizard.geometry.se3 import make_transform, transform_points
@@ -393,6 +394,47 @@ def test_a_file_loads_with_its_own_surface_or_one_within_the_offset_the_bounds_c
                                               process=False), cad_p_points)
     assert np.all(low - fixture.surface_offset_m <= exact)
     assert np.all(exact <= high + fixture.surface_offset_m)
+
+
+def test_an_ascii_stl_writing_minus_zero_at_some_corners_loads_as_one_closed_surface(tmp_path):
+    """An exporter that writes a zero coordinate as '-0' in some facets and '0' in others gives the same corner two
+    spellings of one number (two bit patterns): they are merged as identical coordinates, not left as two vertices
+    (the box would come back open at its edges, with a warning about cracks closed)."""
+    box = trimesh.creation.box((0.1, 0.06, 0.03))
+    corners = (box.vertices - box.bounds[0])[box.faces]  # every corner has a zero coordinate or more
+    facets = []
+    for number, triangle in enumerate(corners):
+        zero = "-0" if number % 2 else "0"
+        lines = ["  vertex " + " ".join(zero if value == 0.0 else repr(value) for value in corner)
+                 for corner in triangle.tolist()]
+        facets.append("facet normal 0 0 0\n outer loop\n" + "\n".join(lines) + "\n endloop\nendfacet\n")
+    path = tmp_path / "box.stl"
+    path.write_text("solid box\n" + "".join(facets) + "endsolid box\n")
+    fixture = load_fixture(path)
+    assert len(fixture.mesh.vertices) == 8 and fixture.signed and fixture.surface_offset_m == 0.0
+    assert fixture.warnings == ()
+
+
+def test_corners_whose_sort_keys_collide_are_still_merged_only_where_identical(tmp_path, monkeypatch):
+    """Corners are grouped by a 64-bit key of their coordinates; where two different corners share a key (every key
+    made the same here) they are told apart by their coordinates, and the surface loads as it does otherwise."""
+    path = tmp_path / "part.stl"
+    SHAPES["cylinder"]().export(path)
+    expected = load_fixture(path)
+    monkeypatch.setattr(fixture_module, "_point_keys", lambda bits: np.zeros(len(bits), np.uint64))
+    collided = load_fixture(path)
+    assert np.array_equal(collided.mesh.vertices, expected.mesh.vertices)
+    assert np.array_equal(collided.mesh.faces, expected.mesh.faces)
+
+
+def test_the_corners_of_a_float32_export_get_a_key_each():
+    """Coordinates read from a binary STL's float32 numbers share their low 29 bits: the keys still tell every
+    corner apart (a key made by multiplying alone did not, and every large STL fell back to the slow sort)."""
+    sphere = trimesh.creation.icosphere(subdivisions=6, radius=0.05)
+    corners = np.unique(sphere.vertices.astype(np.float32).astype(np.float64), axis=0)
+    corners = np.vstack([corners, corners * 1e-3, corners + 1.0])
+    keys = fixture_module._point_keys(np.ascontiguousarray(corners).view(np.uint64))
+    assert len(np.unique(keys)) == len(corners)
 
 
 @pytest.mark.parametrize("objects", [1, 2])
