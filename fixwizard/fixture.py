@@ -435,7 +435,7 @@ def _identical_vertices_merged(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     are closed by ``mesh_hygiene``, which bounds how far that moves the surface. The faces' indices are in range
     (``_refuse_missing_corners``) and the coordinates finite (``refuse_non_finite``)."""
     vertices, faces = np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64)
-    used = used_vertices(faces, len(vertices))
+    used = used_vertices(faces)
     first, rank = _first_of_each_point(vertices[used])
     index = np.full(len(vertices), -1, np.int64)
     index[used] = rank
