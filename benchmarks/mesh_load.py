@@ -10,6 +10,7 @@ one, since these machines drift; each process imports the fixwizard of the check
 """
 
 import argparse
+import os
 import statistics
 import subprocess
 import sys
@@ -39,7 +40,7 @@ def load_process(checkout: Path, mesh: Path) -> tuple[float, float]:
     if not python.exists():
         python = REPO / ".venv" / "bin" / "python"
     result = subprocess.run([str(python), "-c", LOAD, str(mesh)], cwd=checkout, capture_output=True, text=True,
-                            env={"PYTHONPATH": str(checkout), "PATH": "/usr/bin:/bin"})
+                            env={**os.environ, "PYTHONPATH": str(checkout)})
     if result.returncode != 0:
         sys.exit(f"{checkout}: the load failed:\n{result.stderr[-2000:]}")
     load_s, oracle_s = (float(value) for value in result.stdout.split())

@@ -1,6 +1,8 @@
 """The screens' guaranteed figures are rounded up, as the report's are: a bound shown smaller than the solver's would
 leave the true pose outside what the screen promises (0.449 mm said as "0.4 mm")."""
 
+from types import SimpleNamespace
+
 import numpy as np
 
 from fixwizard.solver.estimates import Bounds
@@ -10,6 +12,8 @@ from fixwizard.tui.results.text import mode_line
 from fixwizard.tui.sampling.text import bounds_text as live_bounds_text
 from fixwizard.workflow.details import details_lines
 from fixwizard.workflow.live import LiveView
+from fixwizard.workflow.missable_move import MissableMove
+from fixwizard.workflow.verify import _unique_consistent_line
 
 # each figure just above a rounding step, where rounding to the nearest goes down
 BOUNDS = Bounds(np.eye(4), position_m=0.0061401, rotation_rad=np.radians(6.3401), max_point_displacement_m=0.000449)
@@ -42,11 +46,6 @@ def test_the_details_view_rounds_the_solvers_guaranteed_figures_up():
 def test_verify_says_both_of_its_figures_rounded_up_so_keep_using_never_reads_as_a_larger_figure():
     """3.2201 mm seen against 3.2210 mm guaranteed: to the nearest that read "within 3.22 mm ... no more than the
     3.22 mm" at best, and rounding only the first up "within 3.23 mm ... no more than the 3.22 mm"."""
-    from types import SimpleNamespace
-
-    from fixwizard.workflow.missable_move import MissableMove
-    from fixwizard.workflow.verify import _unique_consistent_line
-
     missable = MissableMove(0.0032201 - 0.05 * 1e-9, 1e-9, np.array([1.0, 0, 0, 0, 0, 0]), np.zeros(3), 0.05)
     guarantee = SimpleNamespace(max_point_displacement_m=0.003221)
     result = SimpleNamespace(missable=missable, seeing_point=SimpleNamespace(where="there"),
