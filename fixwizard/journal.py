@@ -13,10 +13,13 @@ kept) and the journal continues after the last complete record; a torn record fo
 complete one (journals of older versions appended after a failed write) is skipped and the records after it are
 kept. A complete line that fails its checksum is damage to an acknowledged record: an error naming the line, since
 fixwizard will not guess what it held; the last line too, unless it is no JSON at all (a power cut before its fsync
-kept the page with its end and lost the one with its start): that one is torn. One writer at a time, enforced with
-a non-blocking ``flock``. A journal deleted or moved away while open (its folder removed) is written back at its path
-before the next record (from the copy of the saved records kept in memory); a file another program put at the path
-or changed there (renamed or copied over it) is left alone, and records are refused until it is moved away.
+kept the page with its end and lost the one with its start): that one is torn. A blank line, or a line that repeats
+an earlier one byte for byte (left by an editor or a copy: fixwizard writes no blank line, and each of its records
+names the millisecond it was written), holds no record of its own and is skipped, said so on open (``SkippedLine``).
+One writer at a time, enforced with a non-blocking ``flock``. A journal deleted or moved away while open (its folder
+removed) is written back at its path before the next record (from the copy of the saved records kept in memory); a
+file another program put at the path or changed there (renamed or copied over it) is left alone, and records are
+refused until it is moved away.
 """
 
 import errno
@@ -25,7 +28,7 @@ import json
 import os
 import stat
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -36,6 +39,7 @@ import numpy as np
 from fixwizard.errors import InputError, file_problem, other_version
 
 T = TypeVar("T")
+HEADER_BYTES = 1 << 20  # a journal's header is a few hundred bytes: a file whose first line is longer is none
 
 
 @dataclass(frozen=True)
@@ -68,6 +72,21 @@ class TornRecord:
                 "is kept")
 
 
+@dataclass(frozen=True)
+class SkippedLine:
+    """A line found on open that holds no record of its own (1-based line): blank, or the same bytes as the earlier
+    line ``repeats`` (None for a blank one). Skipped: the record it repeats counts once."""
+
+    noun: str
+    line_number: int
+    repeats: int | None
+
+    def __str__(self) -> str:
+        what = "is blank" if self.repeats is None else f"repeats line {self.repeats} exactly"
+        return (f"line {self.line_number} of the {self.noun} journal {what} (an edit or a copy: fixwizard writes "
+                "no such line), so it is skipped; every record is kept")
+
+
 def now() -> str:
     """The time a record is written: UTC, ISO 8601 with milliseconds."""
     return datetime.now(UTC).isoformat(timespec="milliseconds")
@@ -77,7 +96,7 @@ class Journal:
     """An open, locked journal file and the records it held when opened. Use ``create`` or ``open``."""
 
     def __init__(self, kind: JournalKind, path: Path, handle: int, header: dict, records: list[tuple[int, dict]],
-                 recovered: tuple[TornRecord, ...] = ()) -> None:
+                 recovered: tuple[TornRecord | SkippedLine, ...] = ()) -> None:
         self.kind = kind
         self.path = path
         self.header = header
@@ -115,8 +134,8 @@ class Journal:
 
     @classmethod
     def open(cls, kind: JournalKind, path: str | Path) -> Self:
-        """Open a journal to go on with it: its records read back, torn ones skipped and a torn last line moved
-        aside (see ``recovered``)."""
+        """Open a journal to go on with it: its records read back, torn ones, blank lines and repeats skipped and a
+        torn last line moved aside (see ``recovered``)."""
         path = Path(path)
         noun, error = kind.noun, kind.error
         if path.is_dir():
@@ -133,7 +152,10 @@ class Journal:
         try:
             data = path.read_bytes()
             read = _read(kind, path, data)
-            recovered = [TornRecord(noun, number, len(piece), None) for number, piece in read.torn]
+            recovered: list[TornRecord | SkippedLine] = [TornRecord(noun, number, len(piece), None)
+                                                         for number, piece in read.torn]
+            recovered += [SkippedLine(noun, number, repeats) for number, repeats in read.skipped]
+            recovered.sort(key=lambda note: note.line_number)
             if read.torn_tail is not None:
                 number, piece = read.torn_tail
                 try:
@@ -240,18 +262,24 @@ def read_unfinished(kind: JournalKind, path: Path) -> tuple[dict, list[dict]] | 
     """An unfinished journal's header and the records that decode (after a torn one on the same line, if need be),
     read without opening it for writing; None when ``path`` cannot be read (or is no regular file), is no journal of
     ``kind`` or ends with its closed record (told from that last line alone: a folder of finished journals is listed
-    quickly)."""
+    quickly). Only the first line of another file is read (at most ``HEADER_BYTES``), however large it is."""
     try:
         if not stat.S_ISREG(path.stat().st_mode):  # a pipe: reading it would wait for a writer forever
             return None
-        lines = path.read_bytes().splitlines(keepends=True)
+        with open(path, "rb") as stream:
+            first = stream.readline(HEADER_BYTES)
+            header = _header_of(kind, [first])
+            if header is None:
+                return None
+            lines = [first, *stream.read().splitlines(keepends=True)]
     except OSError:
         return None
-    header = _header_of(kind, lines)
-    if header is None or (len(lines) > 1 and (_decode(lines[-1]) or {}).get("kind") == "closed"):
+    if len(lines) > 1 and (_decode(lines[-1]) or {}).get("kind") == "closed":
         return None
     records = []
-    for line in lines[1:]:
+    for _, line, repeats in _lines_of_records(lines):
+        if repeats is not None:
+            continue
         record = _decode(line)
         if record is None:
             after_torn = _after_torn(line)
@@ -342,13 +370,15 @@ def _header_of(kind: JournalKind, lines: list[bytes]) -> dict | None:
 
 @dataclass(frozen=True)
 class _Read:
-    """A journal file read back: its header, complete records and torn records, each with its 1-based line
-    number; ``torn_tail`` is a torn last line (cut off on open), if any."""
+    """A journal file read back: its header, complete records, torn records and lines that hold no record of their
+    own (``SkippedLine``), each with its 1-based line number; ``torn_tail`` is a torn last line (cut off on open), if
+    any."""
 
     header: dict
     records: list[tuple[int, dict]]
     torn: list[tuple[int, bytes]]
     torn_tail: tuple[int, bytes] | None
+    skipped: list[tuple[int, int | None]]  # (line, the earlier line it repeats; None: blank)
 
 
 def _read(kind: JournalKind, path: Path, data: bytes) -> _Read:
@@ -367,10 +397,13 @@ def _read(kind: JournalKind, path: Path, data: bytes) -> _Read:
         raise kind.error(f"{path} is not a fixwizard {kind.noun} journal ({kind.schema}); choose a {kind.noun} file "
                          "the wizard wrote")
     torn_tail = None
-    if len(lines) > 1 and _torn_last(lines[-1]):
+    if len(lines) > 1 and not _blank(lines[-1]) and _torn_last(lines[-1]):
         torn_tail = (len(lines), lines.pop())
-    records, torn = [], []
-    for number, line in enumerate(lines[1:], start=2):
+    records, torn, skipped = [], [], []
+    for number, line, repeats in _lines_of_records(lines):
+        if repeats is not None or _blank(line):
+            skipped.append((number, repeats))
+            continue
         record = _decode(line)
         if record is None:
             after_torn = _after_torn(line)
@@ -381,7 +414,21 @@ def _read(kind: JournalKind, path: Path, data: bytes) -> _Read:
             start, record = after_torn
             torn.append((number, line[:start]))
         records.append((number, record))
-    return _Read(header, records, torn, torn_tail)
+    return _Read(header, records, torn, torn_tail, skipped)
+
+
+def _blank(line: bytes) -> bool:
+    """Whether a whole line (with its newline) holds nothing but white space."""
+    return line.endswith(b"\n") and not line.strip()
+
+
+def _lines_of_records(lines: list[bytes]) -> Iterator[tuple[int, bytes, int | None]]:
+    """Each line after the header: its 1-based number, its bytes and the number of the earlier line (the header
+    included) it repeats byte for byte, None when it repeats none (a blank line never counts as a repeat)."""
+    first_seen = {lines[0]: 1}
+    for number, line in enumerate(lines[1:], start=2):
+        repeats = None if _blank(line) else first_seen.setdefault(line, number)
+        yield number, line, repeats if repeats != number else None
 
 
 # --- files ---

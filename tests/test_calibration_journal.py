@@ -278,6 +278,22 @@ def test_a_damaged_record_is_refused_by_line(fixture, tmp_path):
         CalibrationJournal.open(path)
 
 
+def test_a_pose_line_doubled_by_a_copy_counts_once_in_the_list_and_when_continued(fixture, tmp_path):
+    path = pivot_journal(fixture, tmp_path, 3)
+    lines = path.read_bytes().splitlines(keepends=True)
+    path.write_bytes(b"".join(lines[:3] + [lines[2], b"\n"] + lines[3:]))
+    (offered,) = find_unfinished_calibrations(tmp_path, ROBOT)
+    assert offered.counts["pivot"] == 3
+    resumed = CalibrationJournal.open(path)
+    assert len(resumed.poses["pivot"]) == 3
+    assert [str(note) for note in resumed.recovered] == [
+        "line 4 of the tip calibration journal repeats line 3 exactly (an edit or a copy: fixwizard writes no such "
+        "line), so it is skipped; every record is kept",
+        "line 5 of the tip calibration journal is blank (an edit or a copy: fixwizard writes no such line), so it is "
+        "skipped; every record is kept"]
+    resumed.release()
+
+
 def test_a_calibration_of_another_robot_or_open_elsewhere_is_not_continued(fixture, tmp_path):
     cell = new_cell(fixture)
     workflow = journaled(cell, tmp_path)

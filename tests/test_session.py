@@ -145,6 +145,85 @@ def test_a_last_line_whose_start_a_power_cut_lost_is_set_aside(tmp_path):
         assert [tap.id for tap in resumed.taps] == [1, 2]
 
 
+def test_blank_lines_an_editor_left_are_skipped_said_so_and_every_tap_kept(tmp_path):
+    path = recorded(tmp_path, 3)
+    lines = path.read_bytes().splitlines(keepends=True)
+    path.write_bytes(b"".join(lines[:2] + [b"\n", b"  \r\n"] + lines[2:] + [b"\n"]))
+    with SamplingSession.open(path) as resumed:
+        assert [tap.id for tap in resumed.taps] == [1, 2, 3]
+        assert [(note.line_number, note.repeats) for note in resumed.recovered] == [(3, None), (4, None), (7, None)]
+        assert "line 3 of the session journal is blank" in str(resumed.recovered[0])
+        assert resumed.record_tap(pose(3)).id == 4
+    with SamplingSession.open(path) as again:
+        assert [tap.id for tap in again.taps] == [1, 2, 3, 4]
+    assert sorted(child.name for child in tmp_path.iterdir()) == ["a.jsonl"]  # nothing set aside as torn
+
+
+@pytest.mark.parametrize("kind", ["undo", "drop", "tap"])
+def test_a_record_repeated_byte_for_byte_counts_once(tmp_path, kind):
+    """A line doubled by a copy or an editor: the same record, replayed once (an undo doubled took the tap away
+    and refused the whole session)."""
+    with new_session(tmp_path) as session:
+        for index in range(4):
+            session.record_tap(pose(index))
+        {"undo": session.undo, "drop": lambda: session.drop(2), "tap": lambda: None}[kind]()
+        session.record_tap(pose(7))
+        expected = [tap.id for tap in session.taps]
+    lines = session.path.read_bytes().splitlines(keepends=True)
+    doubled = 6 if kind != "tap" else 3  # the undo or drop, or tap 2
+    session.path.write_bytes(b"".join(lines[:doubled] + [lines[doubled - 1]] + lines[doubled:]))
+    with SamplingSession.open(session.path) as resumed:
+        assert [tap.id for tap in resumed.taps] == expected
+        (note,) = resumed.recovered
+        assert (note.line_number, note.repeats) == (doubled + 1, doubled)
+        assert f"line {doubled + 1} of the session journal repeats line {doubled} exactly" in str(note)
+
+
+def test_records_that_contradict_earlier_ones_are_refused_naming_both_lines_and_the_repair(tmp_path):
+    """Two taps with one id (two journals joined), a tap undone twice, a drop of a tap never recorded: fixwizard
+    writes none of them; resuming names the lines and says to delete the one that does not belong."""
+    path = recorded(tmp_path, 3)
+    lines = path.read_bytes().splitlines(keepends=True)
+    with SamplingSession.open(path) as session:
+        session.undo()
+    undo = path.read_bytes().splitlines(keepends=True)[-1]
+    other = recorded(tmp_path / "other", 1).read_bytes().splitlines(keepends=True)
+    later_undo = SamplingSession.open(path)
+    later_undo.journal.append({"kind": "undo", "id": 3, "time": "2026-12-08T00:00:00.000+00:00"}, "an undo")
+    later_undo.release()
+    second_undo = path.read_bytes().splitlines(keepends=True)[-1]
+    never = SamplingSession.open(recorded(tmp_path / "never", 1))
+    never.journal.append({"kind": "drop", "id": 9, "time": "2026-12-08T00:00:00.000+00:00"}, "a drop")
+    never.release()
+    cases = {
+        "joined": (lines + other[1:], "line 5 of the session .* records tap 1 again \\(line 2 recorded it first\\)"),
+        "undone twice": (lines + [undo, second_undo], "line 6 .* undoes tap 3, which line 5 took away already"),
+        "never recorded": (never.path.read_bytes().splitlines(keepends=True),
+                           "line 3 .* drops tap 9, which no line before it records"),
+    }
+    for name, (journal_lines, message) in cases.items():
+        case = tmp_path / "cases" / f"{name}.jsonl"
+        case.parent.mkdir(exist_ok=True)
+        case.write_bytes(b"".join(journal_lines))
+        with pytest.raises(SessionError, match=message) as refused:
+            SamplingSession.open(case)
+        assert "delete the line that does not belong and resume again" in str(refused.value), name
+        case.write_bytes(b"".join(journal_lines[:-1]))  # the repair the message asks for
+        with SamplingSession.open(case) as repaired:
+            assert repaired.recovered == (), name
+
+
+def test_listing_sessions_reads_only_the_first_line_of_a_huge_foreign_file(tmp_path):
+    """A multi-gigabyte file named *.jsonl in the sessions folder (a log, a dump) is told apart by its first line:
+    the start screen lists the sessions at once instead of reading it whole."""
+    with new_session(tmp_path, "open.jsonl") as session:
+        session.record_tap(pose(0))
+    with open(tmp_path / "dump.jsonl", "wb") as stream:
+        stream.write(b'{"log": "not a session"}\n')
+        stream.truncate(64 << 30)  # sparse: 64 GiB that take no disk
+    assert find_unfinished(tmp_path) == [tmp_path / "open.jsonl"]
+
+
 def test_foreign_and_missing_files_are_refused(tmp_path):
     foreign = tmp_path / "notes.jsonl"
     foreign.write_text('{"hello": "world"}\n')

@@ -22,7 +22,7 @@ from typing import Literal, Self, get_args
 import numpy as np
 
 from fixwizard.errors import InputError
-from fixwizard.journal import Journal, JournalKind, TornRecord, now, read_unfinished, replay
+from fixwizard.journal import Journal, JournalKind, SkippedLine, TornRecord, now, read_unfinished, replay
 
 SCHEMA = "fixwizard.tip-calibration-journal/1"
 JOURNALS_DIR = "journals"
@@ -82,7 +82,8 @@ class CalibrationJournal:
 
     @classmethod
     def open(cls, path: Path) -> Self:
-        """Continue a journal: its poses replayed, torn records skipped (see ``recovered``)."""
+        """Continue a journal: its poses replayed, torn records, blank and repeated lines skipped (see
+        ``recovered``)."""
         opened = replay(KIND, path, lambda journal: cls(journal, continued=True))
         if opened.closed:
             opened.release()
@@ -104,7 +105,7 @@ class CalibrationJournal:
         return settings if isinstance(settings, dict) else {}
 
     @property
-    def recovered(self) -> tuple[TornRecord, ...]:
+    def recovered(self) -> tuple[TornRecord | SkippedLine, ...]:
         return self.journal.recovered
 
     def record_pose(self, step: Step, base_T_tcp: np.ndarray) -> None:

@@ -25,7 +25,7 @@ from fixwizard.atomic import check_output
 from fixwizard.calibration.taps import ball_centres_m
 from fixwizard.errors import InputError
 from fixwizard.geometry.se3 import from_ur_pose, to_ur_pose
-from fixwizard.journal import Journal, JournalKind, TornRecord, now, read_unfinished, replay
+from fixwizard.journal import Journal, JournalKind, SkippedLine, TornRecord, now, read_unfinished, replay
 from fixwizard.points import write_points
 
 SCHEMA = "fixwizard.session/1"
@@ -64,6 +64,7 @@ class SamplingSession:
         self.journal = journal
         self._taps: dict[int, Tap] = {}
         self._next_id = 1
+        self._lines: dict[int, tuple[int | None, int | None]] = {}  # tap id: lines of its tap and its undo or drop
         self.closed = False
         for number, record in journal.records:
             self._apply(record, number)
@@ -80,8 +81,8 @@ class SamplingSession:
 
     @classmethod
     def open(cls, path: str | Path) -> Self:
-        """Resume a journal: replay it, skipping torn records and moving a torn last line aside (see
-        ``recovered``)."""
+        """Resume a journal: replay it, skipping torn records, blank lines and repeated lines and moving a torn last
+        line aside (see ``recovered``); a record that contradicts an earlier one is refused naming both lines."""
         return replay(KIND, path, cls)
 
     @property
@@ -93,8 +94,8 @@ class SamplingSession:
         return self.journal.header
 
     @property
-    def recovered(self) -> tuple[TornRecord, ...]:
-        """The records found torn when the session was resumed."""
+    def recovered(self) -> tuple[TornRecord | SkippedLine, ...]:
+        """The records found torn, and the lines skipped (blank, repeated), when the session was resumed."""
         return self.journal.recovered
 
     @property
@@ -176,17 +177,34 @@ class SamplingSession:
             kind = record["kind"]
             if kind == "tap":
                 tap = _tap_from(record)
+                if tap.id in self._lines:
+                    raise self._conflict(number, f"records tap {tap.id} again (line {self._lines[tap.id][0]} "
+                                                 "recorded it first)")
                 self._taps[tap.id] = tap
+                self._lines[tap.id] = (number, None)
                 self._next_id = max(self._next_id, tap.id + 1)
                 return tap
             if kind in ("undo", "drop"):
-                return self._taps.pop(int(record["id"]))
+                tap_id = int(record["id"])
+                if tap_id not in self._taps:
+                    recorded, removed = self._lines.get(tap_id, (None, None))
+                    raise self._conflict(number, f"{'undoes' if kind == 'undo' else 'drops'} tap {tap_id}, which "
+                                         + (f"line {removed} took away already" if removed is not None
+                                            else "no line before it records"))
+                self._lines[tap_id] = (self._lines[tap_id][0], number)
+                return self._taps.pop(tap_id)
         except (KeyError, TypeError, ValueError):
             raise invalid from None
         if kind != "closed":
             raise invalid
         self.closed = True
         return None
+
+    def _conflict(self, number: int | None, what: str) -> SessionError:
+        """The refusal of a replayed record that contradicts an earlier one: its line ``number`` ``what``."""
+        return SessionError(f"line {number} of the session {self.path} {what}: fixwizard never writes that, so the "
+                            "file was edited or joined with another. Keep a copy of it, delete the line that does not "
+                            "belong and resume again, or start a new session")
 
 
 def find_unfinished(folder: str | Path = SESSIONS_DIR) -> list[Path]:
