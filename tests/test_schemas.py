@@ -149,9 +149,12 @@ def test_every_kind_of_session_line_matches_the_schema(tmp_path):
     session.undo()
     session.record_tap(pose)
     session.drop(1)
+    session.restore()
+    session.drop(1)
     session.close(report=str(tmp_path / "reports" / "r.yaml"))
     lines = [json.loads(line) for line in session.path.read_text().splitlines()]
-    assert [line.get("kind") for line in lines] == [None, "tap", "tap", "undo", "tap", "drop", "closed"]
+    assert [line.get("kind") for line in lines] == [None, "tap", "tap", "undo", "tap", "drop", "restore", "drop",
+                                                    "closed"]
     for line in lines:
         validate(line, "fixwizard.session/1")
     assert invalid({key: value for key, value in lines[1].items() if key != "crc"}, "fixwizard.session/1")

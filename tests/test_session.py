@@ -195,7 +195,12 @@ def test_records_that_contradict_earlier_ones_are_refused_naming_both_lines_and_
     never = SamplingSession.open(recorded(tmp_path / "never", 1))
     never.journal.append({"kind": "drop", "id": 9, "time": "2026-12-08T00:00:00.000+00:00"}, "a drop")
     never.release()
+    restored = SamplingSession.open(recorded(tmp_path / "restored", 2))
+    restored.journal.append({"kind": "restore", "id": 2, "time": "2026-12-08T00:00:00.000+00:00"}, "a restore")
+    restored.release()
     cases = {
+        "restored, never dropped": (restored.path.read_bytes().splitlines(keepends=True),
+                                    "line 4 .* takes back the drop of tap 2, which no line before it drops"),
         "joined": (lines + other[1:], "line 5 of the session .* records tap 1 again \\(line 2 recorded it first\\)"),
         "undone twice": (lines + [undo, second_undo], "line 6 .* undoes tap 3, which line 5 took away already"),
         "never recorded": (never.path.read_bytes().splitlines(keepends=True),
@@ -357,6 +362,33 @@ def test_drop_removes_any_active_tap_by_journaling_it_and_survives_resume(tmp_pa
         assert session.record_tap(pose(5)).id == 5
     with SamplingSession.open(session.path) as resumed:
         assert [tap.id for tap in resumed.taps] == [1, 3, 5]
+
+
+def test_the_last_drop_is_taken_back_with_the_tap_in_its_place_also_after_a_resume(tmp_path):
+    with new_session(tmp_path) as session:
+        for index in range(5):
+            session.record_tap(pose(index))
+        assert session.last_dropped is None
+        session.drop(3)
+        assert session.last_dropped.id == 3
+        assert session.restore().id == 3
+        assert [tap.id for tap in session.taps] == [1, 2, 3, 4, 5]
+        np.testing.assert_allclose(session.base_p_taps[:, 1], [0.0, 0.01, 0.02, 0.03, 0.04])
+        with pytest.raises(SessionError, match="dropped no tap; there is no drop to take back"):
+            session.restore()
+        session.drop(2)
+        session.record_tap(pose(9))  # a tap after the drop: the drop is no longer the last change
+        assert session.last_dropped is None
+        session.drop(4)
+        assert session.undo().id == 6  # nor after an undo
+        assert session.last_dropped is None
+        session.drop(1)
+    with SamplingSession.open(session.path) as resumed:
+        assert resumed.last_dropped.id == 1
+        resumed.restore()
+        assert [tap.id for tap in resumed.taps] == [1, 3, 5]
+    with SamplingSession.open(session.path) as again:
+        assert [tap.id for tap in again.taps] == [1, 3, 5] and again.last_dropped is None
 
 
 # --- torn records and failed writes: nothing acknowledged is lost, nothing follows a partial record ---

@@ -7,14 +7,14 @@ import json
 
 import numpy as np
 import pytest
-from textual.widgets import Input, Static
+from textual.widgets import DataTable, Input, Static
 from textual.widgets._footer import FooterKey
 
 from fixwizard import report
 from fixwizard.geometry.se3 import format_ur_pose
 from fixwizard.solver.solve import Solution, solve
 from fixwizard.tui.app import FixwizardApp
-from fixwizard.tui.results.screen import Done
+from fixwizard.tui.results.screen import Done, Dropped
 from fixwizard.tui.sampling.screen import SamplingScreen
 from fixwizard.tui.solve.screen import SolveScreen
 from fixwizard.tui.widgets.confirm import Confirm
@@ -252,7 +252,7 @@ async def test_an_inconsistent_result_names_the_suspect_and_dropping_it_solves(t
         summary = text_of(results, "#summary-text")
         assert "Tap 13 lies" in summary and "Press d to drop tap 13" in summary
         await pilot.press("d")
-        assert app.results == ["resample"]
+        assert app.results == [Dropped(13)]
         assert len(tapped.session.taps) == 12
         kinds = [json.loads(line)["kind"] for line in tapped.session.path.read_text().splitlines()[1:]]
         assert kinds == ["tap"] * 13 + ["drop"]
@@ -261,6 +261,29 @@ async def test_an_inconsistent_result_names_the_suspect_and_dropping_it_solves(t
         await until(pilot, lambda: len(app.results) == 2)
         again = app.results[1]
         assert again.status == "unique" and again.contains(cell_of(tapped).truth.base_T_cad)
+
+
+async def test_after_a_drop_sampling_says_so_and_u_takes_the_drop_back_with_the_tap_in_its_place(tapped):
+    """A drop pressed by mistake (or regretted once the taps were looked at) is undone like a tap: the tap counts
+    again where it was; the next u undoes the last tap as before."""
+    session = tapped.session
+    ids = [tap.id for tap in session.taps]
+    session.drop(ids[4])  # the solver's suspect can be any tap
+    app = ScreenHost(lambda: tapped.sampling_screen(Dropped(5).said()))
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        await until(pilot, lambda: "Tap 5 dropped" in text_of(screen, "#note"))
+        assert text_of(screen, "#note") == ("Tap 5 dropped: it no longer counts (the journal keeps it, marked "
+                                            "dropped). Press u to take the drop back, or solve again.")
+        await pilot.press("u")
+        assert [tap.id for tap in session.taps] == ids
+        assert screen.query_one(DataTable).row_count == 12
+        assert text_of(screen, "#note") == "Tap 5 counts again: its drop is undone (the journal keeps both)."
+        await pilot.press("u")
+        assert [tap.id for tap in session.taps] == ids[:-1]
+        assert text_of(screen, "#note") == "Tap 12 undone; the journal keeps it, marked undone."
+    kinds = [json.loads(line)["kind"] for line in session.path.read_text().splitlines()[1:]]
+    assert kinds == ["tap"] * 12 + ["drop", "restore", "undo"]
 
 
 @pytest.mark.slow

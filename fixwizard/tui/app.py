@@ -26,7 +26,7 @@ from fixwizard.robot.base import ConnectionLost, ProtectiveStop, Robot, RobotErr
 from fixwizard.tui import keys
 from fixwizard.tui.cell import Cell, NewSession, Resumed, Sampling, SavedCalibration
 from fixwizard.tui.launch import session_to_resume
-from fixwizard.tui.results.screen import Done, ResultsScreen
+from fixwizard.tui.results.screen import Done, Dropped, ResultsScreen
 from fixwizard.tui.sampling.screen import SamplingScreen
 from fixwizard.tui.solve.screen import SolveScreen
 from fixwizard.tui.start.screen import StartScreen
@@ -443,7 +443,8 @@ class FixwizardApp(App[None]):
                 if isinstance(outcome, Done):
                     report_path = outcome.report_path
                     break
-                # "resample": the taps change, so a report written no longer describes them
+                # back to sampling: the taps change, so a report written no longer describes them
+                opened = outcome.said() if isinstance(outcome, Dropped) else ""
         finally:
             await self._step_or_error(lambda: self._end_session(sampling, report_path))
 

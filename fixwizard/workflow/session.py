@@ -7,6 +7,8 @@ The journal is JSON Lines, appended to and never rewritten. Line 1 is the header
   "force": {...} or null}``
 - ``{"kind": "undo", "id": <id of the tap undone>, "time"}``
 - ``{"kind": "drop", "id": <id of any active tap>, "time"}``: that tap no longer counts (e.g. the solver's suspect)
+- ``{"kind": "restore", "id": <id of a dropped tap>, "time"}``: the drop is taken back; the tap counts again, in its
+  place among the taps
 - ``{"kind": "closed", "time", ...}`` once the session is finished.
 
 The journal mechanics (checksums, fsync per record, a full disk, torn records, one writer at a time) are
@@ -31,7 +33,8 @@ from fixwizard.points import write_points
 SCHEMA = "fixwizard.session/1"
 SESSIONS_DIR = Path("sessions")
 SUFFIX = ".jsonl"
-RECORD_NAMES = {"tap": "tap", "undo": "undo", "drop": "dropped tap", "closed": "end of the session"}
+RECORD_NAMES = {"tap": "tap", "undo": "undo", "drop": "dropped tap", "restore": "tap taken back",
+                "closed": "end of the session"}
 
 
 class SessionError(InputError):
@@ -65,6 +68,8 @@ class SamplingSession:
         self._taps: dict[int, Tap] = {}
         self._next_id = 1
         self._lines: dict[int, tuple[int | None, int | None]] = {}  # tap id: lines of its tap and its undo or drop
+        self._dropped: dict[int, Tap] = {}
+        self._last_drop: int | None = None  # the id the last tap, undo, drop or restore record dropped
         self.closed = False
         for number, record in journal.records:
             self._apply(record, number)
@@ -133,6 +138,20 @@ class SamplingSession:
                                "choose one of the taps shown")
         return self._write_tap({"kind": "drop", "id": tap_id, "time": now()})
 
+    @property
+    def last_dropped(self) -> Tap | None:
+        """The tap the last change to the taps dropped (``restore`` takes that back), else None."""
+        return None if self._last_drop is None else self._dropped[self._last_drop]
+
+    def restore(self) -> Tap:
+        """Journal that the drop of ``last_dropped`` is taken back (the tap counts again, in its place) and return
+        the tap."""
+        dropped = self.last_dropped
+        if dropped is None:
+            raise SessionError(f"the last change to the session {self.path} dropped no tap; there is no drop to take "
+                               "back")
+        return self._write_tap({"kind": "restore", "id": dropped.id, "time": now()})
+
     def export_points(self, path: str | Path) -> Path:
         """Write the active taps as a POINTS YAML for ``fixwizard solve``, naming this session as source; never over
         the journal itself (replaced, the taps after it would go to a file no longer in the folder)."""
@@ -171,8 +190,8 @@ class SamplingSession:
 
     def _apply(self, record: dict, number: int | None) -> Tap | None:
         """Replay one record; ``number`` is its journal line when replaying from the file."""
-        invalid = SessionError(f"line {number} of the session {self.path} is not a valid tap, undo, drop or "
-                               "closed record; keep the file and start a new session")
+        invalid = SessionError(f"line {number} of the session {self.path} is not a valid tap, undo, drop, restore "
+                               "or closed record; keep the file and start a new session")
         try:
             kind = record["kind"]
             if kind == "tap":
@@ -183,16 +202,31 @@ class SamplingSession:
                 self._taps[tap.id] = tap
                 self._lines[tap.id] = (number, None)
                 self._next_id = max(self._next_id, tap.id + 1)
+                self._last_drop = None
                 return tap
             if kind in ("undo", "drop"):
                 tap_id = int(record["id"])
                 if tap_id not in self._taps:
-                    recorded, removed = self._lines.get(tap_id, (None, None))
+                    removed = self._lines.get(tap_id, (None, None))[1]
                     raise self._conflict(number, f"{'undoes' if kind == 'undo' else 'drops'} tap {tap_id}, which "
                                          + (f"line {removed} took away already" if removed is not None
                                             else "no line before it records"))
                 self._lines[tap_id] = (self._lines[tap_id][0], number)
-                return self._taps.pop(tap_id)
+                tap = self._taps.pop(tap_id)
+                self._last_drop = tap_id if kind == "drop" else None
+                if kind == "drop":
+                    self._dropped[tap_id] = tap
+                return tap
+            if kind == "restore":
+                tap_id = int(record["id"])
+                if tap_id not in self._dropped:
+                    raise self._conflict(number, f"takes back the drop of tap {tap_id}, which no line before it "
+                                                 "drops")
+                self._lines[tap_id] = (self._lines[tap_id][0], None)
+                self._taps[tap_id] = self._dropped.pop(tap_id)
+                self._taps = dict(sorted(self._taps.items()))  # ids grow with the time a tap was recorded
+                self._last_drop = None
+                return self._taps[tap_id]
         except (KeyError, TypeError, ValueError):
             raise invalid from None
         if kind != "closed":

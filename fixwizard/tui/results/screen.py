@@ -1,8 +1,8 @@
 """The results screen: the solution in words and numbers, pictures of the rotation set and of the taps on
 the fixture, the solver's own figures (Details), the report (default path shown, editable) and what to do next.
-Dismisses with "resample"
-(back to sampling, after dropping the suspect tap of an inconsistent result if asked) or ``Done`` (with the report
-written, if any)."""
+Dismisses with "resample" (back to
+sampling), ``Dropped`` (back to sampling after dropping the suspect tap of an inconsistent result) or ``Done`` (with the
+report written, if any)."""
 
 import datetime as dt
 import os
@@ -44,7 +44,20 @@ class Done:
     report_path: Path | None
 
 
-Outcome = Literal["resample"] | Done
+@dataclass(frozen=True)
+class Dropped:
+    """The suspect tap was dropped: back to sampling, which says so; ``number`` is its place among the taps (1-based)
+    before the drop."""
+
+    number: int
+
+    def said(self) -> str:
+        """What the sampling screen says on opening after the drop."""
+        return (f"Tap {self.number} dropped: it no longer counts (the journal keeps it, marked dropped). Press "
+                f"{keys.name(keys.UNDO)} to take the drop back, or solve again.")
+
+
+Outcome = Literal["resample"] | Done | Dropped
 TABS = ("summary", "rotations", "taps", "details")
 
 
@@ -197,7 +210,7 @@ class ResultsScreen(Screen[Outcome]):
         except (FixwizardError, OSError) as error:
             self._say(error_message(error), problem=True)
             return
-        self.dismiss("resample")
+        self.dismiss(Dropped(suspect.index + 1))
 
     def action_resample(self) -> None:
         self.dismiss("resample")

@@ -96,8 +96,8 @@ def suspect_lines(solution: Solution) -> list[str]:
         lines.append("Press r to go back to sampling.")
         return lines
     if suspect is not None:
-        lines.append(f"Press d to drop tap {suspect.index + 1} (the journal keeps it, marked dropped), then solve "
-                     "again.")
+        lines.append(f"Press d to drop tap {suspect.index + 1} (the journal keeps it, marked dropped; u on the "
+                     "sampling screen takes the drop back), then solve again.")
     else:
         lines.append("Press r to go back to sampling.")
     return lines

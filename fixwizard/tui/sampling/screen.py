@@ -171,15 +171,22 @@ class SamplingScreen(Screen[bool]):
                         doing="Tapping: the robot moves the ball along the tool axis until it touches", cancel=cancel)
 
     def action_undo(self) -> None:
+        """Undo the last change: a drop (the results screen's) is taken back, else the last tap is undone."""
+        session = self.session
         try:
-            tap = self.session.undo()
+            if session.last_dropped is not None:
+                restored = session.restore()
+                said = (f"Tap {session.taps.index(restored) + 1} counts again: its drop is undone (the journal keeps "
+                        "both).")
+            elif session.undo() is not None:
+                said = f"Tap {len(session.taps) + 1} undone; the journal keeps it, marked undone."
+            else:
+                self._say("There is no tap to undo.")
+                return
         except (FixwizardError, OSError) as error:
             self._problem(error_message(error))
             return
-        if tap is None:
-            self._say("There is no tap to undo.")
-            return
-        self._say(f"Tap {len(self.session.taps) + 1} undone; the journal keeps it, marked undone.")
+        self._say(said)
         self._taps_changed()
 
     def action_solve(self) -> None:
