@@ -47,7 +47,7 @@ BACK = Key("escape", "back", "Back", "one step back or cancel (asks before dropp
 # --- the steps ---
 TAP = Key("t", "tap", "Tap", "the robot taps along the tool axis, records the contact", motion=True)
 CAPTURE = Key("space", "capture", "Capture", "record the arm's pose (the ball stays on its point)", display="Space")
-UNDO = Key("u", "undo", "Undo", "undo the last tap, or the drop of one (the journal keeps both)")
+UNDO = Key("u", "undo", "Undo", "undo the last tap or drop (the journal keeps it)")
 SOLVE = Key("s", "solve", "Solve", "find every fixture pose that explains the taps")
 CHECK = Key("c", "check", "Check", "the taps against the fixture's report: has it moved?")
 GO = Key("g", "go", "Go", "the robot moves: above the next tap, or the automatic taps", motion=True)
