@@ -311,6 +311,23 @@ def test_a_cb3_whose_dashboard_cannot_tell_remote_control_connects_and_taps(star
     assert "is in remote control" not in controller.dashboard_commands()
 
 
+@pytest.mark.slow
+def test_an_e_series_before_5_6_in_local_control_is_named_as_a_cause_when_no_program_starts(start_controller,
+                                                                                             connect):
+    """PolyScope 5.0-5.5 has local control but its dashboard cannot be asked about it (ur_rtde says False without
+    asking, so the link takes it to be in remote control); in local control the controller takes a program and runs
+    none. The error named a program loaded on the pendant and a URCap, never the switch the operator must press."""
+    controller = start_controller(polyscope="URSoftware 5.4.1.60000 (Jun 11 2019)")
+    controller.set_remote_control(False)
+    with pytest.raises(RobotError, match="took fixwizard's program on port 30003 but did not start it .* a URCap "
+                                         "holding the arm, or the pendant in local control, which PolyScope before "
+                                         "5.6 cannot tell fixwizard: switch it to remote control\\), then retry$"):
+        URRobot(HOST).connect()
+    assert "is in remote control" not in controller.dashboard_commands()
+    controller.set_remote_control(True)
+    assert connect().tap(**FAST_TAP).travel_m > 0.008
+
+
 @pytest.mark.parametrize("version, asked", [("URSoftware 5.15.0.1234 (Nov 11 2023)", True),
                                             ("URSoftware 5.6.0.90886 (Dec 11 2019)", True),
                                             ("URSoftware 5.5.1.82256 (Oct 28 2019)", False),
@@ -351,9 +368,10 @@ def test_connect_to_a_silent_script_port_says_the_program_did_not_start(start_co
     controller = start_controller()
     controller.silence("script")
     started = time.monotonic()
-    with pytest.raises(RobotError, match="took fixwizard's program on port 30003 but did not start it"):
+    with pytest.raises(RobotError, match="took fixwizard's program on port 30003 but did not start it") as refused:
         URRobot(HOST).connect()
     assert time.monotonic() - started < 10.0
+    assert "local control" not in str(refused.value)  # a PolyScope 5.15 is asked: it was in remote control
 
 
 @pytest.mark.slow

@@ -153,6 +153,7 @@ class Link:
         self._script: socket.socket | None = None
         self._io_lock = threading.Lock()
         self._asks_remote_control = True  # whether the dashboard can tell remote from local control (``connect``)
+        self._polyscope = ""  # the software version the dashboard said (``connect``)
         self._lost: str | None = None  # why the link is down
         self._next_run = random.randrange(1, 1 << 24)
         self._current_run: int | None = None
@@ -173,7 +174,8 @@ class Link:
         self._step(DASHBOARD)
         self._dashboard = self._open(DASHBOARD, lambda: dashboard_client.DashboardClient(self.host))
         self._open(DASHBOARD, lambda: self._dashboard.connect(int(CONNECT_TIMEOUT_S * 1000)))
-        self._asks_remote_control = _tells_remote_control(self._open(DASHBOARD, self._dashboard.polyscopeVersion))
+        self._polyscope = self._open(DASHBOARD, self._dashboard.polyscopeVersion)
+        self._asks_remote_control = _tells_remote_control(self._polyscope)
         if not self._remote_control():
             raise NotInRemoteControl()
         self._step(f"the RTDE data stream (port {RTDE_PORT})")
@@ -324,10 +326,12 @@ class Link:
                 self._current_run = None
                 self._request(run_id, REQUEST_STOP)  # should the controller start it after all, it ends at once
                 if state.ready_to_move:
+                    local = (", or the pendant in local control, which PolyScope before 5.6 cannot tell fixwizard: "
+                             "switch it to remote control" if _unasked_local_control(self._polyscope) else "")
                     raise RobotError(f"the controller took fixwizard's program on port {SCRIPT_PORT} but did not "
                                      f"start it within {PROGRAM_START_TIMEOUT_S:g} s{context}: check the teach "
-                                     "pendant for a message (a program loaded there, a URCap holding the "
-                                     "arm), then retry")
+                                     f"pendant for a message (a program loaded there, a URCap holding the "
+                                     f"arm{local}), then retry")
                 raise self._diagnose(context, state)
             time.sleep(POLL_S)
         self._request(run_id, REQUEST_GO, unless_stopped=True)  # a STOP meanwhile: the program ends unmoved
@@ -633,6 +637,15 @@ def _tells_remote_control(polyscope_version: str) -> bool:
         return False
     major, minor = int(found[1]), int(found[2])
     return major == REMOTE_CONTROL_QUERY_SINCE[0] and minor >= REMOTE_CONTROL_QUERY_SINCE[1]
+
+
+def _unasked_local_control(polyscope_version: str) -> bool:
+    """Whether a dashboard that answers ``PolyscopeVersion`` with ``polyscope_version`` belongs to an e-Series that
+    has local control but cannot be asked about it (PolyScope 5.0 to 5.5): in local control its controller takes a
+    program and runs none."""
+    found = re.search(r"(\d+)\.(\d+)", polyscope_version)
+    return found is not None and int(found[1]) == REMOTE_CONTROL_QUERY_SINCE[0] and \
+        int(found[2]) < REMOTE_CONTROL_QUERY_SINCE[1]
 
 
 def _way_back_blocked(state: ControllerState, stopped: bool) -> bool:

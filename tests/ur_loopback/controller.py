@@ -7,6 +7,7 @@ Ports are fixed (ur_rtde has no way to choose them), so one controller runs at a
 """
 
 import math
+import re
 import socket
 import threading
 import time
@@ -22,10 +23,9 @@ from ur_loopback.rtde_server import RTDE_PORT, RtdeSession
 from ur_loopback.rtde_wire import TYPE_FORMATS, field_type
 from ur_loopback.script_server import SCRIPT_PORT, serve_scripts
 
-CONTROLLER_VERSION = (5, 15, 0, 0)
+# The software version the dashboard says; the RTDE controller version is its four numbers.
 POLYSCOPE_VERSION = "URSoftware 5.15.0.1234 (Nov 11 2023)"
-CB3_CONTROLLER_VERSION = (3, 15, 7, 106331)  # a CB3's: its dashboard has no "is in remote control" (PolyScope 5.6 on)
-CB3_POLYSCOPE_VERSION = "URSoftware 3.15.7.106331 (Mar 28 2022)"
+CB3_POLYSCOPE_VERSION = "URSoftware 3.15.7.106331 (Mar 28 2022)"  # its dashboard has no "is in remote control"
 CYCLE_S = 0.002
 MAX_CATCH_UP_S = 0.02  # the most time one pass of the simulation catches up on
 # A controller checks an RTDE watchdog once a period (1 / its minimum frequency) for an input update within that
@@ -58,7 +58,8 @@ class LoopbackController:
     ``unlock_on_pendant``, ``emergency_stop``, ``safeguard_stop``, ``release_emergency_stop``, ``power_on``,
     ``set_remote_control``, ``move_by_hand``, ``reach_over_the_arm``, ``pause_on_pendant``, ``play_on_pendant``,
     ``set_speed_slider``;
-    ``cb3``: a CB3's versions and dashboard (no remote control to ask about);
+    ``cb3``: a CB3's versions and dashboard (no remote control to ask about); ``polyscope``: an e-Series' software
+    version as its dashboard says it (its dashboard knows "is in remote control" from 5.6 on);
     for the network: ``go_offline``, ``go_online``, ``drop_connections``, ``reboot``, ``burst_rtde``,
     ``freeze_link``, ``thaw_link``, ``silence``, ``delay_programs``, ``garble``. Queries return copies of what the
     controller saw and did.
@@ -67,7 +68,8 @@ class LoopbackController:
     def __init__(self, base_T_flange: np.ndarray | None = None, surface_z_m: float = 0.0,
                  tcp_offset: list[float] | None = None, unlock_delay_s: float = 5.0, host: str = "127.0.0.1",
                  ball_radius_m: float = 0.0, flange_p_tip_m: list[float] | None = None,
-                 fixture: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, cb3: bool = False) -> None:
+                 fixture: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, cb3: bool = False,
+                 polyscope: str = POLYSCOPE_VERSION) -> None:
         """``fixture``: a fixture on the table the tool tip meets too, as its mesh's vertices (CAD frame, m), faces
         and ``base_T_cad``; ``flange_p_tip_m``: the ball's centre on the flange (m; default 0.1 m along z)."""
         if base_T_flange is None:  # tool pointing straight down, tip 8 mm above the surface
@@ -98,6 +100,10 @@ class LoopbackController:
         self._zeroed_in_contact = False
         self._remote_control = True
         self._cb3 = cb3  # a CB3 (PolyScope 3): no remote control, and its dashboard does not know the command
+        self._polyscope = CB3_POLYSCOPE_VERSION if cb3 else polyscope
+        major, minor, patch, build = (int(number) for number in re.findall(r"\d+", self._polyscope)[:4])
+        self._controller_version = (major, minor, patch, build)
+        self._knows_remote_control = major == 5 and minor >= 6
         self._safety = "NORMAL"
         self._robot_mode = "RUNNING"
         self._unlock_delay_s = unlock_delay_s
@@ -511,12 +517,12 @@ class LoopbackController:
             self._dashboard_commands.append(command)
             running = self._program is not None and self._program.running
             if command == "PolyscopeVersion":
-                return CB3_POLYSCOPE_VERSION if self._cb3 else POLYSCOPE_VERSION
+                return self._polyscope
             if command == "get serial number":
                 return "20235500042"
             if command == "get robot model":
                 return "UR5"
-            if command == "is in remote control" and not self._cb3:
+            if command == "is in remote control" and self._knows_remote_control:
                 return "true" if self._remote_control else "false"
             if command == "robotmode":
                 return f"Robotmode: {self._robot_mode}"
@@ -552,8 +558,7 @@ class LoopbackController:
 
     def _serve_rtde(self, client: socket.socket) -> None:
         if self._answers("rtde", client):
-            version = CB3_CONTROLLER_VERSION if self._cb3 else CONTROLLER_VERSION
-            RtdeSession(client, version, self._read_outputs, self._write_inputs, self._claim_inputs,
+            RtdeSession(client, self._controller_version, self._read_outputs, self._write_inputs, self._claim_inputs,
                         self._release_inputs, self._frozen.is_set, lambda: self._rtde_burst_s).serve()
 
     def _serve_dashboard(self, client: socket.socket) -> None:
