@@ -9,6 +9,7 @@ import re
 import shutil
 import subprocess
 import sys
+import threading
 import zlib
 from pathlib import Path
 
@@ -23,8 +24,9 @@ from fixwizard.tui.cell import SavedCalibration
 from fixwizard.tui.launch import simulated_cell
 from fixwizard.tui.start.screen import NEW, StartScreen
 from fixwizard.tui.start.sessions import calibration_changes, start_session
+from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.errors import ErrorModal
-from fixwizard.tui.widgets.help import help_text, keys_of
+from fixwizard.tui.widgets.help import HelpScreen, help_text, keys_of
 from fixwizard.tui.widgets.key_footer import KeyFooter
 from fixwizard.tui.widgets.status import StatusBar
 from fixwizard.workflow.session import SamplingSession
@@ -250,6 +252,39 @@ def test_while_resume_opens_the_session_the_terminal_says_so_with_the_status_lin
             assert underneath.query(StatusBar) and underneath.query(KeyFooter)  # the status line, F12 STOP
             assert help_text(underneath.HELP_ABOUT, keys_of(underneath), False).plain.startswith(
                 "The wizard is starting. With --resume it first loads the session's fixture and tip calibration")
+    asyncio.run(run())
+
+
+def test_a_help_opened_while_resume_loads_closes_when_the_session_opens(tmp_path, monkeypatch):
+    """? pressed while the session's mesh loads showed the opening screen's help; the sampling screen then came over
+    it, and leaving sampling showed that help again, under every later screen."""
+    from fixwizard.tui import app as app_module
+
+    path = recorded_session(tmp_path, taps=2)
+    help_shown = threading.Event()
+    loading = app_module.resume_session
+
+    def slow_resume(cell, requested):
+        assert help_shown.wait(30.0), "the test opens the help while the session loads"
+        return loading(cell, requested)
+
+    monkeypatch.setattr(app_module, "resume_session", slow_resume)
+
+    async def run():
+        app = FixwizardApp(simulated_cell(3, pace_s=0.0, folder=tmp_path), str(path))
+        async with app.run_test(size=SIZE) as pilot:
+            await until(pilot, lambda: app.screen.query("#opening"))
+            await pilot.press("question_mark")
+            await until(pilot, lambda: isinstance(app.screen, HelpScreen))
+            help_shown.set()
+            await until(pilot, lambda: "Resumed" in sampling_note(app))
+            assert not any(isinstance(screen, HelpScreen) for screen in app.screen_stack)
+            await pilot.press("escape")  # leave sampling: the start screen, no help over it
+            await until(pilot, lambda: isinstance(app.screen, (StartScreen, Confirm)))
+            if isinstance(app.screen, Confirm):
+                await pilot.press("y")
+            await until(pilot, lambda: isinstance(app.screen, StartScreen))
+            assert not any(isinstance(screen, HelpScreen) for screen in app.screen_stack)
     asyncio.run(run())
 
 

@@ -383,17 +383,25 @@ class FixwizardApp(App[None]):
             await self._sample_until_done(self._first_sampling)
         elif self.resume is not None:
             resumed = await self._resume(self.resume)
+            self._close_help()
             if isinstance(resumed, Resumed):
                 await self._sample_until_done(resumed.sampling, resumed.opened)
             else:
                 refusal = resumed
         while True:
+            self._close_help()
             choice = await self.push_screen_wait(StartScreen(self.cell, refusal, self._left_session))
             refusal = self._left_session = None
             started = (choice.sampling, choice.opened) if isinstance(choice, Resumed) else \
                 await self._new_session(choice)
             if started is not None:
                 await self._sample_until_done(*started)
+
+    def _close_help(self) -> None:
+        """Close a help left open over the opening screen (``?`` while ``--resume`` loads): the step's screen that
+        comes now would cover it, and it would show again, explaining nothing, once that screen is gone."""
+        while isinstance(self.screen, HelpScreen):
+            self.pop_screen()
 
     async def _new_session(self, choice: NewSession) -> tuple[Sampling, str] | None:
         """A new session for the chosen fixture, after a new tip calibration if none was chosen, and what was
