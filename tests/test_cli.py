@@ -258,6 +258,10 @@ def test_import_poses_refuses_a_tip_farther_than_a_tool_holds_it(tmp_path, capsy
     assert not (tmp_path / "p.yaml").exists()
 
 
+SAVETXT_POSE = ("-4.859099782104382703e-02\n-3.432098340450873697e-01\n1.075154231592212462e-02\n"
+                "-2.755081915890459143e+00\n2.943487357886771516e-01\n8.995426777384196715e-01\n")
+
+
 @pytest.mark.parametrize("text, read", [
     ("\ufeff0.4\n0\n0.2\n0\n3.14159\n0\n", None),  # saved by Notepad with a byte-order mark: read
     ("0.4\r\n0\r\n0.2\r\n0\r\n3.14159\r\n0\r\n", None),  # Windows line ends: read
@@ -273,9 +277,16 @@ def test_import_poses_refuses_a_tip_farther_than_a_tool_holds_it(tmp_path, capsy
     ("p[0.4, 0, 0.2, 0, 3.14159, 0]\n", "'p[0.4,' is no number. A .pose file holds six numbers x y z rx ry rz "
                                       "(metres, radians), one per line or apart by spaces, with '.' as the decimal "
                                       "point"),
-    pytest.param("x" * 10_000 + "\n", "'xxxxxxxx", id="one long word")])
+    pytest.param("x" * 10_000 + "\n", "'xxxxxxxx", id="one long word"),
+    (SAVETXT_POSE, None),  # as numpy's savetxt writes a pose (the paper's data): read
+    (SAVETXT_POSE.rstrip(), None),  # the same without its last line end: whole, read
+    pytest.param(SAVETXT_POSE[:-5], "ends inside its last number: '8.995426777384196715' lacks digits or the "
+                 "exponent the numbers before it were written with, so the file was cut short", id="cut before e-01"),
+    pytest.param(SAVETXT_POSE[:-2], "'8.995426777384196715e-0' lacks digits or the exponent", id="cut in e-01"),
+    pytest.param(SAVETXT_POSE[:-12], "'8.99542677738' lacks digits", id="cut in the digits")])
 def test_a_pose_file_as_editors_save_it_is_read_and_a_damaged_one_named(tmp_path, capsys, text, read):
-    """Angles in degrees (a tool pointing down is 180) were read as radians, another rotation without a word."""
+    """Angles in degrees (a tool pointing down is 180) were read as radians, another rotation without a word; a file
+    cut short inside its last number (a copy broken off) was read with that number 10 times too large."""
     _write_poses(tmp_path / "poses", [[0.5, 0.1, 0.2, 0.0, 3.14159, 0.0]])
     (tmp_path / "poses" / "base_t_tcp_1.pose").write_text(text, encoding="utf-8", newline="")
     (tmp_path / "tip.pose").write_text("0\n0\n0.05\n0\n0\n0\n")

@@ -89,12 +89,14 @@ def quaternion_angle_rad(q_a: np.ndarray, q_b: np.ndarray) -> np.ndarray:
 POSE_FILE_HOLDS = ("A .pose file holds six numbers x y z rx ry rz (metres, radians), one per line or apart by spaces, "
                    "with '.' as the decimal point")
 MAX_POSE_FILE_BYTES = 65_536  # six numbers take about 120 bytes: a larger file is read no further
+SCIENTIFIC_WORD = re.compile(r"[-+]?\d\.(\d+)[eE][-+]\d{2,3}")  # "-2.755081915890459143e+00": its digits
 
 
 def read_pose_file(path: str | Path) -> np.ndarray:
     """Read a ``*.pose`` file (six numbers ``x y z rx ry rz``, m and rad) as a 4x4 transform. ``InputError`` for any
-    other count, a number that is not finite, or a rotation vector of more than a full turn (no rotation needs one:
-    degrees read as radians were silently another rotation)."""
+    other count, a number that is not finite, a rotation vector of more than a full turn (no rotation needs one:
+    degrees read as radians were silently another rotation), or a file cut inside its last number (``_cut_short``: a
+    number cut before its exponent is another number)."""
     path = Path(path)
     if path.exists() and not path.is_file():  # a pipe would wait for a writer: never read
         raise InputError(f"the pose file {path} is not a regular file; a .pose file holds six numbers "
@@ -102,7 +104,8 @@ def read_pose_file(path: str | Path) -> np.ndarray:
     try:
         with path.open("rb") as stream:
             data = stream.read(MAX_POSE_FILE_BYTES + 1)
-        words = data.decode("utf-8-sig").split()  # a byte-order mark: Notepad
+        text = data.decode("utf-8-sig")  # a byte-order mark: Notepad
+        words = text.split()
     except OSError as error:
         raise InputError(f"cannot read the pose file: {file_problem(error, path, 'read')}") from error
     except UnicodeDecodeError as error:
@@ -112,6 +115,10 @@ def read_pose_file(path: str | Path) -> np.ndarray:
         raise InputError(f"the pose file {path} holds more than {MAX_POSE_FILE_BYTES // 1024} kB, so it is no pose "
                          f"(a log or a point cloud?). {POSE_FILE_HOLDS}.")
     values = _pose_numbers(words, path)
+    if _cut_short(words, text):
+        raise InputError(f"the pose file {path} ends inside its last number: {quoted(words[-1])} lacks digits or the "
+                         "exponent the numbers before it were written with, so the file was cut short (while it was "
+                         "copied?) and that number may be another one. Record that pose again")
     if values.shape != (6,):
         raise InputError(f"the pose file {path} must hold exactly six numbers x y z rx ry rz (metres, radians); "
                          f"it holds {values.size}{_count_hint(values.size)}.")
@@ -138,6 +145,18 @@ def _pose_numbers(words: list[str], path: Path) -> np.ndarray:
             raise InputError(f"cannot read the pose file {path}: {quoted(word)} is no number. {POSE_FILE_HOLDS}.") \
                 from None
     return np.array(values, float)
+
+
+def _cut_short(words: list[str], text: str) -> bool:
+    """Whether a pose file written number by number in one scientific format (``%.18e``, as numpy's savetxt writes
+    them: the same digits, an exponent) ends inside its last number: the file does not end with white space and that
+    number, unlike every one before it, is not written in that format."""
+    formats = [SCIENTIFIC_WORD.fullmatch(word) for word in words]
+    if len(words) < 2 or text[-1:].isspace() or not all(formats[:-1]):
+        return False
+    digits = {len(found[1]) for found in formats[:-1] if found is not None}
+    last = formats[-1]
+    return len(digits) == 1 and (last is None or len(last[1]) not in digits)
 
 
 def _count_hint(count: int) -> str:
