@@ -9,7 +9,7 @@ import pytest
 
 from fixwizard.calibration.errors import CalibrationError
 from fixwizard.calibration.taps import ball_centres_m
-from fixwizard.robot import MotionStopped, ProtectiveStop
+from fixwizard.robot import MotionStopped, MoveBlocked, ProtectiveStop
 from fixwizard.robot.sim import SimulatedCell
 from fixwizard.robot.sim_hands import SimulatedHands
 from fixwizard.solver.solve import solve
@@ -142,9 +142,9 @@ def test_a_stop_as_a_move_ends_lets_no_tap_start(ready):
                 cancel.set()
 
         def tap(self, max_travel_m: float = 0.02, speed_m_s: float = 0.01, force_limit_n: float = 10.0,
-                stop_mark: int | None = None):
+                stop_mark: int | None = None, on_contact=None):
             taps.append(max_travel_m)
-            return self.cell.tap(max_travel_m, speed_m_s, force_limit_n, stop_mark)
+            return self.cell.tap(max_travel_m, speed_m_s, force_limit_n, stop_mark, on_contact)
 
     workflow.robot = StopAsTheMoveEnds(cell)
     with pytest.raises(Cancelled, match="table taps were cancelled after 1 of 16 taps"):
@@ -167,9 +167,9 @@ class StopAsTheCallLeaves(MoveLog):
         self.started.append("move")
 
     def tap(self, max_travel_m: float = 0.02, speed_m_s: float = 0.01, force_limit_n: float = 10.0,
-            stop_mark: int | None = None):
+            stop_mark: int | None = None, on_contact=None):
         self._maybe_stop("tap")
-        result = self.cell.tap(max_travel_m, speed_m_s, force_limit_n, stop_mark)
+        result = self.cell.tap(max_travel_m, speed_m_s, force_limit_n, stop_mark, on_contact)
         self.started.append("tap")
         return result
 
@@ -207,6 +207,31 @@ def test_protective_stop_names_the_step_and_keeps_the_recorded_taps(ready):
         workflow.run_table_taps(stop_after_four)
     assert len(workflow.poses("table")) == 4
     cell.unlock()
+    workflow.run_table_taps()
+    assert len(workflow.poses("table")) == 16
+
+
+class RetractMeetsSomething(MoveLog):
+    """A UR's tap whose retract meets something once the contact was reported (``on_contact``): the error comes
+    after the contact, which the robot recorded."""
+
+    def tap(self, max_travel_m: float = 0.02, speed_m_s: float = 0.01, force_limit_n: float = 10.0,
+            stop_mark: int | None = None, on_contact=None):
+        result = self.cell.tap(max_travel_m, speed_m_s, force_limit_n, stop_mark, on_contact)
+        error = MoveBlocked(60.0)
+        error.tap_result = result
+        raise error
+
+
+def test_a_contact_counts_as_the_robot_reports_it_even_when_the_retract_then_fails(ready):
+    """The automatic taps saved a contact only once its tap had returned, so a wizard killed while the ball retracted
+    (or a retract that met something) kept nothing of it: it now counts, journaled, as the robot reports it."""
+    cell, workflow = ready
+    workflow.robot = RetractMeetsSomething(cell)
+    with pytest.raises(MoveBlocked, match="^table taps, tap 1 of 16: "):
+        workflow.run_table_taps()
+    assert len(workflow.poses("table")) == 1
+    workflow.robot = cell
     workflow.run_table_taps()
     assert len(workflow.poses("table")) == 16
 

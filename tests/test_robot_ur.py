@@ -33,7 +33,7 @@ from fixwizard.robot import (
     Robot,
     RobotError,
 )
-from fixwizard.robot.base import MOVE_FORCE_LIMIT_N
+from fixwizard.robot.base import MOVE_FORCE_LIMIT_N, TapResult
 from fixwizard.robot.ur import CONNECT_DEADLINE_S, URRobot
 from fixwizard.robot.ur_link import PROGRAM_START_TIMEOUT_S, _tells_remote_control
 from fixwizard.robot.ur_script import (
@@ -57,6 +57,8 @@ from fixwizard.robot.ur_script import (
     tap_program,
 )
 from fixwizard.robot.ur_state import ControllerState
+from fixwizard.tui.tapping import tap_and_record
+from fixwizard.workflow.session import SamplingSession, Tap
 from ur_loopback import TIP_OFFSET_M, flange_above_surface, private_loopback_host
 from ur_loopback.arm import COLLISION_FORCE_N, FIXTURE_STIFFNESS_N_M, SURFACE_STIFFNESS_N_M
 from ur_loopback.link_faults import (
@@ -592,6 +594,46 @@ def test_a_move_whose_way_back_meets_something_stops_there_and_backs_off(start_c
     assert controller.contact_force_n() == 0.0
     assert robot.status().mode == "ready"
     assert_arm_stands(controller)
+
+
+def test_a_tap_is_saved_as_the_robot_reports_its_contact_while_the_ball_still_retracts(start_controller, connect,
+                                                                                        tmp_path):
+    """The wizard saved a tap once the retract had ended: killed meanwhile (kill -9, an SSH session lost with it), it
+    kept nothing of a contact the arm had made. The contact now reaches the session as the retract starts (15 mm at
+    50 mm/s: 0.3 s)."""
+    controller = start_controller(base_T_flange=flange_above_surface(0.015))
+    robot = connect()
+    session = SamplingSession.create(tmp_path / "taps.jsonl", {"name": "plate"}, {"tcp_p_tip_m": [0.0, 0.0, 0.1]},
+                                     robot="ur")
+    start = controller.flange_pose()
+    when_saved = []
+
+    def record(contact: TapResult) -> Tap:
+        tap = session.record_tap(contact.base_T_tcp_contact)
+        when_saved.append((controller.program_running(), start[2, 3] - controller.flange_pose()[2, 3]))
+        return tap
+
+    tap = tap_and_record(robot, record, lambda: len(session.taps), threading.Event())
+    ((retracting, below_start_m),) = when_saved
+    assert retracting and below_start_m > 0.005, "the tap was saved only after its retract"
+    assert session.taps == [tap]
+    np.testing.assert_allclose(tap.base_T_tcp, controller.contact_poses()[-1], atol=2e-6)
+    np.testing.assert_allclose(controller.flange_pose(), start, atol=1e-6)  # retracted all the same
+    session.release()
+
+
+def test_what_the_contact_s_receiver_raises_is_raised_once_the_tap_has_ended(robot, controller):
+    """A full disk refusing the contact's record must not leave the link mid-tap: the tap retracts, then the error."""
+    start = controller.flange_pose()
+
+    def full_disk(contact: TapResult) -> None:
+        raise OSError(28, "No space left on device")
+
+    with pytest.raises(OSError, match="No space left on device"):
+        robot.tap(**FAST_TAP, on_contact=full_disk)
+    np.testing.assert_allclose(controller.flange_pose(), start, atol=1e-6)
+    assert not controller.program_running()
+    assert robot.tap(**FAST_TAP).travel_m > 0.008  # the link goes on
 
 
 @pytest.mark.parametrize("clearance_m", [0.004, 0.012])

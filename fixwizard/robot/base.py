@@ -4,6 +4,7 @@ Poses are 4x4 float64 transforms ``base_T_tcp`` of the flange (tcp without tool 
 robot base frame, metres. Errors say what happened and what the operator should do next.
 """
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
@@ -130,10 +131,11 @@ class Robot(Protocol):
         """Let the operator move the arm by hand (True) or hold it (False); ``stop_mark``: see ``stop_count``."""
 
     def tap(self, max_travel_m: float = 0.02, speed_m_s: float = 0.01, force_limit_n: float = 10.0,
-            stop_mark: int | None = None) -> TapResult:
+            stop_mark: int | None = None, on_contact: Callable[[TapResult], None] | None = None) -> TapResult:
         """Approach along the tool z axis until ``force_limit_n`` (N), at most ``max_travel_m`` (m) at
         ``speed_m_s`` (m/s); settle, record the contact flange pose, retract to the start. ``stop_mark``: see
-        ``stop_count``."""
+        ``stop_count``. ``on_contact`` is called with the contact as soon as it is recorded, in the caller's thread,
+        before the retract has ended (to save it then); what it raises is raised once the tap has ended."""
 
     def move_linear(self, base_T_tcp: np.ndarray, speed_m_s: float = 0.05, stop_mark: int | None = None) -> None:
         """Move the flange in a straight line to ``base_T_tcp`` (4x4, base frame, m) at ``speed_m_s`` (m/s).

@@ -7,6 +7,7 @@ so a ball centre computed from a report errs by at most ``fk_error_bound_m``.
 """
 
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal
 
@@ -142,7 +143,13 @@ class SimulatedCell:
             self._freedrive = on
 
     def tap(self, max_travel_m: float = 0.02, speed_m_s: float = 0.01, force_limit_n: float = 10.0,
-            stop_mark: int | None = None) -> TapResult:
+            stop_mark: int | None = None, on_contact: Callable[[TapResult], None] | None = None) -> TapResult:
+        result = self._tap(max_travel_m, speed_m_s, force_limit_n, stop_mark)
+        if on_contact is not None:  # the simulated tap has no retract of its own to report the contact before
+            on_contact(result)
+        return result
+
+    def _tap(self, max_travel_m: float, speed_m_s: float, force_limit_n: float, stop_mark: int | None) -> TapResult:
         check_tap_request(max_travel_m, speed_m_s, force_limit_n)
         self._move_for_pace("tap", stop_mark)
         with self._lock:

@@ -26,7 +26,7 @@ import signal
 import socket
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
@@ -170,10 +170,11 @@ class URRobot:
                                              " while switching freedrive")
 
     def tap(self, max_travel_m: float = 0.02, speed_m_s: float = 0.01, force_limit_n: float = 10.0,
-            stop_mark: int | None = None) -> TapResult:
+            stop_mark: int | None = None, on_contact: Callable[[TapResult], None] | None = None) -> TapResult:
         """Approach along the tool z axis at ``speed_m_s`` (m/s) until the force reaches ``force_limit_n`` (N),
         at most ``max_travel_m`` (m), every limit held by the controller; wait for the contact to settle,
-        record the flange pose, retract to the start. See the class docstring for ``tap_result``."""
+        record the flange pose, retract to the start. ``on_contact``: see ``base.Robot.tap`` (called as the retract
+        starts). See the class docstring for ``tap_result``."""
         check_tap_request(max_travel_m, speed_m_s, force_limit_n)
         stop_mark = self._mark(stop_mark)
         with self._locked("tap"), self._motion():
@@ -182,7 +183,7 @@ class URRobot:
             deadline_s = max_travel_m / speed_m_s + SETTLE_TIMEOUT_S + 2 * max_travel_m / RETRACT_SPEED_M_S
             try:
                 return self._call(link, "tap", (stop_mark, max_travel_m, speed_m_s, force_limit_n),
-                                  deadline_s + MOTION_SLACK_S, " during the tap")
+                                  deadline_s + MOTION_SLACK_S, " during the tap", on_contact=on_contact)
             except ConnectionLost as error:
                 raise _with_tap_note(error) from None
 
@@ -238,15 +239,17 @@ class URRobot:
         return int(self._stop_count.value) if stop_mark is None else stop_mark
 
     def _call(self, link: _LinkProcess, command: str, args: tuple, deadline_s: float, context: str,
-              watch_state: bool = True) -> Any:
+              watch_state: bool = True, on_contact: Callable[[TapResult], None] | None = None) -> Any:
         """Run ``command`` in the link process and wait for its answer at most ``deadline_s``; a link process
-        that dies, stalls (no fresh sample, when ``watch_state``) or misses the deadline is abandoned."""
+        that dies, stalls (no fresh sample, when ``watch_state``) or misses the deadline is abandoned. A tap's
+        contact goes to ``on_contact`` as it arrives; what that raises is raised once the command has answered (the
+        link keeps being watched meanwhile)."""
         try:
             link.conn.send((command, args))
         except OSError:
             raise self._abandon(link, f"fixwizard's robot link process is gone{context}") from None
         deadline = time.monotonic() + deadline_s
-        step, contact = command, None
+        step, contact, unsaved = command, None, None
         lost_seen_at = 0.0  # when the link process was first seen to have lost its connection
         while True:
             try:
@@ -262,15 +265,22 @@ class URRobot:
                     continue
                 if kind == "contact":
                     contact = payload[0]
+                    if on_contact is not None:
+                        try:
+                            on_contact(contact)
+                        except Exception as failure:  # raised once the tap has ended, below
+                            unsaved = failure
                     continue
                 if kind == "done":
+                    if unsaved is not None:
+                        raise unsaved
                     return payload[0]
                 error = unpack_error(*payload)
                 if contact is not None and not hasattr(error, "tap_result"):
                     error.tap_result = contact
                 if isinstance(error, ConnectionLost):
                     error = self._abandon(link, str(error), getattr(error, "tap_result", None))
-                raise error
+                raise _noting_unsaved(error, unsaved)
             problem = None
             ended = f"fixwizard's robot link process ended unexpectedly{context}"
             if ready or not link.process.is_alive():
@@ -291,7 +301,7 @@ class URRobot:
                            f"fixwizard was waiting for {step}: check that the controller is running and that "
                            "nothing between this computer and the robot holds the connection")
             if problem is not None:
-                raise self._abandon(link, problem, contact)
+                raise _noting_unsaved(self._abandon(link, problem, contact), unsaved)
 
     def _abandon(self, link: _LinkProcess, problem: str, tap_result: TapResult | None = None) -> LinkLost:
         """Kill the link process, send the dashboard's stop, wait until the watchdog has stopped the arm; the
@@ -430,6 +440,13 @@ def _checked_target(base_T_tcp: np.ndarray) -> np.ndarray:
         raise RobotError("the move's target is not a rigid pose (its rotation is not a rotation): this is a bug in "
                          "the step that asked for the move; report it")
     return target
+
+
+def _noting_unsaved(error: Exception, unsaved: Exception | None) -> Exception:
+    """``error``, saying that the contact could not be saved either when ``on_contact`` raised ``unsaved``."""
+    if unsaved is not None:
+        error.add_note(f"The contact could not be saved either: {unsaved}")
+    return error
 
 
 def _with_tap_note(error: ConnectionLost) -> ConnectionLost:

@@ -38,23 +38,41 @@ def freedrive_again(robot: Robot, cancel: threading.Event) -> None:
 
 def tap_and_record(robot: Robot, record: Callable[[TapResult], T], tap_count: Callable[[], int],
                    cancel: threading.Event) -> T:
-    """Tap and ``record`` the contact; a contact the robot recorded before a fault is recorded too (the error then
-    holds it as ``recorded_tap`` and says it was saved as tap ``tap_count()``). ``cancel``: set by STOP (freedrive
-    then stays off). Raises the robot's error."""
+    """Tap and ``record`` the contact as soon as the robot has it, while the ball retracts (a wizard killed then has
+    saved it); a contact the robot recorded before a fault is recorded too (the error then holds it as
+    ``recorded_tap`` and says it was saved as tap ``tap_count()``). ``cancel``: set by STOP (freedrive then stays
+    off). Raises the robot's error, else the error of a record that failed (a full disk)."""
+    saved: list[T] = []
+    unsaved: list[Exception] = []
+
+    def save(contact: TapResult) -> None:
+        if saved or unsaved:  # one contact per tap
+            return
+        try:
+            saved.append(record(contact))
+        except Exception as error:  # raised after the tap, which goes on to its retract
+            unsaved.append(error)
+
     robot.freedrive(False)
     try:
-        result = robot.tap(stop_mark=unless_stopped(robot, cancel, "tap"))
+        result = robot.tap(stop_mark=unless_stopped(robot, cancel, "tap"), on_contact=save)
     except NoContact:
         freedrive_again(robot, cancel)
         raise
     except RobotError as error:
         recorded = getattr(error, "tap_result", None)
         if recorded is not None:  # the contact came before the fault (while retracting, or the link went down)
-            error.recorded_tap = record(recorded)  # type: ignore[attr-defined]
+            save(recorded)
+            if unsaved:
+                raise unsaved[0] from error
+            error.recorded_tap = saved[0]  # type: ignore[attr-defined]
             error.add_note(f"The contact was saved as tap {tap_count()}.")
         error.add_note(FREEDRIVE_STAYS_OFF)
         raise
     try:
-        return record(result)
+        save(result)
+        if unsaved:
+            raise unsaved[0]
+        return saved[0]
     finally:
         freedrive_again(robot, cancel)

@@ -35,7 +35,7 @@ from fixwizard.calibration.table import coarse_table_frame, fit_table_plane
 from fixwizard.calibration.taps import PoseSeries, ball_centres_m
 from fixwizard.errors import FixwizardError
 from fixwizard.geometry.se3 import invert, transform_points
-from fixwizard.robot.base import MAX_TAP_TRAVEL_M, Robot, RobotError
+from fixwizard.robot.base import MAX_TAP_TRAVEL_M, Robot, RobotError, TapResult
 from fixwizard.workflow.calibration_journal import STEPS, CalibrationJournal, CalibrationJournalError, Step
 
 Progress = Callable[[Step, int, int], None]
@@ -162,9 +162,8 @@ class RobotTipCalibration:
         done = len(self._poses["table_coarse"])
         if done == len(TABLE_POINTS):
             raise CalibrationError("the table points A, B and C are recorded already; go on with the table taps")
-        contact = _call(f"table point {TABLE_POINTS[done]}", self.robot.tap, stop_mark=stop_mark).base_T_tcp_contact
-        self._record("table_coarse", contact)
-        return contact
+        return _call(f"table point {TABLE_POINTS[done]}", self.robot.tap, stop_mark=stop_mark,
+                     on_contact=self._recorder("table_coarse")).base_T_tcp_contact
 
     def accept_table_points(self) -> None:
         """Check that A, B, C make a table frame the automatic taps can start from; when they do not (on one spot,
@@ -206,6 +205,11 @@ class RobotTipCalibration:
             self.journal.record_pose(step, base_T_tcp)
         self._poses[step].append(base_T_tcp)
 
+    def _recorder(self, step: Step) -> Callable[[TapResult], None]:
+        """What records a tap's contact in ``step`` as the robot reports it, while the ball retracts (a wizard killed
+        then has it in the journal)."""
+        return lambda contact: self._record(step, contact.base_T_tcp_contact)
+
     def _clear(self, steps: tuple[Step, ...]) -> None:
         if self.journal is not None:
             self.journal.record_clear(steps)
@@ -242,8 +246,8 @@ class RobotTipCalibration:
                 self._check_above_corner(_call(where, self.robot.base_T_tcp), base_T_table, tip, base_p_hover)
                 _call(where, self._lift, tip, base_n_up, base_p_hover[index], stop_mark)
             _call(where, self.robot.move_linear, plan[index], stop_mark=unless_cancelled())
-            result = _call(where, self.robot.tap, max_travel_m=self._tap_travel_m, stop_mark=unless_cancelled())
-            self._record(step, result.base_T_tcp_contact)
+            _call(where, self.robot.tap, max_travel_m=self._tap_travel_m, stop_mark=unless_cancelled(),
+                  on_contact=self._recorder(step))
             if progress is not None:
                 progress(step, len(recorded), total)
 
