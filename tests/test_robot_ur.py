@@ -622,6 +622,23 @@ def test_a_tap_is_saved_as_the_robot_reports_its_contact_while_the_ball_still_re
     session.release()
 
 
+def test_a_retract_that_meets_something_is_said_first_when_the_contact_could_not_be_saved(start_controller, connect):
+    """A full disk refusing the contact and a retract that met something: the arm's fault is what the operator must
+    read first (the disk's said after it); it was the disk's error alone."""
+    controller = start_controller(base_T_flange=flange_above_surface(0.015))
+    robot = connect()
+    controller.when("settled", "reach_over_the_arm", 0.012)
+
+    def full_disk(contact: TapResult) -> Tap:
+        raise OSError(28, "No space left on device")
+
+    with pytest.raises(RobotError, match="^the arm met something on its way back") as raised:
+        tap_and_record(robot, full_disk, lambda: 0, threading.Event())
+    notes = raised.value.__notes__
+    assert notes[0] == "The contact could not be saved: [Errno 28] No space left on device"
+    assert notes[1].startswith("Freedrive stays off after this")
+
+
 def test_what_the_contact_s_receiver_raises_is_raised_once_the_tap_has_ended(robot, controller):
     """A full disk refusing the contact's record must not leave the link mid-tap: the tap retracts, then the error."""
     start = controller.flange_pose()

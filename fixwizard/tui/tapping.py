@@ -63,10 +63,11 @@ def tap_and_record(robot: Robot, record: Callable[[TapResult], T], tap_count: Ca
         recorded = getattr(error, "tap_result", None)
         if recorded is not None:  # the contact came before the fault (while retracting, or the link went down)
             save(recorded)
-            if unsaved:
-                raise unsaved[0] from error
+        if saved:
             error.recorded_tap = saved[0]  # type: ignore[attr-defined]
             error.add_note(f"The contact was saved as tap {tap_count()}.")
+        elif unsaved:  # the robot's fault first: it says what the arm did
+            error.add_note(f"The contact could not be saved: {unsaved[0]}")
         error.add_note(FREEDRIVE_STAYS_OFF)
         raise
     try:
