@@ -35,6 +35,7 @@ import inspect
 import logging
 import os
 import re
+import signal
 import socket
 import socketserver
 import stat
@@ -540,8 +541,17 @@ def serve_command(args: argparse.Namespace) -> int:
     return 0
 
 
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM (``systemctl stop``, ``kill``): serving stops as on Ctrl+C, logged."""
+
+
+def _terminate(signum: int, frame: object) -> None:
+    raise _Terminated()
+
+
 def _serve(service: FixtureService, host: str, port: int) -> None:
-    """Serve on ``host:port`` until Ctrl+C; InputError when the address cannot be had."""
+    """Serve on ``host:port`` until Ctrl+C or SIGTERM, which the log says; InputError when the address cannot be
+    had."""
     try:
         server = make_server(service, host, port)
     except (OSError, OverflowError) as error:
@@ -560,9 +570,13 @@ def _serve(service: FixtureService, host: str, port: int) -> None:
     print(f"fixwizard serve: {len(names)} fixture{'s' if len(names) != 1 else ''} ({', '.join(names) or 'none yet'}) "
           f"from {service.folder} on http://{bound_host}:{bound_port} (reports older than "
           f"{age_text(service.max_age_s)} refused); Ctrl+C stops", flush=True)
+    in_main_thread = threading.current_thread() is threading.main_thread()  # where signal handlers are set
+    previous = signal.signal(signal.SIGTERM, _terminate) if in_main_thread else None
     try:
         server.serve_forever()
-    except KeyboardInterrupt:
-        pass
+    except KeyboardInterrupt as stop:
+        LOG.info("stopped (%s)", "SIGTERM" if isinstance(stop, _Terminated) else "Ctrl+C")
     finally:
+        if in_main_thread:
+            signal.signal(signal.SIGTERM, previous)
         server.server_close()

@@ -572,6 +572,22 @@ def interrupt(process: subprocess.Popen) -> tuple[str, str]:
 
 
 @pytest.mark.slow
+def test_sigterm_stops_serving_as_ctrl_c_does_and_the_log_says_so(cell, tmp_path):
+    """systemctl stop (SIGTERM) ended serve at once: no "stopped" on its output or in its log, so a stop could not be
+    told from a crash; a request being answered was cut off."""
+    log = tmp_path / "serve.log"
+    process, fw, _ = serve_process(cell, "--log", str(log))
+    try:
+        assert fw.is_usable("bracket")
+    finally:
+        process.send_signal(signal.SIGTERM)
+        out, err = process.communicate(timeout=30)
+    assert process.returncode == 0 and "fixwizard serve: stopped" in out
+    assert log.read_text().splitlines()[-1].endswith(" stopped (SIGTERM)")
+    assert "Traceback" not in err
+
+
+@pytest.mark.slow
 def test_the_serve_command_serves_until_interrupted(cell):
     process, fw, first = serve_process(cell)
     try:
@@ -581,6 +597,7 @@ def test_the_serve_command_serves_until_interrupted(cell):
         out, err = interrupt(process)
     assert process.returncode == 0 and "stopped" in out
     assert "get_status('bracket') -> {'status': 'unique'" in err and "Traceback" not in err
+    assert err.splitlines()[-1].endswith(" stopped (Ctrl+C)")
 
 
 def test_the_reports_folder_given_as_a_report_is_called_a_file_and_may_start_with_a_tilde(cell, capsys, monkeypatch):
