@@ -148,3 +148,22 @@ def test_a_link_lost_while_the_operator_guides_the_arm_is_announced_with_reconne
             assert not isinstance(app.screen, ErrorModal)  # said once, not again at every status update
             assert not app.robot_status.connected
     asyncio.run(run())
+
+
+def test_a_connect_the_controller_refuses_offers_reconnect_which_connects_once_that_is_fixed(wizard, controller):
+    """The arm in local control as the wizard starts: the error offered OK alone, and the operator had to try a robot
+    key to be offered Reconnect."""
+    controller.set_remote_control(False)
+
+    async def run():
+        app = FixwizardApp(wizard.cell)  # the start screen: no robot call but the connect's
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await until(pilot, lambda: dialog_shown(app, ErrorModal), 15.0)
+            assert "switch it to remote control" in screen_text(app)
+            assert app.screen.query("#reconnect")
+            controller.set_remote_control(True)
+            app.screen.query_one("#reconnect", Button).press()
+            await until(pilot, lambda: app.robot_status is not None and app.robot_status.connected, 15.0)
+            assert not isinstance(app.screen, ErrorModal)
+
+    asyncio.run(run())

@@ -86,7 +86,7 @@ class FixwizardApp(App[None]):
         self.screen_change_signal.subscribe(self, self._frame_screen)
         if self.resume is not None:  # the session's mesh can take seconds to load: not a blank terminal meanwhile
             self._frame_screen(self.screen)
-        in_thread(self, self.cell.robot.connect)
+        self._connect()
         self.set_interval(STATUS_INTERVAL_S, self.refresh_robot_status)
         self._run_flow()
 
@@ -295,15 +295,16 @@ class FixwizardApp(App[None]):
             in_thread(self, self.cell.robot.stop)
         self.exit()
 
-    def show_error(self, error: ShownError) -> None:
-        """The error's message and next step in a modal; then the recovery the operator chose. Not while quitting:
-        stopping a running step may end it with an error, and the app is closing; not a lost link while one is
-        shown (a step that failed on it and the status that saw it go)."""
+    def show_error(self, error: ShownError, reconnect: bool = False) -> None:
+        """The error's message and next step in a modal (with Reconnect for a lost link, or when ``reconnect``); then
+        the recovery the operator chose. Not while quitting: stopping a running step may end it with an error, and
+        the app is closing; not a lost link while one is shown (a step that failed on it and the status that saw it
+        go)."""
         if isinstance(error, ConnectionLost) and any(
                 isinstance(screen, ErrorModal) and isinstance(screen.error, ConnectionLost)
                 for screen in self.screen_stack):
             return
-        modal = self._error_modal(error)
+        modal = self._error_modal(error, reconnect)
         if modal is not None:
             self.push_screen(modal, self._recover)
 
@@ -315,23 +316,28 @@ class FixwizardApp(App[None]):
             recovery: Recovery = await self.push_screen_wait(modal)
             self._recover(recovery)
 
-    def _error_modal(self, error: ShownError) -> ErrorModal | None:
+    def _error_modal(self, error: ShownError, reconnect: bool = False) -> ErrorModal | None:
         if self._quitting:
             return None
         can_unlock = callable(getattr(self.cell.robot, "unlock_protective_stop", None))
         if isinstance(error, ProtectiveStop):
             self.stopped = True
-        return ErrorModal(error, self.cell.simulated, can_unlock)
+        return ErrorModal(error, self.cell.simulated, can_unlock, reconnect)
+
+    def _connect(self, on_done: Callable[[None], None] | None = None) -> None:
+        """Connect the robot (in a thread); a connect that fails leaves it unconnected whatever the cause (local
+        control, no program started), so its error offers Reconnect."""
+        in_thread(self, self.cell.robot.connect, on_done, offer_reconnect=lambda: True)
 
     def _recover(self, recovery: Recovery | None) -> None:
-        robot, hands = self.cell.robot, self.cell.hands
+        hands = self.cell.hands
         if recovery == "reconnect":
             self._reconnects += 1
-            in_thread(self, robot.connect, lambda _: self._reconnected())
+            self._connect(lambda _: self._reconnected())
         elif recovery == "unlock" and hands is not None:
             in_thread(self, hands.cell.unlock, lambda _: self.notify("SIMULATED: protective stop unlocked."))
         elif recovery == "unlock":
-            unlock: Callable[[], None] | None = getattr(robot, "unlock_protective_stop", None)
+            unlock: Callable[[], None] | None = getattr(self.cell.robot, "unlock_protective_stop", None)
             if unlock is not None:
                 in_thread(self, unlock, lambda _: self.notify("Protective stop unlocked. Check the cell, then retry."))
 

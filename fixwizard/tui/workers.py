@@ -28,7 +28,7 @@ class WizardServices(Protocol):
     robot_status: RobotStatus | None
     stopped: bool
 
-    def show_error(self, error: ShownError) -> None: ...
+    def show_error(self, error: ShownError, reconnect: bool = False) -> None: ...
 
     def refresh_robot_status(self) -> None: ...
 
@@ -48,11 +48,12 @@ def services(node: DOMNode) -> WizardServices:
 
 @work(thread=True, group="blocking", exit_on_error=True)
 def in_thread(node: DOMNode, call: Callable[[], T], on_done: Callable[[T], None] | None = None,
-              on_failed: Callable[[ShownError], None] | None = None, modal: bool = True) -> None:
+              on_failed: Callable[[ShownError], None] | None = None, modal: bool = True,
+              offer_reconnect: Callable[[], bool] | None = None) -> None:
     """Run ``call`` in a thread worker owned by ``node``. Afterwards, on the event loop: ``on_done(result)``,
-    or for a ``FixwizardError``/``OSError`` ``on_failed(error)`` and (when ``modal``) the app's error modal;
-    then the status bar refreshes. Callbacks are skipped when ``node`` has left the screen meanwhile (its
-    workers are cancelled then)."""
+    or for a ``FixwizardError``/``OSError`` ``on_failed(error)`` and (when ``modal``) the app's error modal, with
+    Reconnect where ``offer_reconnect()`` says so (a connect that failed); then the status bar refreshes.
+    Callbacks are skipped when ``node`` has left the screen meanwhile (its workers are cancelled then)."""
     worker, app = get_current_worker(), services(node)
 
     def left() -> bool:
@@ -68,7 +69,7 @@ def in_thread(node: DOMNode, call: Callable[[], T], on_done: Callable[[T], None]
             on_failed(error)
         app.refresh_robot_status()
         if modal:
-            app.show_error(error)
+            app.show_error(error, offer_reconnect is not None and offer_reconnect())
 
     try:
         result = call()

@@ -5,6 +5,7 @@ decides what comes next. "Check a calibrated fixture" opens ``CheckScreen`` over
 (with the chosen stored tip calibration); back from there is back here."""
 
 import os
+import threading
 from collections.abc import Callable
 from datetime import datetime
 from pathlib import Path
@@ -258,15 +259,18 @@ class StartScreen(Screen[StartChoice]):
 
     def _switch_robot(self, switch: Callable[[Cell], Cell]) -> None:
         """Close the robot, switch to another cell and connect its robot (worker thread); a failed connection
-        shows its message and leaves the new robot chosen, disconnected, for a reconnect."""
+        shows its message with Reconnect and leaves the new robot chosen, disconnected."""
+        switched = threading.Event()
 
         def switch_and_connect() -> Cell:
             cell = switch(self.cell)
+            switched.set()
             self.app.call_from_thread(self._show_robot, cell)
             cell.robot.connect()
             return cell
 
-        in_thread(self, switch_and_connect, lambda cell: self.notify(f"Connected to {cell.robot_name}."))
+        in_thread(self, switch_and_connect, lambda cell: self.notify(f"Connected to {cell.robot_name}."),
+                  offer_reconnect=switched.is_set)
 
     def _show_robot(self, cell: Cell) -> None:
         self.cell = cell

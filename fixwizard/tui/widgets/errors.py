@@ -46,15 +46,17 @@ class ErrorModal(Dialog[Recovery]):
     """Shows one error; dismisses with "ok", "reconnect" or "unlock" (the caller does the recovery)."""
 
 
-    def __init__(self, error: FixwizardError | OSError, simulated: bool, can_unlock: bool = False) -> None:
+    def __init__(self, error: FixwizardError | OSError, simulated: bool, can_unlock: bool = False,
+                 reconnect: bool = False) -> None:
         super().__init__(error_title(error), error_message(error))
         self.error = error
         self.simulated = simulated
         self.can_unlock = can_unlock  # the robot unlocks a protective stop from fixwizard (a UR arm does)
+        self.reconnect = reconnect  # offer Reconnect whatever the error (a connect that failed)
 
     def buttons(self) -> Iterable[Button]:
         yield Button("OK", id="ok", variant="primary")
-        if isinstance(self.error, ConnectionLost):
+        if isinstance(self.error, ConnectionLost) or self.reconnect:
             yield Button("Reconnect", id="reconnect")
         if isinstance(self.error, ProtectiveStop) and self.simulated:
             yield Button("SIMULATED: unlock (teach pendant)", id="unlock")
