@@ -15,11 +15,11 @@ kept. A complete line that fails its checksum is damage to an acknowledged recor
 fixwizard will not guess what it held; the last line too, unless it is no JSON at all (a power cut before its fsync
 kept the page with its end and lost the one with its start): that one is torn. A blank line, or a line that repeats
 an earlier one byte for byte (left by an editor or a copy: fixwizard writes no blank line, and each of its records
-names the millisecond it was written), holds no record of its own and is skipped, said so on open (``SkippedLine``).
-One writer at a time, enforced with a non-blocking ``flock``. A journal deleted or moved away while open (its folder
-removed) is written back at its path before the next record (from the copy of the saved records kept in memory); a
-file another program put at the path or changed there (renamed or copied over it) is left alone, and records are
-refused until it is moved away.
+names the millisecond it was written, stamped again should it repeat an earlier line), holds no record of its own
+and is skipped, said so on open (``SkippedLine``). One writer at a time, enforced with a non-blocking ``flock``. A
+journal deleted or moved away while open (its folder removed) is written back at its path before the next record
+(from the copy of the saved records kept in memory); a file another program put at the path or changed there
+(renamed or copied over it) is left alone, and records are refused until it is moved away.
 """
 
 import errno
@@ -27,6 +27,7 @@ import fcntl
 import json
 import os
 import stat
+import time
 import zlib
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -104,6 +105,7 @@ class Journal:
         self.recovered = recovered
         self.handle: int | None = handle
         self._saved = _read_all(handle)  # the journal up to its last saved record, to write it back if need be
+        self._lines = set(bytes(self._saved).splitlines(keepends=True))  # each saved line, to write none twice
 
     @classmethod
     def create(cls, kind: JournalKind, path: str | Path, header: dict) -> Self:
@@ -174,10 +176,14 @@ class Journal:
 
     def append(self, record: dict, what: str) -> dict:
         """Write ``record`` durably and return it as read back; ``what`` names it in the message of a failed write
-        ("this tap")."""
+        ("this tap"). A record that would repeat a line of the journal byte for byte (the same drop of a tap within
+        one millisecond) is stamped with its ``time`` again once the clock has moved on."""
         if self.handle is None:
             raise self.kind.error(f"the {self.kind.noun} {self.path} was released; resume it to record more")
         line = _encode(record)
+        while line in self._lines:  # the same record within one millisecond: read back, it would pass for a copy
+            time.sleep(0.001)
+            line = _encode({**record, "time": now()})
         self._append(line, what)
         return _decode_own(line)
 
@@ -209,6 +215,7 @@ class Journal:
                                 "now)")
             raise problem from failure
         self._saved += line
+        self._lines.add(line)
 
     def _rejoin(self, what: str) -> None:
         """Put the journal back at its path when the file open here is no longer there (deleted, its folder removed,

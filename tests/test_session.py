@@ -391,6 +391,27 @@ def test_the_last_drop_is_taken_back_with_the_tap_in_its_place_also_after_a_resu
         assert [tap.id for tap in again.taps] == [1, 3, 5] and again.last_dropped is None
 
 
+
+def test_a_tap_dropped_again_within_the_millisecond_of_its_first_drop_stays_dropped_after_a_resume(tmp_path,
+                                                                                                  monkeypatch):
+    """Records of one millisecond (drop, restore, drop of one tap) are distinct lines: a line repeated byte for byte
+    is skipped on open as a copy, so the second drop, read as a copy of the first, brought the tap back."""
+    with new_session(tmp_path) as session:
+        session.record_tap(pose(0))
+        session.record_tap(pose(1))
+        monkeypatch.setattr("fixwizard.workflow.session.now", lambda: "2026-12-07T22:47:20.136+00:00")
+        session.drop(1)
+        session.restore()
+        session.drop(1)
+        session.restore()
+        session.drop(1)
+        assert [tap.id for tap in session.taps] == [2]
+    lines = session.path.read_bytes().splitlines()
+    assert len(set(lines)) == len(lines) == 8
+    with SamplingSession.open(session.path) as resumed:
+        assert resumed.recovered == ()
+        assert [tap.id for tap in resumed.taps] == [2] and resumed.last_dropped.id == 1
+
 # --- torn records and failed writes: nothing acknowledged is lost, nothing follows a partial record ---
 
 class FailingWrites:
