@@ -88,6 +88,32 @@ class SkippedLine:
                 "no such line), so it is skipped; every record is kept")
 
 
+def said(recovered: tuple[TornRecord | SkippedLine, ...]) -> list[str]:
+    """What opening a journal found, as sentences to show: each torn record, and the lines skipped in one sentence
+    when there are several (a file double-spaced by an editor would otherwise fill the screen with a note per
+    line)."""
+    skipped = [note for note in recovered if isinstance(note, SkippedLine)]
+    if len(skipped) < 2:
+        return [str(note) for note in recovered]
+    blank = [note.line_number for note in skipped if note.repeats is None]
+    repeated = [note.line_number for note in skipped if note.repeats is not None]
+    parts = ([f"{_lines_named(blank)} {'is' if len(blank) == 1 else 'are'} blank"] if blank else []) + \
+        ([f"{_lines_named(repeated)} {'repeats an earlier line' if len(repeated) == 1 else 'repeat earlier lines'} "
+          "exactly"] if repeated else [])
+    return [str(note) for note in recovered if isinstance(note, TornRecord)] + [
+        f"{' and '.join(parts)} in the {skipped[0].noun} journal (an edit or a copy: fixwizard writes no such line), "
+        "so they are skipped; every record is kept"]
+
+
+def _lines_named(numbers: list[int], shown: int = 5) -> str:
+    """"line 3", "lines 3, 5 and 7", "lines 3, 5, 7, 9, 11 and 40 more"."""
+    if len(numbers) == 1:
+        return f"line {numbers[0]}"
+    head = ", ".join(str(number) for number in numbers[:min(shown, len(numbers) - 1)])
+    rest = len(numbers) - min(shown, len(numbers) - 1)
+    return f"lines {head} and {numbers[-1] if rest == 1 else f'{rest} more'}"
+
+
 def now() -> str:
     """The time a record is written: UTC, ISO 8601 with milliseconds."""
     return datetime.now(UTC).isoformat(timespec="milliseconds")

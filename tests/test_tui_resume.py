@@ -82,6 +82,26 @@ def test_a_resume_says_which_session_it_opened_and_shows_every_tap(tmp_path):
     asyncio.run(run())
 
 
+
+def test_a_resumed_journal_double_spaced_by_an_editor_says_so_in_one_note_and_shows_the_taps(tmp_path):
+    """Twenty blank lines and two copies are one note on the sampling screen, not a note per line filling the
+    screen above the taps."""
+    path = recorded_session(tmp_path, taps=20)
+    lines = path.read_bytes().splitlines(keepends=True)
+    path.write_bytes(b"".join([lines[0]] + [piece for line in lines[1:] for piece in (line, b"\n")]
+                              + [lines[3], lines[5]]))
+
+    async def run():
+        app = FixwizardApp(simulated_cell(3, pace_s=0.0, folder=tmp_path), "")
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await until(pilot, lambda: "Resumed" in sampling_note(app))
+            notes = sampling_note(app).split("\n")[1:]
+            assert notes == ["Note: lines 3, 5, 7, 9, 11 and 15 more are blank and lines 42 and 43 repeat earlier "
+                             "lines exactly in the session journal (an edit or a copy: fixwizard writes no such "
+                             "line), so they are skipped; every record is kept."]
+            assert [tap.id for tap in app.screen.session.taps] == list(range(1, 21))
+    asyncio.run(run())
+
 def missing(path: Path) -> str:
     return str(path.with_name("gone.jsonl"))
 

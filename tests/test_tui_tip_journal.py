@@ -203,3 +203,24 @@ def test_re_arming_at_the_continued_automatic_taps_turns_freedrive_on_where_the_
 
     asyncio.run(leave_at_the_automatic_taps(cell))
     asyncio.run(continue_it())
+
+
+def test_a_continued_calibration_double_spaced_by_an_editor_says_so_in_one_warning(tmp_path):
+    """A warning per blank line stacked a toast for each pose over the step; one names them all."""
+    cell = simulated_cell(SEED, pace_s=0.0, folder=tmp_path)
+    asyncio.run(leave_at_the_automatic_taps(cell))
+    (unfinished,) = find_unfinished_calibrations(cell.calibrations_dir, cell.robot_name)
+    lines = unfinished.path.read_bytes().splitlines(keepends=True)
+    unfinished.path.write_bytes(b"".join([lines[0]] + [piece for line in lines[1:] for piece in (line, b"\n")]))
+
+    async def continue_it() -> list[str]:
+        app = FixwizardApp(simulated_cell(SEED, pace_s=0.0, folder=tmp_path))
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await at_start(pilot)
+            await press_continue(pilot)
+            await until(pilot, lambda: isinstance(app.screen, AutoTapsScreen) and app.screen.is_mounted)
+            return [str(note.message) for note in app._notifications if "journal" in str(note.message)]
+
+    (warning,) = asyncio.run(continue_it())
+    assert warning.startswith("lines 3, 5, 7, 9, 11 and ")
+    assert "more are blank in the tip calibration journal" in warning

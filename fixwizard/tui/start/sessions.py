@@ -12,6 +12,7 @@ from fixwizard.calibration.errors import CalibrationFileError
 from fixwizard.calibration.store import TipCalibration, load_calibration
 from fixwizard.errors import FixwizardError
 from fixwizard.fixture import Fixture, load_fixture
+from fixwizard.journal import said
 from fixwizard.tui.cell import Cell, Resumed, Sampling, SavedCalibration
 from fixwizard.tui.widgets.errors import ResumeRefused, error_text
 from fixwizard.workflow.session import (
@@ -117,7 +118,7 @@ def resumed_text(session: SamplingSession, mesh: Path, calibration_path: Path) -
     count = len(session.taps)
     lines = [f"Resumed the session {session.path}: {count} tap{'' if count == 1 else 's'} recorded, fixture "
              f"{mesh.name}, tip calibration {calibration_path.name}."]
-    lines += [f"Note: {note}." for note in session.recovered]
+    lines += [f"Note: {note}." for note in said(session.recovered)]
     return "\n".join(lines)
 
 

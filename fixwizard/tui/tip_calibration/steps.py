@@ -8,6 +8,7 @@ from pathlib import Path
 from textual.app import App
 
 from fixwizard.calibration.errors import CalibrationError
+from fixwizard.journal import said
 from fixwizard.tui.cell import Cell, SavedCalibration
 from fixwizard.tui.tip_calibration.auto import AutoTapsScreen
 from fixwizard.tui.tip_calibration.hands import PivotScreen, TablePointsScreen
@@ -54,7 +55,7 @@ async def calibrate_tip_on_screens(app: App[None], cell: Cell,
     """Walk the operator through the tip calibration ``workflow`` from the step it reached (call from an async
     worker): the calibration once one is accepted and saved, None when they went back from the pivot."""
     if workflow.journal is not None:
-        for note in workflow.journal.recovered:
+        for note in said(workflow.journal.recovered):
             app.notify(f"{note}.", severity="warning", timeout=15)
     step = reached_step(workflow)
     try:
