@@ -102,6 +102,26 @@ def test_a_resumed_journal_double_spaced_by_an_editor_says_so_in_one_note_and_sh
             assert [tap.id for tap in app.screen.session.taps] == list(range(1, 21))
     asyncio.run(run())
 
+
+def test_a_resumed_session_whose_last_change_was_a_drop_says_u_takes_it_back(tmp_path):
+    """u takes back the last drop also after a resume: the screen said nothing of the drop, so u, pressed to undo
+    the last tap, brought back the tap the operator had dropped."""
+    path = recorded_session(tmp_path, taps=6)
+    with SamplingSession.open(path) as session:
+        session.drop(3)
+
+    async def run():
+        app = FixwizardApp(simulated_cell(3, pace_s=0.0, folder=tmp_path), "")
+        async with app.run_test(size=SIZE, notifications=True) as pilot:
+            await until(pilot, lambda: "Resumed" in sampling_note(app))
+            assert sampling_note(app).split("\n")[1:] == [
+                "Tap 3 was dropped last: it does not count (the journal keeps it, marked dropped). Press u to take "
+                "the drop back."]
+            await pilot.press("u")
+            await until(pilot, lambda: "counts again" in sampling_note(app))
+            assert [tap.id for tap in app.screen.session.taps] == list(range(1, 7))
+    asyncio.run(run())
+
 def missing(path: Path) -> str:
     return str(path.with_name("gone.jsonl"))
 

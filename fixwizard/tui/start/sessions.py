@@ -13,6 +13,7 @@ from fixwizard.calibration.store import TipCalibration, load_calibration
 from fixwizard.errors import FixwizardError
 from fixwizard.fixture import Fixture, load_fixture
 from fixwizard.journal import said
+from fixwizard.tui import keys
 from fixwizard.tui.cell import Cell, Resumed, Sampling, SavedCalibration
 from fixwizard.tui.widgets.errors import ResumeRefused, error_text
 from fixwizard.workflow.session import (
@@ -113,12 +114,17 @@ def _recorded(value: object, shape: tuple[int, ...]) -> np.ndarray | None:
 
 
 def resumed_text(session: SamplingSession, mesh: Path, calibration_path: Path) -> str:
-    """Which session was opened, with how many taps, its fixture and tip calibration, and any record that was
-    never finished (skipped)."""
+    """Which session was opened, with how many taps, its fixture and tip calibration, any record that was never
+    finished and any line skipped, and a drop that the undo key takes back."""
     count = len(session.taps)
     lines = [f"Resumed the session {session.path}: {count} tap{'' if count == 1 else 's'} recorded, fixture "
              f"{mesh.name}, tip calibration {calibration_path.name}."]
     lines += [f"Note: {note}." for note in said(session.recovered)]
+    dropped = session.last_dropped
+    if dropped is not None:  # the undo key takes that drop back: say so, as after the results screen's drop
+        place = sum(tap.id < dropped.id for tap in session.taps) + 1
+        lines.append(f"Tap {place} was dropped last: it does not count (the journal keeps it, marked dropped). Press "
+                     f"{keys.name(keys.UNDO)} to take the drop back.")
     return "\n".join(lines)
 
 
