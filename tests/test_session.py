@@ -3,6 +3,7 @@
 import errno
 import json
 import os
+import re
 import select
 import shutil
 import signal
@@ -216,6 +217,24 @@ def test_records_that_contradict_earlier_ones_are_refused_naming_both_lines_and_
         case.write_bytes(b"".join(journal_lines[:-1]))  # the repair the message asks for
         with SamplingSession.open(case) as repaired:
             assert repaired.recovered == (), name
+
+
+def test_two_journals_joined_whole_are_refused_naming_where_the_second_session_starts(tmp_path):
+    """``cat a.jsonl b.jsonl``: the second header was refused as 'not a valid record ... start a new session', as if
+    every tap before it were lost; the message says where the other session starts and what to cut."""
+    first = recorded(tmp_path, 3)
+    other = recorded(tmp_path / "other", 2)
+    joined = tmp_path / "joined.jsonl"
+    joined.write_bytes(first.read_bytes() + other.read_bytes())
+    created = json.loads(other.read_bytes().splitlines()[0])["created"]
+    with pytest.raises(SessionError, match=re.escape(
+            f"line 5 of the session {joined} is the first line of another session (started {created}): the file joins "
+            "two journals. Keep a copy of it, delete line 5 and the lines after it that belong to that session and "
+            "resume again, or start a new session")):
+        SamplingSession.open(joined)
+    joined.write_bytes(first.read_bytes())
+    with SamplingSession.open(joined) as repaired:
+        assert [tap.id for tap in repaired.taps] == [1, 2, 3]
 
 
 def test_listing_sessions_reads_only_the_first_line_of_a_huge_foreign_file(tmp_path):

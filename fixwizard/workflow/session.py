@@ -192,6 +192,11 @@ class SamplingSession:
         """Replay one record; ``number`` is its journal line when replaying from the file."""
         invalid = SessionError(f"line {number} of the session {self.path} is not a valid tap, undo, drop, restore "
                                "or closed record; keep the file and start a new session")
+        if record.get("schema") == SCHEMA:  # ``cat a.jsonl b.jsonl``: the taps before it are good
+            raise SessionError(f"line {number} of the session {self.path} is the first line of another session "
+                               f"(started {record.get('created')}): the file joins two journals. Keep a copy of it, "
+                               f"delete line {number} and the lines after it that belong to that session and resume "
+                               "again, or start a new session")
         try:
             kind = record["kind"]
             if kind == "tap":
