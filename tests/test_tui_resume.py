@@ -22,6 +22,7 @@ from fixwizard.demo import demo_fixture
 from fixwizard.tui.app import FixwizardApp
 from fixwizard.tui.cell import SavedCalibration
 from fixwizard.tui.launch import simulated_cell
+from fixwizard.tui.solve.screen import SolveScreen
 from fixwizard.tui.start.screen import NEW, StartScreen
 from fixwizard.tui.start.sessions import calibration_changes, start_session
 from fixwizard.tui.widgets.confirm import Confirm
@@ -104,8 +105,8 @@ def test_a_resumed_journal_double_spaced_by_an_editor_says_so_in_one_note_and_sh
 
 
 def test_a_resumed_session_whose_last_change_was_a_drop_says_u_takes_it_back(tmp_path):
-    """u takes back the last drop also after a resume: the screen said nothing of the drop, so u, pressed to undo
-    the last tap, brought back the tap the operator had dropped."""
+    """u takes back the last drop also after a resume, and after a solve left without d: the screen said nothing of
+    the drop, so u, pressed to undo the last tap, brought back the tap the operator had dropped."""
     path = recorded_session(tmp_path, taps=6)
     with SamplingSession.open(path) as session:
         session.drop(3)
@@ -114,9 +115,13 @@ def test_a_resumed_session_whose_last_change_was_a_drop_says_u_takes_it_back(tmp
         app = FixwizardApp(simulated_cell(3, pace_s=0.0, folder=tmp_path), "")
         async with app.run_test(size=SIZE, notifications=True) as pilot:
             await until(pilot, lambda: "Resumed" in sampling_note(app))
-            assert sampling_note(app).split("\n")[1:] == [
-                "Tap 3 was dropped last: it does not count (the journal keeps it, marked dropped). Press u to take "
-                "the drop back."]
+            said = ("Tap 3 was dropped last: it does not count (the journal keeps it, marked dropped). Press u to "
+                    "take the drop back.")
+            assert sampling_note(app).split("\n")[1:] == [said]
+            await pilot.press("s")  # a solve, cancelled: back on the sampling screen, u still takes the drop back
+            await until(pilot, lambda: isinstance(app.screen, SolveScreen))
+            await pilot.press("escape")
+            await until(pilot, lambda: sampling_note(app) == said)
             await pilot.press("u")
             await until(pilot, lambda: "counts again" in sampling_note(app))
             assert [tap.id for tap in app.screen.session.taps] == list(range(1, 7))

@@ -30,7 +30,13 @@ from fixwizard.tui.results.screen import Done, Dropped, ResultsScreen
 from fixwizard.tui.sampling.screen import SamplingScreen
 from fixwizard.tui.solve.screen import SolveScreen
 from fixwizard.tui.start.screen import StartScreen
-from fixwizard.tui.start.sessions import resume_refusal, resume_session, start_session, started_text
+from fixwizard.tui.start.sessions import (
+    drop_to_take_back,
+    resume_refusal,
+    resume_session,
+    start_session,
+    started_text,
+)
 from fixwizard.tui.tip_calibration.steps import calibrate_tip_on_screens, open_tip_calibration
 from fixwizard.tui.toasts import keep_toast_delays_positive
 from fixwizard.tui.widgets.confirm import Confirm
@@ -449,7 +455,7 @@ class FixwizardApp(App[None]):
         try:
             while await self.push_screen_wait(SamplingScreen(self.cell, sampling, self._solver_for(sampling),
                                                              opened)) is True:
-                opened = ""
+                opened = drop_to_take_back(sampling.session)  # back to sampling without d: u takes that drop back
                 solution = await self.push_screen_wait(SolveScreen(self.cell, sampling, self._solver_for(sampling)))
                 if solution is None:
                     continue
@@ -458,7 +464,8 @@ class FixwizardApp(App[None]):
                     report_path = outcome.report_path
                     break
                 # back to sampling: the taps change, so a report written no longer describes them
-                opened = outcome.said() if isinstance(outcome, Dropped) else ""
+                if isinstance(outcome, Dropped):
+                    opened = outcome.said()
         finally:
             await self._step_or_error(lambda: self._end_session(sampling, report_path))
 

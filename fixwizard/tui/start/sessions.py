@@ -120,12 +120,17 @@ def resumed_text(session: SamplingSession, mesh: Path, calibration_path: Path) -
     lines = [f"Resumed the session {session.path}: {count} tap{'' if count == 1 else 's'} recorded, fixture "
              f"{mesh.name}, tip calibration {calibration_path.name}."]
     lines += [f"Note: {note}." for note in said(session.recovered)]
+    return "\n".join(lines + [drop_to_take_back(session)]).strip()
+
+
+def drop_to_take_back(session: SamplingSession) -> str:
+    """The drop the undo key takes back (the session's last change), in words; "" when its last change was none."""
     dropped = session.last_dropped
-    if dropped is not None:  # the undo key takes that drop back: say so, as after the results screen's drop
-        place = sum(tap.id < dropped.id for tap in session.taps) + 1
-        lines.append(f"Tap {place} was dropped last: it does not count (the journal keeps it, marked dropped). Press "
-                     f"{keys.name(keys.UNDO)} to take the drop back.")
-    return "\n".join(lines)
+    if dropped is None:
+        return ""
+    place = sum(tap.id < dropped.id for tap in session.taps) + 1
+    return (f"Tap {place} was dropped last: it does not count (the journal keeps it, marked dropped). Press "
+            f"{keys.name(keys.UNDO)} to take the drop back.")
 
 
 def resume_refusal(requested: str | Path, error: FixwizardError | OSError) -> ResumeRefused:
