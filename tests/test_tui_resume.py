@@ -2,6 +2,7 @@
 it opened; every refusal is explained on screen and leaves the operator on the start screen."""
 
 import asyncio
+import contextlib
 import dataclasses
 import json
 import os
@@ -11,10 +12,12 @@ import subprocess
 import sys
 import threading
 import zlib
+from collections.abc import AsyncIterator
 from pathlib import Path
 
 import numpy as np
 import pytest
+from textual.pilot import Pilot
 from textual.widgets import Static
 
 from fixwizard.calibration.store import load_calibration, save_calibration
@@ -300,25 +303,32 @@ def test_while_resume_opens_the_session_the_terminal_says_so_with_the_status_lin
     asyncio.run(run())
 
 
-def test_a_help_opened_while_resume_loads_closes_when_the_session_opens(tmp_path, monkeypatch):
-    """? pressed while the session's mesh loads showed the opening screen's help; the sampling screen then came over
-    it, and leaving sampling showed that help again, under every later screen."""
+@contextlib.asynccontextmanager
+async def opening_held(tmp_path: Path, monkeypatch) -> AsyncIterator[tuple[FixwizardApp, Pilot, threading.Event]]:
+    """The wizard resuming a session of two taps, held on its opening screen (the session loading) until the
+    returned event is set: the test acts meanwhile."""
     from fixwizard.tui import app as app_module
 
     path = recorded_session(tmp_path, taps=2)
-    help_shown = threading.Event()
+    release = threading.Event()
     loading = app_module.resume_session
 
-    def slow_resume(cell, requested):
-        assert help_shown.wait(30.0), "the test opens the help while the session loads"
+    def held(cell, requested):
+        assert release.wait(30.0), "the test acts while the session loads, then lets it open"
         return loading(cell, requested)
 
-    monkeypatch.setattr(app_module, "resume_session", slow_resume)
+    monkeypatch.setattr(app_module, "resume_session", held)
+    app = FixwizardApp(simulated_cell(3, pace_s=0.0, folder=tmp_path), str(path))
+    async with app.run_test(size=SIZE) as pilot:
+        await until(pilot, lambda: app.screen.query("#opening"))
+        yield app, pilot, release
 
+
+def test_a_help_opened_while_resume_loads_closes_when_the_session_opens(tmp_path, monkeypatch):
+    """? pressed while the session's mesh loads showed the opening screen's help; the sampling screen then came over
+    it, and leaving sampling showed that help again, under every later screen."""
     async def run():
-        app = FixwizardApp(simulated_cell(3, pace_s=0.0, folder=tmp_path), str(path))
-        async with app.run_test(size=SIZE) as pilot:
-            await until(pilot, lambda: app.screen.query("#opening"))
+        async with opening_held(tmp_path, monkeypatch) as (app, pilot, help_shown):
             await pilot.press("question_mark")
             await until(pilot, lambda: isinstance(app.screen, HelpScreen))
             help_shown.set()
@@ -332,6 +342,24 @@ def test_a_help_opened_while_resume_loads_closes_when_the_session_opens(tmp_path
             assert not any(isinstance(screen, HelpScreen) for screen in app.screen_stack)
     asyncio.run(run())
 
+
+def test_a_re_arm_question_asked_while_resume_loads_is_answered_before_the_session_opens(tmp_path, monkeypatch):
+    """F12 and Ctrl+R while the session's mesh loads: the sampling screen came over the re-arm question, the robot
+    keys stayed off, and Ctrl+R there asked nothing (the question was asked already, under the screen)."""
+    async def run():
+        async with opening_held(tmp_path, monkeypatch) as (app, pilot, asked):
+            await pilot.press("f12")
+            await until(pilot, lambda: app.stopped)
+            await pilot.press("ctrl+r")
+            await until(pilot, lambda: isinstance(app.screen, Confirm))
+            asked.set()
+            await pilot.pause(0.5)  # the session has loaded: the question stays on top until answered
+            assert isinstance(app.screen, Confirm)
+            await pilot.press("y")
+            await until(pilot, lambda: "Resumed" in sampling_note(app))
+            assert not app.stopped
+            assert not any(isinstance(screen, Confirm) for screen in app.screen_stack)
+    asyncio.run(run())
 
 def test_a_tip_calibration_changed_since_the_session_started_is_told_by_each_figure_its_taps_depend_on():
     calibration = load_calibration(REPO / "calibrations" / "example_matlab_logo.yaml")

@@ -7,6 +7,7 @@ After STOP or a protective stop the wizard is STOPPED: the status bar says so an
 ``?`` shows the help of the current screen; quitting while the robot moves asks first. The look of every screen
 is in ``wizard.tcss``."""
 
+import asyncio
 import threading
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -51,6 +52,7 @@ from fixwizard.workflow.solver_process import SolverProcess
 
 T = TypeVar("T")
 STATUS_INTERVAL_S = 0.5
+DIALOG_POLL_S = 0.05  # how often the flow looks whether a dialog over the opening screen is answered
 REARM_QUESTION = "Re-arm the robot?"
 CSS_FILE = Path(__file__).with_name("wizard.tcss")  # package data: every screen's look
 
@@ -395,13 +397,13 @@ class FixwizardApp(App[None]):
             await self._sample_until_done(self._first_sampling)
         elif self.resume is not None:
             resumed = await self._resume(self.resume)
-            self._close_help()
+            await self._clear_opening()
             if isinstance(resumed, Resumed):
                 await self._sample_until_done(resumed.sampling, resumed.opened)
             else:
                 refusal = resumed
         while True:
-            self._close_help()
+            await self._clear_opening()
             choice = await self.push_screen_wait(StartScreen(self.cell, refusal, self._left_session))
             refusal = self._left_session = None
             started = (choice.sampling, choice.opened) if isinstance(choice, Resumed) else \
@@ -409,11 +411,16 @@ class FixwizardApp(App[None]):
             if started is not None:
                 await self._sample_until_done(*started)
 
-    def _close_help(self) -> None:
-        """Close a help left open over the opening screen (``?`` while ``--resume`` loads): the step's screen that
-        comes now would cover it, and it would show again, explaining nothing, once that screen is gone."""
-        while isinstance(self.screen, HelpScreen):
-            self.pop_screen()
+    async def _clear_opening(self) -> None:
+        """Close a help left open over the opening screen (``?`` while ``--resume`` loads), and wait until a question
+        asked or an error shown over it meanwhile (the re-arm after F12) is answered: the step's screen that comes
+        now would cover them, a help to show again, explaining nothing, once that screen is gone, a question that
+        could not be asked again (it is asked once) and so the robot keys off for good."""
+        while isinstance(self.screen, ModalScreen):
+            if isinstance(self.screen, HelpScreen):
+                self.pop_screen()
+            else:
+                await asyncio.sleep(DIALOG_POLL_S)
 
     async def _new_session(self, choice: NewSession) -> tuple[Sampling, str] | None:
         """A new session for the chosen fixture, after a new tip calibration if none was chosen, and what was
