@@ -213,6 +213,14 @@ def no_unfinished_session(path: Path) -> str:
     return ""
 
 
+def finished_session_by_path(path: Path) -> str:
+    """A session closed with its report, asked for by its path: it opened for sampling, and a tap the robot made
+    there was refused after the move (the session is finished)."""
+    with SamplingSession.open(path) as session:
+        session.close(report="done.yaml")
+    return str(path)
+
+
 @pytest.mark.parametrize("spoil, reason", [
     (missing, "gone.jsonl does not exist; check the path"),
     (unknown_users_home, "~nosuchuser-fixwizard/gone.jsonl does not exist; check the path"),
@@ -228,6 +236,7 @@ def no_unfinished_session(path: Path) -> str:
     (header_naming_no_fixture, "was not started by the wizard"),
     (deeply_nested_calibration, "nested too deeply to read"),
     (no_unfinished_session, "there is no unfinished session in"),
+    (finished_session_by_path, "is finished already (its report was written): start a new session to tap again"),
 ])
 def test_every_refused_resume_is_explained_on_the_start_screen(tmp_path, spoil, reason):
     requested = spoil(recorded_session(tmp_path))

@@ -54,9 +54,12 @@ def started_text(session: SamplingSession, tip: SavedCalibration, calibrated_now
 
 def resume_session(cell: Cell, path: Path) -> Resumed:
     """Open the session at ``path`` with the fixture and tip calibration it names, and say what was opened, in
-    words. Refused when it was recorded on another robot or its mesh changed since."""
+    words. Refused when it is finished, was recorded on another robot or its mesh changed since."""
     session = SamplingSession.open(path)
     try:
+        if session.closed:  # asked for by its path: the start screen lists only unfinished ones
+            raise SessionError(f"the session {path.name} is finished already (its report was written): start a new "
+                               "session to tap again")
         header = session.header
         if header.get("robot") != cell.robot_name:
             raise SessionError(f"the session {path.name} was recorded on '{header.get('robot')}', not on "
