@@ -27,11 +27,10 @@ import fcntl
 import json
 import os
 import stat
-import time
 import zlib
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Self, TypeVar
 
@@ -203,13 +202,13 @@ class Journal:
     def append(self, record: dict, what: str) -> dict:
         """Write ``record`` durably and return it as read back; ``what`` names it in the message of a failed write
         ("this tap"). A record that would repeat a line of the journal byte for byte (the same drop of a tap within
-        one millisecond) is stamped with its ``time`` again once the clock has moved on."""
+        one millisecond) gets a ``time`` a millisecond later than now, or later still until it repeats none."""
         if self.handle is None:
             raise self.kind.error(f"the {self.kind.noun} {self.path} was released; resume it to record more")
-        line = _encode(record)
+        line, stamp = _encode(record), datetime.now(UTC)
         while line in self._lines:  # the same record within one millisecond: read back, it would pass for a copy
-            time.sleep(0.001)
-            line = _encode({**record, "time": now()})
+            stamp += timedelta(milliseconds=1)  # not waiting for the clock, which may stand still (a test's)
+            line = _encode({**record, "time": stamp.isoformat(timespec="milliseconds")})
         self._append(line, what)
         return _decode_own(line)
 
