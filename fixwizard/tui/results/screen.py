@@ -1,8 +1,7 @@
 """The results screen: the solution in words and numbers, pictures of the rotation set and of the taps on
 the fixture, the solver's own figures (Details), the report (default path shown, editable) and what to do next.
-Dismisses with "resample" (back to
-sampling), ``Dropped`` (back to sampling after dropping the suspect tap of an inconsistent result) or ``Done`` (with the
-report written, if any)."""
+Dismisses with "resample" (back to sampling), ``Dropped`` (back to sampling after dropping the suspect tap of an
+inconsistent result) or ``Done`` (with the report written, if any)."""
 
 import datetime as dt
 import os
