@@ -1250,7 +1250,10 @@ def test_writes_that_ur_rtde_drops_without_raising_drop_the_link_before_anything
     monkeypatch.setattr("fixwizard.robot.ur.serve", serve_whose_writes_are_lost_once_connected)
     robot = connect()
     before = controller.flange_pose()
-    with pytest.raises(ConnectionLost, match="writing to the controller failed .ur_rtde could not send it"):
+    # the move's own write names the cause; on a loaded machine the watchdog's kick may fail first, and the move
+    # then finds the link already down
+    with pytest.raises(ConnectionLost, match="writing to the controller failed .ur_rtde could not send it|^the link "
+                                             "to the robot dropped before the move"):
         robot.move_linear(flange_above_surface(0.03), speed_m_s=0.05)
     assert [name for name, _, _ in controller.programs()] == ["setup"]
     np.testing.assert_allclose(controller.flange_pose(), before, atol=1e-9)

@@ -173,8 +173,8 @@ class URWatchedApp(WatchedApp):
         self.stop_at = time.monotonic()
         super().action_stop_robot()
 
-    def _error_modal(self, error):
-        modal = super()._error_modal(error)
+    def _error_modal(self, error, reconnect=False):
+        modal = super()._error_modal(error, reconnect)
         if modal is not None:
             self.shown[id(modal)] = ArmAt.now(self.controller, f"the error {str(error)[:200]!r}")
         return modal

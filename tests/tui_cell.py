@@ -217,7 +217,7 @@ class ScreenHost(App):
     def forget_cancel(self, cancel: threading.Event) -> None:
         self.motion_cancels.discard(cancel)
 
-    def show_error(self, error: Exception) -> None:
+    def show_error(self, error: Exception, reconnect: bool = False) -> None:
         self.errors.append(error)
 
     def on_mount(self) -> None:
