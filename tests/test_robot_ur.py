@@ -6,6 +6,7 @@ frozen or silent link, a crashed or stalled link process) raises its typed error
 crashing or freezing this process and without motion after the error. The loopback listens on the
 controller's fixed ports at a loopback address of this run's own, so parallel runs do not clash."""
 
+import multiprocessing
 import os
 import random
 import re
@@ -56,7 +57,7 @@ from fixwizard.robot.ur_script import (
     setup_program,
     tap_program,
 )
-from fixwizard.robot.ur_state import ControllerState
+from fixwizard.robot.ur_state import LOST_REASON_BYTES, ControllerState, SharedState
 from fixwizard.tui.tapping import tap_and_record
 from fixwizard.workflow.session import SamplingSession, Tap
 from ur_loopback import TIP_OFFSET_M, flange_above_surface, private_loopback_host
@@ -1251,9 +1252,8 @@ def test_writes_that_ur_rtde_drops_without_raising_drop_the_link_before_anything
     robot = connect()
     before = controller.flange_pose()
     # the move's own write names the cause; on a loaded machine the watchdog's kick may fail first, and the move
-    # then finds the link already down
-    with pytest.raises(ConnectionLost, match="writing to the controller failed .ur_rtde could not send it|^the link "
-                                             "to the robot dropped before the move"):
+    # then finds the link already down, with that cause
+    with pytest.raises(ConnectionLost, match="writing to the controller failed .ur_rtde could not send it"):
         robot.move_linear(flange_above_surface(0.03), speed_m_s=0.05)
     assert [name for name, _, _ in controller.programs()] == ["setup"]
     np.testing.assert_allclose(controller.flange_pose(), before, atol=1e-9)
@@ -1278,11 +1278,38 @@ def test_a_pose_that_is_not_a_number_is_never_moved_from(robot, controller):
     all be NaN) is refused without a program sent."""
     controller.garble("actual_TCP_pose")
     assert wait_until(lambda: not robot.status().connected)
-    with pytest.raises(ConnectionLost):
+    with pytest.raises(ConnectionLost, match=r"dropped \(the controller's RTDE data holds a value that is not a "
+                                             r"number \(x\)\)"):
         robot.base_T_tcp()
     with pytest.raises(ConnectionLost):
         robot.move_linear(flange_above_surface(0.02))
     assert [name for name, _, _ in controller.programs()] == ["setup"]
+
+
+@pytest.mark.parametrize("fault", ["go_offline", "drop_connections"])
+def test_a_link_that_drops_while_nothing_runs_names_its_cause_at_the_next_command(robot, controller, fault):
+    """A switch that resets, or a network that fails, while the operator reads the screen: the next command says
+    why the link dropped (what the link process saw), not only that it did; nothing moves."""
+    getattr(controller, fault)()
+    assert wait_until(lambda: not robot.status().connected, 3.0)
+    with pytest.raises(ConnectionLost, match=r"^the link to the robot dropped before the tap \((the controller "
+                                             r"closed the RTDE connection|writing to the controller failed|reading "
+                                             r"the RTDE data failed|no RTDE data from the controller)"):
+        robot.tap(**FAST_TAP)
+    assert [name for name, _, _ in controller.programs()] == ["setup"]
+    assert_arm_stands(controller)
+
+
+def test_the_shared_state_keeps_the_first_cause_of_a_drop_whole_or_cut_at_a_character():
+    shared = SharedState(multiprocessing.get_context("spawn"))
+    assert shared.lost_reason() == ""
+    reason = "writing to the controller failed (" + "ü" * LOST_REASON_BYTES + ")"
+    shared.lose(reason)
+    assert shared.read()[2]
+    said = shared.lost_reason()
+    assert reason.startswith(said) and LOST_REASON_BYTES - 1 <= len(said.encode()) <= LOST_REASON_BYTES
+    shared.lose("the controller closed the RTDE connection")  # shorter: nothing of the first is left after it
+    assert shared.lost_reason() == "the controller closed the RTDE connection"
 
 
 def test_a_link_stalled_longer_than_the_watchdog_says_this_computer_stalled(start_controller, connect):

@@ -295,7 +295,7 @@ class URRobot:
                 else:  # the link process saw its connection drop: its answer, coming, names the cause
                     lost_seen_at = lost_seen_at or time.monotonic()
                     if time.monotonic() - lost_seen_at > LOST_ANSWER_WAIT_S:
-                        problem = f"the link to the robot dropped{context}"
+                        problem = _dropped(link, context)
             elif time.monotonic() > deadline:
                 problem = (f"the robot at {self.host} did not answer within {deadline_s:.0f} s{context} while "
                            f"fixwizard was waiting for {step}: check that the controller is running and that "
@@ -362,8 +362,8 @@ class URRobot:
             self._until_the_arm_stands()  # another call may have abandoned the link a moment ago
             raise LinkLost(f"fixwizard is not connected to the robot at {self.host}{context}: reconnect")
         if self._fresh(link) is None:
-            reason = "the link to the robot dropped" if link.shared.read()[2] else "no data from the robot"
-            raise self._abandon(link, f"{reason}{context}")
+            raise self._abandon(link, _dropped(link, context) if link.shared.read()[2] else
+                                f"no data from the robot{context}")
         return link
 
     def _until_the_arm_stands(self) -> None:
@@ -458,6 +458,12 @@ def _with_tap_note(error: ConnectionLost) -> ConnectionLost:
     if recorded is not None:
         noted.tap_result = recorded
     return noted
+
+
+def _dropped(link: _LinkProcess, context: str) -> str:
+    """The problem of a ``link`` that saw its connection drop, with the cause it noted."""
+    reason = link.shared.lost_reason()
+    return f"the link to the robot dropped{context}" + (f" ({reason})" if reason else "")
 
 
 def _exit_text(process: BaseProcess) -> str:

@@ -155,6 +155,7 @@ class Link:
         self._asks_remote_control = True  # whether the dashboard can tell remote from local control (``connect``)
         self._polyscope = ""  # the software version the dashboard said (``connect``)
         self._lost: str | None = None  # why the link is down
+        self._lose_lock = threading.Lock()
         self._next_run = random.randrange(1, 1 << 24)
         self._current_run: int | None = None
         self._stop_mark = stop_count.value  # the wizard's STOP count when the current motion was asked for
@@ -487,9 +488,11 @@ class Link:
         return LinkLost(f"the link to the robot is down{context}: {reason}")
 
     def _lose(self, reason: str) -> None:
-        if self._lost is None:
-            self._lost = reason
-            self._shared.publish({"lost": 1.0})
+        """Note the first reason the link went down (from any of its threads) and tell the wizard's process."""
+        with self._lose_lock:
+            if self._lost is None:
+                self._lost = reason
+                self._shared.lose(reason)
 
     def _publish_loop(self) -> None:
         """Publish every new RTDE sample; the link is lost once the stream closes, goes quiet or sends a value that
@@ -629,23 +632,28 @@ class Link:
         send_or_leave(self._conn, ("step", what))
 
 
+def _polyscope_version(answer: str) -> tuple[int, int] | None:
+    """(major, minor) from a dashboard's answer to ``PolyscopeVersion`` ("URSoftware 5.15.0.1234 (Nov 11 2023)"),
+    None if it names no version."""
+    found = re.search(r"(\d+)\.(\d+)", answer)
+    return None if found is None else (int(found[1]), int(found[2]))
+
+
 def _tells_remote_control(polyscope_version: str) -> bool:
-    """Whether ur_rtde asks a dashboard that answers ``PolyscopeVersion`` with ``polyscope_version`` ("URSoftware
-    5.15.0.1234 (Nov 11 2023)") "is in remote control", rather than saying False without asking."""
-    found = re.search(r"(\d+)\.(\d+)", polyscope_version)
-    if found is None:
-        return False
-    major, minor = int(found[1]), int(found[2])
-    return major == REMOTE_CONTROL_QUERY_SINCE[0] and minor >= REMOTE_CONTROL_QUERY_SINCE[1]
+    """Whether ur_rtde asks a dashboard that answers ``PolyscopeVersion`` with ``polyscope_version`` "is in remote
+    control", rather than saying False without asking."""
+    version = _polyscope_version(polyscope_version)
+    return version is not None and version[0] == REMOTE_CONTROL_QUERY_SINCE[0] and \
+        version[1] >= REMOTE_CONTROL_QUERY_SINCE[1]
 
 
 def _unasked_local_control(polyscope_version: str) -> bool:
     """Whether a dashboard that answers ``PolyscopeVersion`` with ``polyscope_version`` belongs to an e-Series that
     has local control but cannot be asked about it (PolyScope 5.0 to 5.5): in local control its controller takes a
     program and runs none."""
-    found = re.search(r"(\d+)\.(\d+)", polyscope_version)
-    return found is not None and int(found[1]) == REMOTE_CONTROL_QUERY_SINCE[0] and \
-        int(found[2]) < REMOTE_CONTROL_QUERY_SINCE[1]
+    version = _polyscope_version(polyscope_version)
+    return version is not None and version[0] == REMOTE_CONTROL_QUERY_SINCE[0] and \
+        version[1] < REMOTE_CONTROL_QUERY_SINCE[1]
 
 
 def _way_back_blocked(state: ControllerState, stopped: bool) -> bool:

@@ -6,6 +6,7 @@ Times are ``time.monotonic()`` seconds (one clock for every process on the machi
 ``base_T_tcp`` of the flange in the robot base frame (m), speeds m/s, forces N.
 """
 
+import ctypes
 import multiprocessing
 import time
 from dataclasses import dataclass
@@ -35,6 +36,7 @@ _FIELDS = ("received_at", "timestamp", "x", "y", "z", "rx", "ry", "rz", "speed_m
            "settle_s", "last_kick_at", "lost")
 _INDEX = {name: index for index, name in enumerate(_FIELDS)}
 READ_ATTEMPTS = 100
+LOST_REASON_BYTES = 400  # room for why the link dropped (UTF-8), longer reasons are cut
 
 
 @dataclass(frozen=True)
@@ -93,12 +95,13 @@ class ControllerState:
 
 
 class SharedState:
-    """The latest ``ControllerState``, the time of the link's last watchdog kick and whether the link saw its
-    connection drop. Made in the wizard's process and handed to the link process."""
+    """The latest ``ControllerState``, the time of the link's last watchdog kick and whether (and why) the link saw
+    its connection drop. Made in the wizard's process and handed to the link process."""
 
     def __init__(self, context: multiprocessing.context.BaseContext) -> None:
         self._values: SynchronizedArray = context.Array("d", len(_FIELDS), lock=False)
         self._sequence = context.Value("q", 0, lock=False)
+        self._lost_reason: ctypes.Array[ctypes.c_char] = context.Array("c", LOST_REASON_BYTES, lock=False)
 
     # --- the link process writes ---
 
@@ -108,6 +111,13 @@ class SharedState:
         for name, value in sample.items():
             self._values[_INDEX[name]] = value
         self._sequence.value += 1
+
+    def lose(self, reason: str) -> None:
+        """Say that the link saw its connection drop, and why (the link process says its first reason only). The
+        reason is written before the flag, so a reader that sees the flag finds it."""
+        encoded = reason.encode("utf-8", "replace")[:LOST_REASON_BYTES].decode("utf-8", "ignore").encode("utf-8")
+        self._lost_reason.raw = encoded.ljust(LOST_REASON_BYTES, b"\0")  # cut between characters, the rest zeros
+        self.publish({"lost": 1.0})
 
     # --- the wizard's process reads ---
 
@@ -130,3 +140,7 @@ class SharedState:
             int(field["safety_status_bits"]), int(field["runtime_state"]), int(field["run_id"]),
             int(field["phase"]), field["travel_m"], field["peak_force_n"], field["settle_s"])
         return state, field["last_kick_at"], bool(field["lost"])
+
+    def lost_reason(self) -> str:
+        """Why the link saw its connection drop ("" before it did)."""
+        return self._lost_reason.value.decode("utf-8", "replace") if self.read()[2] else ""
