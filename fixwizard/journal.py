@@ -7,19 +7,21 @@ parses. A record is written whole (one ``write``, repeated only for the rest of 
 before the caller hears of it. A write that fails (a full disk) is cut off again at once, so the next record never
 follows a partial one; the caller is told that the record was not saved.
 
-A record that never finished (a crash, or a failed write whose cut-off did not happen) is a *torn* record: the
-start of a line without its end. On open a torn last line is moved aside into ``<name>.torn-<time>`` (evidence
-kept) and the journal continues after the last complete record; a torn record followed on the same line by a
-complete one (journals of older versions appended after a failed write) is skipped and the records after it are
-kept. A complete line that fails its checksum is damage to an acknowledged record: an error naming the line, since
-fixwizard will not guess what it held; the last line too, unless it is no JSON at all (a power cut before its fsync
-kept the page with its end and lost the one with its start): that one is torn. A blank line, or a line that repeats
-an earlier one byte for byte (left by an editor or a copy: fixwizard writes no blank line, and each of its records
-names the millisecond it was written, stamped again should it repeat an earlier line), holds no record of its own
-and is skipped, said so on open (``SkippedLine``). One writer at a time, enforced with a non-blocking ``flock``. A
-journal deleted or moved away while open (its folder removed) is written back at its path before the next record
-(from the copy of the saved records kept in memory); a file another program put at the path or changed there
-(renamed or copied over it) is left alone, and records are refused until it is moved away.
+A record that never finished (a crash, or a failed write whose cut-off did not happen) is a *torn* record: the start
+of a line without its end. A last line that holds a whole record and only lacks its newline (an editor that strips
+the final newline, or a crash just before it) is complete: its newline is added on open. On open a torn last line is
+moved aside into ``<name>.torn-<time>`` (evidence kept) and the journal continues after the last complete record; a
+torn record followed on the same line by a complete one (journals of older versions appended after a failed write)
+is skipped and the records after it are kept. A complete line that fails its checksum is damage to an acknowledged
+record: an error naming the line, since fixwizard will not guess what it held; the last line too, unless it is no
+JSON at all (a power cut before its fsync kept the page with its end and lost the one with its start): that one is
+torn. A blank line, or a line that repeats an earlier one byte for byte (left by an editor or a copy: fixwizard
+writes no blank line, and each of its records names the millisecond it was written, stamped again should it repeat
+an earlier line), holds no record of its own and is skipped, said so on open (``SkippedLine``). One writer at a
+time, enforced with a non-blocking ``flock``. A journal deleted or moved away while open (its folder removed) is
+written back at its path before the next record (from the copy of the saved records kept in memory); a file another
+program put at the path or changed there (renamed or copied over it) is left alone, and records are refused until it
+is moved away.
 """
 
 import errno
@@ -190,6 +192,13 @@ class Journal:
                 except OSError as problem:
                     raise error(f"cannot set aside the unfinished last record of the {noun} {path}: "
                                 f"{file_problem(problem, access='write')}; then resume again") from problem
+            if read.unended:
+                try:
+                    _write_all(handle, b"\n")
+                    os.fsync(handle)
+                except OSError as problem:
+                    raise error(f"cannot end the last line of the {noun} {path} with a newline: "
+                                f"{file_problem(problem, access='write')}; then resume again") from problem
             return cls(kind, path, handle, read.header, read.records, tuple(recovered))
         except BaseException:
             os.close(handle)
@@ -300,7 +309,7 @@ def read_unfinished(kind: JournalKind, path: Path) -> tuple[dict, list[dict]] | 
             return None
         with open(path, "rb") as stream:
             first = stream.readline(HEADER_BYTES)
-            header = _header_of(kind, [first])
+            header = _header_of(kind, [_ended(first)])  # without its newline, a first line is all the file holds
             if header is None:
                 return None
             lines = [first, *stream.read().splitlines(keepends=True)]
@@ -411,11 +420,16 @@ class _Read:
     torn: list[tuple[int, bytes]]
     torn_tail: tuple[int, bytes] | None
     skipped: list[tuple[int, int | None]]  # (line, the earlier line it repeats; None: blank)
+    unended: bool  # the last line holds a whole record but no newline (add one before appending)
 
 
 def _read(kind: JournalKind, path: Path, data: bytes) -> _Read:
     """Split a journal into header, records and torn records; the kind's error for a foreign or damaged file."""
     lines = data.splitlines(keepends=True)
+    unended = bool(lines) and _ended(lines[-1]) != lines[-1] and (_decode(lines[-1]) is not None
+                                                                  or _after_torn(lines[-1]) is not None)
+    if unended:
+        lines[-1] = _ended(lines[-1])
     header = _header_of(kind, lines)
     if header is None:
         found = (_decode(lines[0]) or {}).get("schema") if lines else None
@@ -446,7 +460,12 @@ def _read(kind: JournalKind, path: Path, data: bytes) -> _Read:
             start, record = after_torn
             torn.append((number, line[:start]))
         records.append((number, record))
-    return _Read(header, records, torn, torn_tail, skipped)
+    return _Read(header, records, torn, torn_tail, skipped, unended)
+
+
+def _ended(line: bytes) -> bytes:
+    """``line`` with its newline (added if it has none)."""
+    return line if line.endswith(b"\n") else line + b"\n"
 
 
 def _blank(line: bytes) -> bool:

@@ -133,6 +133,23 @@ def test_damaged_last_line_is_refused_naming_it_not_set_aside(tmp_path):
     assert path.read_bytes() == b"".join(lines) and [p.name for p in tmp_path.iterdir()] == ["a.jsonl"]
 
 
+@pytest.mark.parametrize("taps", [0, 3])
+def test_a_last_record_whose_newline_an_editor_stripped_is_kept_and_the_newline_put_back(tmp_path, taps):
+    """An editor that strips the final newline (or a crash between a record and its newline) leaves a whole record
+    on the last line: it counts, nothing is set aside, and the next record starts on a line of its own."""
+    path = recorded(tmp_path, taps)
+    complete = path.read_bytes()
+    path.write_bytes(complete.removesuffix(b"\n"))
+    assert find_unfinished(tmp_path) == [path]  # listed on the start screen
+    with SamplingSession.open(path) as resumed:
+        assert [tap.id for tap in resumed.taps] == list(range(1, taps + 1)) and resumed.recovered == ()
+        assert path.read_bytes() == complete
+        resumed.record_tap(pose(7))
+    with SamplingSession.open(path) as again:
+        assert [tap.id for tap in again.taps] == list(range(1, taps + 2)) and again.recovered == ()
+    assert [child.name for child in tmp_path.iterdir()] == ["a.jsonl"]
+
+
 def test_a_last_line_whose_start_a_power_cut_lost_is_set_aside(tmp_path):
     """A write cut by a power cut before its fsync can keep the page holding a line's end and lose the one with
     its start (zeros): that line never parsed, was never acknowledged, and is set aside as torn."""
@@ -280,12 +297,11 @@ def test_a_session_of_another_fixwizard_version_is_said_to_be_one(tmp_path):
         SamplingSession.open(path)
 
 
-@pytest.mark.parametrize("line_ends", [b"\r", b""], ids=["carriage returns", "none"])
-def test_a_session_whose_line_ends_were_changed_is_said_to_be_so(tmp_path, line_ends):
-    """Newlines turned into carriage returns (an old Mac editor), or the header's removed: the journal was called
-    "of a version this fixwizard does not read ('fixwizard.session/1'; it reads fixwizard.session/1)"."""
-    path = recorded(tmp_path, 1 if line_ends else 0)
-    path.write_bytes(path.read_bytes().replace(b"\n", line_ends))
+def test_a_session_whose_line_ends_were_changed_is_said_to_be_so(tmp_path):
+    """Newlines turned into carriage returns (an old Mac editor): the journal was called "of a version this
+    fixwizard does not read ('fixwizard.session/1'; it reads fixwizard.session/1)"."""
+    path = recorded(tmp_path, 1)
+    path.write_bytes(path.read_bytes().replace(b"\n", b"\r"))
     with pytest.raises(SessionError) as refused:
         SamplingSession.open(path)
     assert str(refused.value) == (f"the first line of the session {path} does not end with a newline (LF) as "

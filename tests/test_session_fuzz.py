@@ -102,9 +102,10 @@ def operated(session: SamplingSession, rng: random.Random) -> None:
 
 def copied_or_spaced(data: bytes, rng: random.Random) -> tuple[bytes, str]:
     """``data`` as an editor or a copy may leave it holding the same records: blank lines, lines (the header too)
-    repeated after themselves, line ends changed to CRLF, the journal or the start of it appended to itself."""
+    repeated after themselves, line ends changed to CRLF, the journal or the start of it appended to itself, the
+    final newline stripped."""
     lines = data.splitlines(keepends=True)
-    kind = rng.choice(["blank", "repeat", "crlf", "appended"])
+    kind = rng.choice(["blank", "repeat", "crlf", "appended", "unended"])
     if kind == "blank":
         lines.insert(rng.randint(1, len(lines)), rng.choice([b"\n", b"\r\n", b"  \t\n"]))
     elif kind == "repeat":
@@ -112,6 +113,8 @@ def copied_or_spaced(data: bytes, rng: random.Random) -> tuple[bytes, str]:
         lines.insert(rng.randint(line + 1, len(lines)), lines[line])
     elif kind == "crlf":
         lines = [line if line.endswith(b"\r\n") else line[:-1] + b"\r\n" for line in lines]
+    elif kind == "unended":
+        lines[-1] = lines[-1].removesuffix(b"\n")
     else:
         lines += lines[: rng.randint(1, len(lines))]
     return b"".join(lines), kind
@@ -119,8 +122,8 @@ def copied_or_spaced(data: bytes, rng: random.Random) -> tuple[bytes, str]:
 
 def test_a_journal_copied_or_spaced_by_an_editor_replays_every_change_of_the_session(tmp_path):
     """Whatever the session did (taps, undos, drops, drops taken back, resumes between), its journal with blank lines,
-    repeated lines, CRLF line ends or a copy of itself appended replays to the same taps in the same order and the
-    same drop to take back. FUZZ_TRIALS sessions (default 60) from a printed seed."""
+    repeated lines, CRLF line ends, a copy of itself appended or no final newline replays to the same taps in the
+    same order and the same drop to take back. FUZZ_TRIALS sessions (default 60) from a printed seed."""
     seed = random.randrange(1 << 30)
     rng = random.Random(seed)
     for trial in range(SESSIONS):
