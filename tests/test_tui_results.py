@@ -14,9 +14,10 @@ from fixwizard import report
 from fixwizard.geometry.se3 import format_ur_pose
 from fixwizard.solver.solve import Solution, solve
 from fixwizard.tui.app import FixwizardApp
-from fixwizard.tui.results.screen import Done, Dropped
+from fixwizard.tui.results.screen import Done
 from fixwizard.tui.sampling.screen import SamplingScreen
 from fixwizard.tui.solve.screen import SolveScreen
+from fixwizard.tui.start.sessions import drop_to_take_back
 from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.key_footer import KeyFooter
 from fixwizard.tui.widgets.status import StatusBar
@@ -252,7 +253,7 @@ async def test_an_inconsistent_result_names_the_suspect_and_dropping_it_solves(t
         summary = text_of(results, "#summary-text")
         assert "Tap 13 lies" in summary and "Press d to drop tap 13" in summary
         await pilot.press("d")
-        assert app.results == [Dropped(13)]
+        assert app.results == ["resample"]
         assert len(tapped.session.taps) == 12
         kinds = [json.loads(line)["kind"] for line in tapped.session.path.read_text().splitlines()[1:]]
         assert kinds == ["tap"] * 13 + ["drop"]
@@ -269,12 +270,12 @@ async def test_after_a_drop_sampling_says_so_and_u_takes_the_drop_back_with_the_
     session = tapped.session
     ids = [tap.id for tap in session.taps]
     session.drop(ids[4])  # the solver's suspect can be any tap
-    app = ScreenHost(lambda: tapped.sampling_screen(Dropped(5).said()))
+    app = ScreenHost(lambda: tapped.sampling_screen(drop_to_take_back(session)))  # as the app opens it after d
     async with app.run_test(size=SIZE) as pilot:
         screen = app.screen
-        await until(pilot, lambda: "Tap 5 dropped" in text_of(screen, "#note"))
-        assert text_of(screen, "#note") == ("Tap 5 dropped: it no longer counts (the journal keeps it, marked "
-                                            "dropped). Press u to take the drop back, or solve again.")
+        await until(pilot, lambda: "Tap 5 was dropped" in text_of(screen, "#note"))
+        assert text_of(screen, "#note") == ("Tap 5 was dropped last: it does not count (the journal keeps it, marked "
+                                            "dropped). Press u to take the drop back.")
         await pilot.press("u")
         assert [tap.id for tap in session.taps] == ids
         assert screen.query_one(DataTable).row_count == 12

@@ -27,7 +27,7 @@ from fixwizard.robot.base import ConnectionLost, ProtectiveStop, Robot, RobotErr
 from fixwizard.tui import keys
 from fixwizard.tui.cell import Cell, NewSession, Resumed, Sampling, SavedCalibration
 from fixwizard.tui.launch import session_to_resume
-from fixwizard.tui.results.screen import Done, Dropped, ResultsScreen
+from fixwizard.tui.results.screen import Done, ResultsScreen
 from fixwizard.tui.sampling.screen import SamplingScreen
 from fixwizard.tui.solve.screen import SolveScreen
 from fixwizard.tui.start.screen import StartScreen
@@ -462,17 +462,15 @@ class FixwizardApp(App[None]):
         try:
             while await self.push_screen_wait(SamplingScreen(self.cell, sampling, self._solver_for(sampling),
                                                              opened)) is True:
-                opened = drop_to_take_back(sampling.session)  # back to sampling without d: u takes that drop back
                 solution = await self.push_screen_wait(SolveScreen(self.cell, sampling, self._solver_for(sampling)))
-                if solution is None:
-                    continue
-                outcome = await self.push_screen_wait(ResultsScreen(self.cell, sampling, solution))
-                if isinstance(outcome, Done):
-                    report_path = outcome.report_path
-                    break
-                # back to sampling: the taps change, so a report written no longer describes them
-                if isinstance(outcome, Dropped):
-                    opened = outcome.said()
+                if solution is not None:
+                    outcome = await self.push_screen_wait(ResultsScreen(self.cell, sampling, solution))
+                    if isinstance(outcome, Done):
+                        report_path = outcome.report_path
+                        break
+                # back to sampling (the taps may change: a report written no longer describes them), saying which
+                # drop u takes back if the last change was one (the results' d, or a drop before this solve)
+                opened = drop_to_take_back(sampling.session)
         finally:
             await self._step_or_error(lambda: self._end_session(sampling, report_path))
 

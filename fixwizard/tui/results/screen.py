@@ -1,7 +1,7 @@
 """The results screen: the solution in words and numbers, pictures of the rotation set and of the taps on
 the fixture, the solver's own figures (Details), the report (default path shown, editable) and what to do next.
-Dismisses with "resample" (back to sampling), ``Dropped`` (back to sampling after dropping the suspect tap of an
-inconsistent result) or ``Done`` (with the report written, if any)."""
+Dismisses with "resample" (back to sampling, also after dropping the suspect tap of an inconsistent result) or
+``Done`` (with the report written, if any)."""
 
 import datetime as dt
 import os
@@ -43,20 +43,7 @@ class Done:
     report_path: Path | None
 
 
-@dataclass(frozen=True)
-class Dropped:
-    """The suspect tap was dropped: back to sampling, which says so; ``number`` is its place among the taps (1-based)
-    before the drop."""
-
-    number: int
-
-    def said(self) -> str:
-        """What the sampling screen says on opening after the drop."""
-        return (f"Tap {self.number} dropped: it no longer counts (the journal keeps it, marked dropped). Press "
-                f"{keys.name(keys.UNDO)} to take the drop back, or solve again.")
-
-
-Outcome = Literal["resample"] | Done | Dropped
+Outcome = Literal["resample"] | Done
 TABS = ("summary", "rotations", "taps", "details")
 
 
@@ -209,7 +196,7 @@ class ResultsScreen(Screen[Outcome]):
         except (FixwizardError, OSError) as error:
             self._say(error_message(error), problem=True)
             return
-        self.dismiss(Dropped(suspect.index + 1))
+        self.dismiss("resample")  # sampling says which tap was dropped (the session's last change)
 
     def action_resample(self) -> None:
         self.dismiss("resample")
