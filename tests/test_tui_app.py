@@ -571,7 +571,9 @@ def test_the_start_screen_describes_stored_calibrations_and_resumes_an_unfinishe
             await at_start(pilot)
             await choose(pilot, "#calibration", str(tmp_path / "calibrations" / "example_matlab_logo.yaml"))
             details = text_of(app, "#calibration-info")
-            assert "calibrated 2026-11-24 03:09 on Universal Robots arm" in details
+            assert "calibrated 2026-11-24 03:09 on Universal Robots arm of the matlab-logo data set (Haugaard, Kim, " \
+                "Iversen, ICRA 2024)\nNot calibrated on this robot (SIMULATED demo cell (seed 3)): use it only if " \
+                "this very tool, untouched since, is on its flange; otherwise calibrate the tip anew" in details
             assert "each tap is trusted to 0.8 mm" in details
             await choose(pilot, "#session", str(path))
             await press_button(pilot, "#continue")
@@ -648,11 +650,14 @@ def test_an_unreachable_ur_arm_is_explained_and_nothing_says_simulated(tmp_path)
 
 
 def test_the_start_screen_switches_to_a_ur_arm_and_back_to_the_simulated_cell(tmp_path):
+    shutil.copytree(REPO / "calibrations", tmp_path / "calibrations")  # made on another robot
+
     async def run():
         context = wizard(tmp_path)
         app = FixwizardApp(context)
         async with app.run_test(size=SIZE) as pilot:
             await at_start(pilot)
+            await choose(pilot, "#calibration", str(tmp_path / "calibrations" / "example_matlab_logo.yaml"))
             app.screen.query_one("#robot-host", Input).focus()
             await pilot.press(*"127.0.0.3", "enter")  # nothing listens there
             await until(pilot, lambda: dialog_shown(app, ErrorModal))
@@ -660,6 +665,7 @@ def test_the_start_screen_switches_to_a_ur_arm_and_back_to_the_simulated_cell(tm
             await press_button(pilot, "#ok")
             await until(pilot, lambda: isinstance(app.screen, StartScreen))
             assert app.cell.robot_name == "UR arm at 127.0.0.3" and not app.cell.simulated and app.cell.hands is None
+            assert "\nNot calibrated on this robot (UR arm at 127.0.0.3): " in text_of(app, "#calibration-info")
             assert "SIMULATED" not in screen_text(app) + str(app.screen.query_one(StatusBar).render())
             await press_button(pilot, "#use-simulated")
             await until(pilot, lambda: app.cell.simulated and app.robot_status is not None

@@ -58,12 +58,16 @@ def calibration_choices(calibrations_dir: Path) -> list[CalibrationChoice]:
                   reverse=True) + unreadable
 
 
-def describe_calibration(calibration: TipCalibration) -> str:
-    """The ball diameter, date and robot, then the verdict with its first reason."""
+def describe_calibration(calibration: TipCalibration, robot_name: str) -> str:
+    """The ball diameter, date and robot (said when it is not ``robot_name``, the robot connected), then the verdict
+    with its first reason."""
     created = calibration.created.replace("T", " ")[:16]
     verdict = tip_verdict(calibration)
+    other_robot = "" if calibration.robot == robot_name else (
+        f"\nNot calibrated on this robot ({robot_name}): use it only if this very tool, untouched since, is on its "
+        "flange; otherwise calibrate the tip anew (a wrong tip makes every tap miss)")
     return (f"Ball diameter {calibration.ball_diameter_m * 1e3:.1f} mm (check it is the ball on the tool), "
-            f"calibrated {created} on {calibration.robot or 'an unknown robot'}\n"
+            f"calibrated {created} on {calibration.robot or 'an unknown robot'}{other_robot}\n"
             f"{verdict.level.capitalize()}: {verdict.reasons[0]}")
 
 

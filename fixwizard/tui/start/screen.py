@@ -245,7 +245,7 @@ class StartScreen(Screen[StartChoice]):
         elif choice.calibration is None:
             info.update(choice.problem or "")
         else:
-            info.update(describe_calibration(choice.calibration))
+            info.update(describe_calibration(choice.calibration, self.cell.robot_name))
 
     # --- continue ---
 
@@ -278,6 +278,7 @@ class StartScreen(Screen[StartChoice]):
         note = " (no real arm moves)" if cell.simulated else ""
         self.query_one("#robot", Static).update(f"{cell.robot_name}{note}")
         self.query_one("#use-simulated", Button).set_class(cell.simulated, "-hidden")
+        self._show_calibration()  # whether the calibration chosen was made on this robot
         services(self).refresh_robot_status()
 
     def _resume(self, path: Path) -> Resumed:
