@@ -307,6 +307,21 @@ async def test_a_wrong_ball_diameter_is_said_plainly_instead_of_blaming_a_tap(ta
 
 
 @pytest.mark.slow
+async def test_a_tip_calibrated_on_another_robot_is_named_first_when_no_pose_explains_the_taps(tapped):
+    """The operator chose a calibration made on another robot (the example's, on the demo cell): its ball and tip
+    are not this tool's; the result says so before any cause the taps' figures suggest."""
+    tapped.calibration = dataclasses.replace(tapped.calibration, robot="UR arm at 10.0.0.7", ball_diameter_m=0.006)
+    solved(tapped)
+    app = ScreenHost(lambda: tapped.results_screen())
+    async with app.run_test(size=SIZE):
+        assert "INCONSISTENT" in text_of(app.screen, "#headline")
+        assert text_of(app.screen, "#summary-text").startswith(
+            "The tip calibration truth was made on UR arm at 10.0.0.7, not on this robot (simulated cell): unless "
+            "this very tool is on its flange, untouched since, every tap misses. Calibrate the tip on this robot "
+            "and tap again.\nThe taps fit a ball of about ")
+
+
+@pytest.mark.slow
 async def test_an_ambiguous_result_lists_the_modes_and_says_where_to_tap_next(tmp_path):
     context = wizard_context(tmp_path, cell=symmetric_cell())
     record_spread_taps(context, 12)

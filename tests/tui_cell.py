@@ -38,13 +38,14 @@ HANDS_SEED = 1
 # The cell's forward-kinematics error bound (0.3 mm) with a margin, as a tip calibration would propose.
 SAMPLE_BOUND_M = 0.00035
 TEST_MAX_CELLS = 8e6
+ROBOT_NAME = "simulated cell"  # the robot the test cell is named and its tip calibrated on
 
 
 def truth_calibration(cell: SimulatedCell) -> TipCalibration:
     """A tip calibration holding the cell's hidden tip and ball, as if calibrated perfectly."""
     no_residuals = ResidualStats(0.0, 0.0)
     return TipCalibration(
-        name="truth", created=dt.datetime.now(dt.UTC).isoformat(), robot="simulated",
+        name="truth", created=dt.datetime.now(dt.UTC).isoformat(), robot=ROBOT_NAME,
         tcp_p_tip_m=cell.truth.tcp_p_tip_m, ball_diameter_m=cell.truth.ball_diameter_m,
         sample_bound_m=SAMPLE_BOUND_M, sample_bound_reason="the simulated cell's error bound with a margin",
         base_T_table=np.eye(4), pivot_tcp_p_tip_m=cell.truth.tcp_p_tip_m, pivot_residuals=no_residuals,
@@ -128,7 +129,7 @@ def wizard_context(folder: Path, cell_seed: int = CELL_SEED, max_cells: float = 
                                      {"tcp_p_tip_m": calibration.tcp_p_tip_m.tolist(),
                                       "ball_diameter_m": calibration.ball_diameter_m,
                                       "sample_bound_m": calibration.sample_bound_m}, robot="simulated")
-    wizard_cell = Cell(robot=cell, robot_name="simulated cell", simulated=True,
+    wizard_cell = Cell(robot=cell, robot_name=ROBOT_NAME, simulated=True,
                        hands=SimulatedHands(cell, seed=HANDS_SEED), reports_dir=folder / "reports", max_cells=max_cells)
     return WizardParts(wizard_cell, session, cell.fixture, calibration, folder / "calibrations" / "truth.yaml")
 

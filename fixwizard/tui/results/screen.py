@@ -23,6 +23,7 @@ from fixwizard.tui.cell import Cell, Sampling
 from fixwizard.tui.results.text import (
     headline,
     modes_lines,
+    other_robot_lines,
     summary_lines,
     suspect_lines,
     warning_lines,
@@ -104,7 +105,7 @@ class ResultsScreen(Screen[Outcome]):
     def _summary(self) -> list[str]:
         solution = self.solution
         if solution.status == "inconsistent":
-            lines = suspect_lines(solution)
+            lines = other_robot_lines(self.sampling.calibration, self.cell.robot_name) + suspect_lines(solution)
         else:
             lines = summary_lines(solution)
             if solution.status == "ambiguous":
