@@ -525,6 +525,32 @@ async def test_the_live_check_says_the_ball_diameter_is_wrong_when_the_taps_fit_
         assert f"Ball diameter fitted with the pose: {fitted_mm:.2f} mm." in details
 
 
+async def test_the_live_check_names_a_tip_calibrated_on_another_robot_first_when_no_pose_fits(context):
+    """The example calibration (another robot's tool) chosen on the demo cell: the live line says so before what
+    the taps' figures suggest, and says nothing of it while a pose fits."""
+    context.calibration = dataclasses.replace(context.calibration, robot="UR arm at 10.0.0.7", ball_diameter_m=0.006)
+    record_spread_taps(context, 12)
+    app = ScreenHost(lambda: context.sampling_screen())
+    async with app.run_test(size=SIZE) as pilot:
+        screen = app.screen
+        await until(pilot, lambda: screen.live is not None and screen.live.ball_mismatch is not None
+                    and not screen.live_running, timeout_s=120)
+        assert text_of(screen, "#live").startswith(
+            "Live check of 12 taps: NO POSE FITS these taps with this ball. The tip calibration truth was made on UR "
+            "arm at 10.0.0.7, not on this robot (simulated cell): unless this very tool is on its flange, untouched "
+            "since, every tap misses. Calibrate the tip on this robot and tap again. The taps fit a ball of about ")
+    elsewhere = "The tip calibration x was made on y, not on this robot (z): ... tap again."
+    fits = LiveView.of(quick_check(context.fixture, context.session.base_p_taps, 0.003,
+                                   context.calibration.sample_bound_m), context.fixture)
+    assert fits.verdict == "unique" and live_text(fits, 12, None, elsewhere) == live_text(fits, 12, None)
+    for verdict, cause, said in (("inconsistent", "tap 3 is off", "INCONSISTENT, no pose explains the taps. "
+                                  f"{elsewhere} Most likely: tap 3 is off"),
+                                 ("undetermined", "none found", "NO POSE FOUND that explains every tap within the "
+                                  f"sample bound. {elsewhere} Check the tip calibration's bound")):
+        view = dataclasses.replace(fits, verdict=verdict, cause=cause)
+        assert live_text(view, 12, None, elsewhere).startswith(f"Live check of 12 taps: {said}")
+
+
 async def test_a_tap_says_at_once_what_the_robot_does_and_counts_its_seconds(context):
     """A real tap takes seconds: the note says so the moment the key is pressed, and the count goes on."""
     cell_of(context).pace_s = 1.6  # each simulated motion takes this long

@@ -23,11 +23,11 @@ from fixwizard.tui.cell import Cell, Sampling
 from fixwizard.tui.results.text import (
     headline,
     modes_lines,
-    other_robot_lines,
     summary_lines,
     suspect_lines,
     warning_lines,
 )
+from fixwizard.tui.tip_origin import other_robot_cause
 from fixwizard.tui.widgets.confirm import Confirm
 from fixwizard.tui.widgets.errors import error_message
 from fixwizard.tui.widgets.key_footer import KeyFooter
@@ -105,7 +105,8 @@ class ResultsScreen(Screen[Outcome]):
     def _summary(self) -> list[str]:
         solution = self.solution
         if solution.status == "inconsistent":
-            lines = other_robot_lines(self.sampling.calibration, self.cell.robot_name) + suspect_lines(solution)
+            elsewhere = other_robot_cause(self.sampling.calibration, self.cell.robot_name)
+            lines = ([elsewhere] if elsewhere else []) + suspect_lines(solution)
         else:
             lines = summary_lines(solution)
             if solution.status == "ambiguous":

@@ -5,7 +5,6 @@ inconsistent one (a wrong ball diameter, or a suspect tap); the solver's own fig
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from fixwizard.calibration.store import TipCalibration
 from fixwizard.geometry.se3 import format_ur_pose, rotation_angle_rad
 from fixwizard.report import robot_pose_text, rounded_up_text
 from fixwizard.solver.estimates import Bounds
@@ -102,16 +101,6 @@ def suspect_lines(solution: Solution) -> list[str]:
     else:
         lines.append("Press r to go back to sampling.")
     return lines
-
-
-def other_robot_lines(calibration: TipCalibration, robot_name: str) -> list[str]:
-    """For an inconsistent result: the tip calibration was made on another robot than ``robot_name`` (the one
-    connected), a cause no figure of the taps can show."""
-    if calibration.robot == robot_name:
-        return []
-    return [f"The tip calibration {calibration.name} was made on {calibration.robot or 'an unknown robot'}, not on "
-            f"this robot ({robot_name}): unless this very tool is on its flange, untouched since, every tap misses. "
-            "Calibrate the tip on this robot and tap again."]
 
 
 def warning_lines(solution: Solution) -> list[str]:

@@ -41,6 +41,7 @@ from fixwizard.tui.sampling.text import (
 from fixwizard.tui.solve.progress_text import progress_words
 from fixwizard.tui.start.choices import FixtureChoice, fixture_choices
 from fixwizard.tui.tapping import FREEDRIVE_STAYS_OFF, freedrive_again, tap_and_record, unless_stopped
+from fixwizard.tui.tip_origin import other_robot_cause
 from fixwizard.tui.widgets.confirm import Confirm, ConfirmMove
 from fixwizard.tui.widgets.dialog import Dialog
 from fixwizard.tui.widgets.doing import TICK_S, Doing, seconds_text
@@ -466,7 +467,7 @@ class SamplingScreen(Screen[bool]):
             shown_these = self.live is not None and self.live.tap_count == tap_count
             words = self._live_progress or ("going on from what it found" if shown_these else "starting")
             progress = words + seconds_text(time.monotonic() - self._live_started)
-        text = live_text(self.live, tap_count, progress)
+        text = live_text(self.live, tap_count, progress, other_robot_cause(self.calibration, self.cell.robot_name))
         if text != self._live_shown:  # the count looks often, the screen changes twice a second
             self._live_shown = text
             self.query_one("#live", Static).update(text)

@@ -23,9 +23,10 @@ def bounds_text(check: LiveView) -> str:
             f"{rounded_up_text(bounds.max_point_displacement_m * 1e3, 1)} mm")
 
 
-def live_text(check: LiveView | None, tap_count: int, progress: str | None) -> str:
+def live_text(check: LiveView | None, tap_count: int, progress: str | None, first_cause: str = "") -> str:
     """What the latest quick solve says about the taps; ``progress``: what the running check is doing, in words
-    (None when none is on its way): of newer taps, or looking closer at these (going deeper, tightening)."""
+    (None when none is on its way): of newer taps, or looking closer at these (going deeper, tightening);
+    ``first_cause``: said first when no pose explains the taps (a tip calibration made on another robot)."""
     if tap_count < MIN_TAPS:
         return (f"Live check: starts at {MIN_TAPS} taps ({MIN_TAPS - tap_count} to go). 10-20 taps over several "
                 "faces give tight bounds.")
@@ -37,14 +38,15 @@ def live_text(check: LiveView | None, tap_count: int, progress: str | None) -> s
     elif progress:
         doing = f" (looking closer: {progress}...)"
     head = f"Live check of {check.tap_count} taps{doing}: "
+    first = f"{first_cause} " if first_cause else ""
     if check.ball_mismatch is not None:
-        return head + f"NO POSE FITS these taps with this ball. {check.ball_mismatch.sentence()}"
+        return head + f"NO POSE FITS these taps with this ball. {first}{check.ball_mismatch.sentence()}"
     if check.verdict == "inconsistent":
         cause = check.cause or "check the mesh, its units and the tip calibration."
-        return head + f"INCONSISTENT, no pose explains the taps. Most likely: {cause}"
+        return head + f"INCONSISTENT, no pose explains the taps. {first}Most likely: {cause}"
     if check.verdict == "undetermined" and check.cause is not None:
-        return (head + "NO POSE FOUND that explains every tap within the sample bound; check the tip calibration's "
-                f"bound and the ball diameter. Guaranteed so far: {bounds_text(check)}.")
+        return (head + f"NO POSE FOUND that explains every tap within the sample bound. {first}Check the tip "
+                f"calibration's bound and the ball diameter. Guaranteed so far: {bounds_text(check)}.")
     if check.verdict == "undetermined":
         return (head + "the pose is not pinned down yet; keep tapping, on other faces too. Guaranteed so far: "
                 f"{bounds_text(check)}.")

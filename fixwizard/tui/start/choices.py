@@ -10,6 +10,7 @@ from fixwizard.calibration.store import TipCalibration, load_calibration
 from fixwizard.calibration.verdict import tip_verdict
 from fixwizard.demo import DEMO_MESH, DEMO_MESH_UNITS, DISC_MESH
 from fixwizard.fixture import MESH_SUFFIXES, Fixture
+from fixwizard.tui.tip_origin import other_robot_note
 from fixwizard.workflow.calibration_journal import Unfinished
 from fixwizard.workflow.session import find_unfinished
 
@@ -63,12 +64,11 @@ def describe_calibration(calibration: TipCalibration, robot_name: str) -> str:
     with its first reason."""
     created = calibration.created.replace("T", " ")[:16]
     verdict = tip_verdict(calibration)
-    other_robot = "" if calibration.robot == robot_name else (
-        f"\nNot calibrated on this robot ({robot_name}): use it only if this very tool, untouched since, is on its "
-        "flange; otherwise calibrate the tip anew (a wrong tip makes every tap miss)")
-    return (f"Ball diameter {calibration.ball_diameter_m * 1e3:.1f} mm (check it is the ball on the tool), "
-            f"calibrated {created} on {calibration.robot or 'an unknown robot'}{other_robot}\n"
-            f"{verdict.level.capitalize()}: {verdict.reasons[0]}")
+    lines = [f"Ball diameter {calibration.ball_diameter_m * 1e3:.1f} mm (check it is the ball on the tool), "
+             f"calibrated {created} on {calibration.robot or 'an unknown robot'}",
+             other_robot_note(calibration, robot_name),
+             f"{verdict.level.capitalize()}: {verdict.reasons[0]}"]
+    return "\n".join(line for line in lines if line)
 
 
 def describe_unfinished_calibration(unfinished: Unfinished) -> str:
