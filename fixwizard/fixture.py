@@ -69,6 +69,9 @@ PLAUSIBLE_SIZE_M = (0.005, 2.5)
 # finely as a tap is placed, and it is refused.
 FLOAT32_WARNED_M = 1e-6
 FLOAT32_REFUSED_M = 1e-5
+# A CAD origin farther from its part (a plant layout's frame) would lie about as far from the robot base, beyond what
+# a report holds (report.MAX_POSITION_M, 1 km: farther from its robot no fixture is).
+MAX_ORIGIN_OFFSET_M = 500.0
 
 
 @dataclass(frozen=True)
@@ -550,6 +553,10 @@ def fixture_from_mesh(mesh_m: trimesh.Trimesh, path: Path, units: str, sha256: s
     clean = clean_mesh(mesh_m, path.name)
     _check_size(path, clean.mesh, units)
     ball = minimum_enclosing_ball(clean.mesh.vertices)
+    if (offset_m := float(np.linalg.norm(ball.center))) > MAX_ORIGIN_OFFSET_M:
+        raise MeshError(f"{path}: the fixture lies {offset_m:.0f} m from the mesh's origin; fixwizard gives the pose "
+                        "of that origin, and one so far from the robot base is no pose a report holds. Export the "
+                        f"mesh with its origin near the part (within {MAX_ORIGIN_OFFSET_M:g} m of it)")
     warnings = clean.warnings
     if polygon_warp_m > ZIP_SHARE * float(np.linalg.norm(clean.mesh.extents)):
         warnings += (_warped_polygons_warning(path.name, polygon_warp_m),)

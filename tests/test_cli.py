@@ -1,6 +1,7 @@
 """The headless command line, as an operator would use it: good runs, and every kind of bad input."""
 
 import errno
+import json
 import time
 from pathlib import Path
 
@@ -59,6 +60,37 @@ def test_solve_prints_a_summary_and_writes_a_loadable_report(bracket, capsys):
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("offset_m", [400.0, 600.0])
+def test_a_mesh_whose_origin_lies_far_from_the_part_gives_a_report_every_reader_takes_or_is_refused(tmp_path, capsys,
+                                                                                                    offset_m):
+    """A plant layout's frame as the mesh's origin: within 500 m the report holds the pose and export reads it;
+    farther, the CAD origin would be more than a report holds from the robot base (its readers refused the report
+    solve had just written, as if edited), so the mesh is refused naming the fix."""
+    plate = l_prism()
+    offset = np.array([offset_m, 0.0, 0.0])
+    plate.apply_translation(offset)
+    plate.export(tmp_path / "plate.obj")  # text: float64 coordinates, placed to the micrometre so far out
+    base_T_part = make_transform(Rotation.from_euler("z", 40, degrees=True), [0.5, 0.1, 0.0])
+    rng = np.random.default_rng(11)
+    taps = transform_points(base_T_part, touching_ball_centres(l_prism(), 20, 0.0015, rng))
+    write_points(tmp_path / "taps.yaml", taps)
+    args = ["solve", str(tmp_path / "plate.obj"), str(tmp_path / "taps.yaml"), "--mesh-units", "m", "--sample-bound",
+            "0.5mm", "--ball-diameter", "3mm", "--max-cells", "1e6", "-q", "-o", str(tmp_path / "report.yaml")]
+    code = main(args)
+    if offset_m > 500.0:
+        assert code == 1 and not (tmp_path / "report.yaml").exists()
+        assert capsys.readouterr().err.strip().endswith(
+            f"plate.obj: the fixture lies {offset_m:.0f} m from the mesh's origin; fixwizard gives the pose of that "
+            "origin, and one so far from the robot base is no pose a report holds. Export the mesh with its origin "
+            "near the part (within 500 m of it)")
+        return
+    assert code == 0 and report.load(tmp_path / "report.yaml").status == "unique"
+    assert main(["export", str(tmp_path / "report.yaml"), "--format", "json", "-o", str(tmp_path / "pose.json")]) == 0
+    cad_origin_m = transform_points(base_T_part, -offset[None])[0]  # the CAD origin: about 400 m from the base
+    exported_m = np.array(json.loads((tmp_path / "pose.json").read_text())["bounds"]["center"]["position_m"])
+    assert np.linalg.norm(exported_m - cad_origin_m) <= report.load(tmp_path / "report.yaml").position_bound_m
+
+
 def test_without_quiet_the_phases_after_the_search_are_shown_as_they_come(bracket, capsys):
     """With many taps the refinement can take minutes after the last search level: each round is a line."""
     folder, _, _ = bracket
