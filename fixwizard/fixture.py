@@ -496,9 +496,15 @@ def _check_size(path: Path, mesh_m: trimesh.Trimesh, units: str) -> None:
                 "(fixwizard reads m or mm)")
     else:
         hint = "check that the file holds the fixture and its units (fixwizard reads m or mm)"
-    size = f"{size_m:.3g} m large" if size_m > PLAUSIBLE_SIZE_M[1] else f"{size_m * 1e3:.3g} mm small"
-    raise MeshUnitsError(f"{path} would be a {size} fixture with units '{units}', which is implausible; {hint}",
-                         likely)
+    large = size_m > PLAUSIBLE_SIZE_M[1]
+    shown = size_m if large else size_m * 1e3
+    digits = 3
+    while digits < 9 and _plausible(float(f"{shown:.{digits}g}") / (1.0 if large else 1e3)):
+        digits += 1  # 4.9996 mm is no "5 mm small fixture, which is implausible"
+    size = f"{shown:.{digits}g} m large" if large else f"{shown:.{digits}g} mm small"
+    low, high = PLAUSIBLE_SIZE_M
+    raise MeshUnitsError(f"{path} would be a {size} fixture with units '{units}', which is implausible (fixwizard "
+                         f"takes fixtures {low * 1e3:g} mm to {high:g} m across); {hint}", likely)
 
 
 def _warped_polygons_warning(name: str, warp_m: float) -> tuple[str, str]:

@@ -47,6 +47,19 @@ def test_a_mesh_in_inches_is_refused_naming_inches_not_a_unit_that_would_be_refu
     assert caught.value.likely_units is None
 
 
+@pytest.mark.parametrize("size_mm, shown", [(4.9996, "a 4.9996 mm small fixture"), (4.2, "a 4.2 mm small fixture"),
+                                             (2500.4, "a 2.5004 m large fixture")])
+def test_a_size_just_beyond_the_plausible_range_is_said_with_the_digits_that_show_it_and_the_range(tmp_path, size_mm,
+                                                                                                 shown):
+    """A 4.9996 mm part was "a 5 mm small fixture, which is implausible" while 5 mm is fine."""
+    path = tmp_path / "part.stl"
+    trimesh.creation.box([size_mm, size_mm / 2, size_mm / 3]).export(path)
+    with pytest.raises(MeshUnitsError) as caught:
+        load_fixture(path, "mm")
+    assert f"would be {shown} with units 'mm', which is implausible (fixwizard takes fixtures 5 mm to 2.5 m " \
+        "across)" in str(caught.value)
+
+
 @pytest.mark.parametrize("content, match", [(b"", "empty"), (b"hello, I am not a mesh\n" * 10, "mesh"),
                                             (b"solid x\nendsolid x\n", "no triangles")])
 def test_files_that_are_not_meshes_get_a_clear_message(tmp_path, content, match):
