@@ -120,8 +120,7 @@ def test_true_cell_survives_every_level_down_to_fine_cells(name, seed):
     assert family.position_bound_m < 0.0005 and np.max(family.distinct_rotations()[1]) < np.radians(0.5)
     siblings = filter_cells(problem, cells, parents).cells
     assert np.count_nonzero(true_cell_mask(siblings, base_T_fix)) == 1
-    centre = bound_centre(siblings, -fixture.cad_p_center, siblings.distinct_rotations()[0][0],
-                          fixture.oracle.hull_cover)
+    centre = bound_centre(siblings, -fixture.cad_p_center, siblings.distinct_rotations()[0][0])
     position, rotation, displacement = cell_bound_figures(siblings, centre, -fixture.cad_p_center,
                                                           fixture.oracle.hull_cover).max(axis=1)
     centre_T_cad = make_transform(centre.rotation, centre.cad_origin_m)
