@@ -97,20 +97,11 @@ class BoundCentre:
     cad_origin_m: np.ndarray
 
 
-def bound_centre(cells: CellSet, fix_p_origin: np.ndarray, rotation_centre: Rotation, cover: HullCover) -> BoundCentre:
-    """Centre from a rotation and the minimum enclosing ball of the cells' CAD origins, or of their fixture centres
-    when that bounds the fixture's points tighter (``cover``: see ``cell_bound_figures``): a CAD origin far from the
-    fixture (a mesh exported in the cell's or an assembly's frame) swings with every turn of the cells, and a centre
-    among those origins puts the fixture itself off-centre, loosening every figure the verdict reads."""
+def bound_centre(cells: CellSet, fix_p_origin: np.ndarray, rotation_centre: Rotation) -> BoundCentre:
+    """Centre from a rotation and the minimum enclosing ball of the cells' CAD origins."""
     rotations, _, rotation_index = cells.distinct_rotations()
-    positions = cells.positions_m()
-    cad_origins = rotations.apply(fix_p_origin).reshape(-1, 3)[rotation_index] + positions
-    among_origins = BoundCentre(rotation_centre, minimum_enclosing_ball(cad_origins).center)
-    among_fixtures = BoundCentre(rotation_centre,
-                                 minimum_enclosing_ball(positions).center + rotation_centre.apply(fix_p_origin))
-    largest = [cell_bound_figures(cells, centre, fix_p_origin, cover)[2].max() for centre in (among_origins,
-                                                                                              among_fixtures)]
-    return among_fixtures if largest[1] < largest[0] else among_origins
+    cad_origins = rotations.apply(fix_p_origin).reshape(-1, 3)[rotation_index] + cells.positions_m()
+    return BoundCentre(rotation_centre, minimum_enclosing_ball(cad_origins).center)
 
 
 # Cells whose ball bound lies below this fraction of the largest displacement found keep the ball bound: they do

@@ -328,8 +328,7 @@ def _modes(problem: SearchProblem, survivors: Survivors, likelihood: _Likelihood
             sampling = sampler.submit(sample_cells, mode_cells, oracle, problem.base_p_taps, problem.ball_radius_m,
                                       likelihood.sigma_m, per_mode_samples, likelihood.rng, problem.fixture_radius_m,
                                       cancel)
-            centre = bound_centre(mode_cells, fix_p_origin, rotation_center(mode_cells.distinct_rotations()[0]),
-                                  oracle.hull_cover)
+            centre = bound_centre(mode_cells, fix_p_origin, rotation_center(mode_cells.distinct_rotations()[0]))
             def refining(round_: int, mode: int = number) -> None:
                 stage(SolveStage("bounds", mode, len(distinct), round_))
 
@@ -448,8 +447,7 @@ def solve(fixture: Fixture, base_p_taps: np.ndarray, ball_diameter_m: float, sam
         bounds = top.bounds
     else:
         mode_cells = cells.subset(in_modes)
-        centre = bound_centre(mode_cells, fix_p_origin, Rotation.from_matrix(top.bounds.base_T_cad_center[:3, :3]),
-                              fixture.oracle.hull_cover)
+        centre = bound_centre(mode_cells, fix_p_origin, Rotation.from_matrix(top.bounds.base_T_cad_center[:3, :3]))
         bounds = bounds_from_figures(centre, cell_bound_figures(mode_cells, centre, fix_p_origin,
                                                                 fixture.oracle.hull_cover).max(1))
     status = status_of([mode.bounds for mode in modes], fixture.radius_m)
