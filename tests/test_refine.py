@@ -123,3 +123,34 @@ def test_rounds_on_the_displacement_alone_only_tighten(monkeypatch):
                             hull_cells=joint))
     assert np.all(with_rounds <= without)
     assert with_rounds[2] < (1.0 - 1e-3) * without[2]
+
+
+def test_the_last_round_splits_as_many_outermost_cells_as_the_budget_affords_even_where_their_ratios_tie():
+    """A set that spans every rotation has thousands of cells at the largest angle, pi (ratio 1 exactly): a threshold
+    between ratios chose none of them when the budget afforded fewer, and the refinement stopped before its first
+    round."""
+    tied = [np.array([1.0, 0.99, 1.0, 0.5]), np.array([1.0, 1.0, 0.98])]
+    outer = [ratio > refine.OUTER_FRACTION for ratio in tied]
+    for count in range(8):
+        picked = refine._outermost(tied, outer, count)
+        assert all(not np.any(mask & ~among) for mask, among in zip(picked, outer, strict=True))
+        chosen = np.concatenate([ratio[mask] for ratio, mask in zip(tied, picked, strict=True)])
+        left = np.concatenate([ratio[among & ~mask] for ratio, among, mask in zip(tied, outer, picked, strict=True)])
+        assert len(chosen) == min(count, 6)
+        assert len(chosen) == 0 or len(left) == 0 or chosen.min() >= left.max()
+
+
+def test_a_set_spanning_every_rotation_is_refined_within_a_budget_smaller_than_its_outermost_cells():
+    from fixwizard.solver.estimates import bound_centre, rotation_center
+    from fixwizard.solver.search import search
+    from test_search_parts import small_problem
+
+    fixture, problem = small_problem()
+    survivors = search(problem, 5e4).final
+    rotations = survivors.cells.distinct_rotations()[0]
+    centre = bound_centre(survivors.cells, -fixture.cad_p_center, rotation_center(rotations))
+    refinement = refine._Refinement(problem, survivors, centre, -fixture.cad_p_center, None, None)
+    before = refinement.largest()
+    assert before[1] == pytest.approx(np.pi)  # every rotation: thousands of cells tie at pi
+    refinement.stage(800.0, refine.ALL_FIGURES)  # affords 100 of them
+    assert refinement.number >= 1 and np.all(refinement.largest() <= before)

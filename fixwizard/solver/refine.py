@@ -37,12 +37,23 @@ DISPLACEMENT = (2,)  # the row of the point displacement in the figures
 
 
 def _outermost(ratios: list[np.ndarray], outer: list[np.ndarray], count: int) -> list[np.ndarray]:
-    """The ``outer`` cells whose ratio (figure / current maximum) exceeds that of all but at most ``count`` of them."""
+    """At most ``count`` of the ``outer`` cells, those with the largest ratios (figure / current maximum), ties
+    broken arbitrarily: a set that spans every rotation has thousands of cells at the largest angle, pi, and a
+    threshold between ratios chose none of them, so the refinement stopped before its first round."""
     every = np.concatenate([ratio[mask] for ratio, mask in zip(ratios, outer, strict=True)])
-    if count <= 0:
-        return [np.zeros_like(mask) for mask in outer]
-    threshold = np.partition(every, len(every) - count)[len(every) - count] if count < len(every) else -np.inf
-    return [mask & (ratio > threshold) for ratio, mask in zip(ratios, outer, strict=True)]
+    if count >= len(every):
+        return [mask.copy() for mask in outer]
+    chosen = np.zeros(len(every), bool)
+    if count > 0:
+        chosen[np.argpartition(-every, count - 1)[:count]] = True
+    picked, start = [], 0
+    for mask in outer:
+        indices = np.flatnonzero(mask)
+        cells = np.zeros_like(mask)
+        cells[indices[chosen[start:start + len(indices)]]] = True
+        picked.append(cells)
+        start += len(indices)
+    return picked
 
 
 Pool = tuple[Survivors, np.ndarray]
